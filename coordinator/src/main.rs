@@ -1,0 +1,22 @@
+//! `coordinator`: photonfarm's main program. It loads a scene, renders it until a time, phase or error target,
+//! and writes the image, its layers and the run record.
+
+mod cli;
+mod output_folder;
+mod render_command;
+
+use clap::Parser;
+
+fn main() -> std::process::ExitCode {
+    let cli = cli::Cli::parse();
+    let result = match cli.command {
+        cli::Command::Render(args) => render_command::run(args),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,88 @@
+//! The output folder of a run: the multi-layer EXR, the PNG preview and the JSON record.
+
+use anyhow::{Context, Result};
+use photonfarm::accumulation::{relative_rmse, Accumulator};
+use photonfarm::output::exr_file::{find_layer, read_exr, write_exr, LayerImage};
+use photonfarm::output::preview::{auto_exposure, write_preview_png};
+use photonfarm::render::images::{layer_images, total_image};
+use photonfarm::render::record::{RunRecord, TrueError};
+use std::path::{Path, PathBuf};
+
+/// A reference image loaded once and compared against after every save.
+pub struct Reference {
+    pub path: PathBuf,
+    pub total: Vec<[f64; 3]>,
+    /// Pixels that see a light directly in the reference (its visible_lights layer, when it has one).
+    pub lit: Option<Vec<bool>>,
+}
+
+impl Reference {
+    /// Loads a reference EXR and checks its size.
+    pub fn load(path: &Path, width: u32, height: u32) -> Result<Reference> {
+        let layers = read_exr(path)?;
+        let total = find_layer(&layers, path, "total")?;
+        if (total.width, total.height) != (width as usize, height as usize) {
+            anyhow::bail!(
+                "reference {} is {}×{} but the scene renders {}×{}",
+                path.display(),
+                total.width,
+                total.height,
+                width,
+                height
+            );
+        }
+        let lit = find_layer(&layers, path, "visible_lights")
+            .ok()
+            .map(|v| v.rgb.iter().map(|p| p.iter().any(|&c| c > 0.0)).collect());
+        Ok(Reference {
+            path: path.to_path_buf(),
+            total: total.rgb.iter().map(|p| [p[0] as f64, p[1] as f64, p[2] as f64]).collect(),
+            lit,
+        })
+    }
+
+    /// Relative RMSE of the sums' mean image against this reference.
+    pub fn compare(&self, sums: &Accumulator) -> TrueError {
+        let image = total_image(sums);
+        let lit = |i: usize| match &self.lit {
+            Some(l) => l[i],
+            None => sums.sees_light(i),
+        };
+        TrueError {
+            reference: self.path.display().to_string(),
+            rmse_all: relative_rmse(&image, &self.total, |_| true),
+            rmse_unlit: relative_rmse(&image, &self.total, |i| !lit(i)),
+        }
+    }
+}
+
+/// Writes image.exr, preview.png and run.json; each file is replaced atomically.
+pub fn save(dir: &Path, sums: &Accumulator, record: &RunRecord) -> Result<()> {
+    let layers: Vec<LayerImage> = layer_images(sums);
+    write_exr(&dir.join("image.exr"), &layers)?;
+    let total = layers.iter().find(|l| l.name == "total").context("total layer missing")?;
+    write_preview_png(&dir.join("preview.png"), total, auto_exposure(total))?;
+    let json = serde_json::to_vec_pretty(record)?;
+    let tmp = dir.join(".run.json.tmp");
+    std::fs::write(&tmp, json).with_context(|| format!("cannot write {}", tmp.display()))?;
+    std::fs::rename(&tmp, dir.join("run.json"))
+        .with_context(|| format!("cannot write {}", dir.join("run.json").display()))?;
+    Ok(())
+}
+
+/// A fresh folder under out/ named after the scene and the UTC time.
+pub fn default_dir(scene: &Path) -> PathBuf {
+    let stem = scene.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "render".into());
+    let stamp = humantime::format_rfc3339_seconds(std::time::SystemTime::now())
+        .to_string()
+        .replace([':', 'T'], "-")
+        .trim_end_matches('Z')
+        .to_string();
+    let mut dir = PathBuf::from("out").join(format!("{stem}-{stamp}"));
+    let mut n = 1;
+    while dir.exists() {
+        n += 1;
+        dir = PathBuf::from("out").join(format!("{stem}-{stamp}-{n}"));
+    }
+    dir
+}

@@ -1,0 +1,181 @@
+//! `coordinator render`: the main job.
+
+use crate::cli::{ErrorOverArg, MethodArg, RenderArgs};
+use crate::output_folder::{self, Reference};
+use anyhow::{bail, Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use photonfarm::render::record::{HistoryEntry, RunRecord};
+use photonfarm::render::session::{self, ErrorOver, StopReason, StopRule};
+use photonfarm::render::{memory, Engine, Method, RenderSettings};
+use photonfarm::scene::Scene;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+const DEFAULT_TIME_S: f64 = 30.0;
+
+pub fn run(args: RenderArgs) -> Result<()> {
+    let stop = stop_rule(&args)?;
+    let scene = Scene::load(&args.scene)?;
+    let method = match args.method {
+        MethodArg::Pbpm => Method::Pbpm,
+        MethodArg::Path => Method::Path,
+    };
+    let mut settings = RenderSettings::for_scene(&scene, method, args.seed);
+    if let Some(d) = args.max_depth {
+        if d == 0 {
+            bail!("--max-depth must be at least 1");
+        }
+        settings.max_depth = d;
+    }
+    if let Some(d) = args.backward_diffuse_depth {
+        if !(1..=2).contains(&d) {
+            bail!("--backward-diffuse-depth must be 1 or 2");
+        }
+        settings.backward_diffuse_depth = d;
+    }
+    if let Some(r) = args.radius_scale {
+        if !(r.is_finite() && r > 0.0) {
+            bail!("--radius-scale must be a positive number");
+        }
+        settings.radius_scale = r;
+    }
+    if let Some(l) = args.light_paths_per_pixel {
+        if !(l.is_finite() && l > 0.0) {
+            bail!("--light-paths-per-pixel must be a positive number");
+        }
+        settings.light_paths_per_pixel = l;
+    }
+    let reference = match &args.reference {
+        Some(p) => Some(Reference::load(p, scene.camera.width, scene.camera.height)?),
+        None => None,
+    };
+    let dir = args.out.clone().unwrap_or_else(|| output_folder::default_dir(&args.scene));
+    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create the output folder {}", dir.display()))?;
+
+    let interrupted = Arc::new(AtomicBool::new(false));
+    {
+        let flag = interrupted.clone();
+        // A second Ctrl-C while results are being written still ends the process.
+        ctrlc::set_handler(move || {
+            if flag.swap(true, Ordering::SeqCst) {
+                std::process::exit(130);
+            }
+        })
+        .context("cannot install the Ctrl-C handler")?;
+    }
+
+    let bar = if args.quiet { ProgressBar::hidden() } else { ProgressBar::new_spinner() };
+    bar.set_style(ProgressStyle::with_template("{spinner} [{elapsed_precise}] {msg}").expect("static template"));
+    bar.enable_steady_tick(Duration::from_millis(200));
+
+    let mut engine = Engine::new(&scene, settings);
+    let mut history: Vec<HistoryEntry> = Vec::new();
+    let start = Instant::now();
+    let mut last_save = Instant::now();
+    let mut save_error: Option<anyhow::Error> = None;
+    let save_interval = Duration::from_secs_f64(args.save_interval.max(0.5));
+    let record_of = |engine: &Engine, history: &[HistoryEntry], reason: &str| RunRecord {
+        photonfarm_version: env!("CARGO_PKG_VERSION").to_string(),
+        scene: args.scene.display().to_string(),
+        scene_hash: scene.hash.clone(),
+        width: scene.camera.width,
+        height: scene.camera.height,
+        settings: *engine.settings(),
+        radius_at_1m: engine.settings().radius_schedule(&scene).radius(1.0, 1),
+        threads: 1,
+        stop_reason: reason.to_string(),
+        totals: engine.totals(),
+        wall_time_s: start.elapsed().as_secs_f64(),
+        peak_memory_bytes: memory::peak_rss_bytes(),
+        bytes_per_pixel: engine.bytes_per_pixel(),
+        error: engine.sums().error(),
+        true_error: reference.as_ref().map(|r| r.compare(engine.sums())),
+        history: history.to_vec(),
+    };
+
+    let mut saved_history_len = 0;
+    let reason = session::run(&mut engine, &stop, &interrupted, &mut history, Duration::ZERO, |engine, entry| {
+        let secs = entry.time_s.max(1e-9);
+        let rays = (entry.backward_rays + entry.forward_rays) as f64;
+        let delta = match stop.error_over {
+            ErrorOver::Unlit => entry.delta_unlit,
+            ErrorOver::All => entry.delta_all,
+        };
+        bar.set_message(format!(
+            "phase {}  {:.2} Mrays/s  δ {} {}",
+            entry.phase,
+            rays / secs / 1e6,
+            if delta.is_finite() { format!("{:.2}%", 100.0 * delta) } else { "–".to_string() },
+            if stop.error_over == ErrorOver::Unlit { "(unlit pixels)" } else { "(all pixels)" },
+        ));
+        if last_save.elapsed() >= save_interval && save_error.is_none() {
+            last_save = Instant::now();
+            saved_history_len = entry.phase;
+            // The closure cannot see `history`; the periodic record carries totals and δ, the final one all.
+            if let Err(e) = output_folder::save(&dir, engine.sums(), &record_of(engine, &[], "running")) {
+                save_error = Some(e);
+            }
+        }
+    });
+    let _ = saved_history_len;
+    bar.finish_and_clear();
+    if let Some(e) = save_error {
+        return Err(e.context("writing the periodic results failed; the run was stopped"));
+    }
+    let record = record_of(&engine, &history, reason.name());
+    output_folder::save(&dir, engine.sums(), &record)?;
+    let e = record.error;
+    println!(
+        "{} phases in {:.1} s ({}), {:.2} M backward + {:.2} M forward rays, δ {:.2}% (unlit pixels) / {:.2}% (all pixels)",
+        record.totals.phases,
+        record.wall_time_s,
+        reason.name(),
+        record.totals.backward_rays as f64 / 1e6,
+        record.totals.forward_rays as f64 / 1e6,
+        100.0 * e.delta_unlit,
+        100.0 * e.delta_all
+    );
+    if let Some(t) = &record.true_error {
+        println!(
+            "true relative RMSE against {}: {:.2}% (unlit pixels) / {:.2}% (all pixels)",
+            t.reference,
+            100.0 * t.rmse_unlit,
+            100.0 * t.rmse_all
+        );
+    }
+    if reason == StopReason::Interrupted {
+        println!("interrupted: the results of every completed phase were written");
+    }
+    println!("wrote {}", dir.display());
+    Ok(())
+}
+
+fn stop_rule(args: &RenderArgs) -> Result<StopRule> {
+    if let Some(t) = args.time {
+        if !(t.is_finite() && t > 0.0) {
+            bail!("--time must be a positive number of seconds");
+        }
+    }
+    if args.phases == Some(0) {
+        bail!("--phases must be at least 1");
+    }
+    if let Some(d) = args.target_error {
+        if !(d.is_finite() && d > 0.0) {
+            bail!("--target-error must be a positive number, e.g. 0.05 for 5%");
+        }
+    }
+    let time = match (args.time, args.phases, args.target_error) {
+        (None, None, None) => Some(DEFAULT_TIME_S),
+        (t, _, _) => t,
+    };
+    Ok(StopRule {
+        time: time.map(Duration::from_secs_f64),
+        phases: args.phases,
+        target_error: args.target_error,
+        error_over: match args.error_over {
+            ErrorOverArg::Unlit => ErrorOver::Unlit,
+            ErrorOverArg::All => ErrorOver::All,
+        },
+    })
+}

@@ -1,0 +1,230 @@
+//! Running sums over phases and the error estimate δ (paper eq. 6–7). Sums from independent workers add, so
+//! whoever merges them computes δ over the merged sums.
+
+use crate::color::{luminance, luminance_f64, Rgb};
+use crate::integrator::{Layer, LayerValues};
+use serde::{Deserialize, Serialize};
+
+/// The sums one pixel keeps (paper §2's layers, in f64 as the final image needs).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PixelSums {
+    /// Σ_j L_ij per layer and RGB channel.
+    pub sum: [[f64; 3]; 4],
+    /// Σ_j L_ij² of each layer's luminance, then of the total's.
+    pub sum_sq: [f64; 5],
+    /// Phases closed at this pixel.
+    pub phases: u32,
+    /// Camera rays started at this pixel.
+    pub camera_rays: u32,
+}
+
+/// The running sums of a whole image.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Accumulator {
+    pub width: u32,
+    pub height: u32,
+    pub pixels: Vec<PixelSums>,
+}
+
+/// δ over the image and over the pixels that do not see a light directly.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ErrorEstimate {
+    /// Paper eq. 6 over every pixel (dominated by directly visible lights).
+    pub delta_all: f64,
+    /// Eq. 6 restricted to pixels whose visible-lights layer is zero: the figure stopping rules use.
+    pub delta_unlit: f64,
+    /// Fewest phases at any pixel (δ needs at least two).
+    pub min_phases: u32,
+}
+
+impl Accumulator {
+    /// Empty sums for an image.
+    pub fn new(width: u32, height: u32) -> Self {
+        Accumulator { width, height, pixels: vec![PixelSums::default(); width as usize * height as usize] }
+    }
+
+    /// Closes one phase at one pixel: adds the phase value L_ij of every layer and of the total.
+    #[inline]
+    pub fn add_phase(&mut self, pixel: usize, value: &LayerValues, camera_rays: u32) {
+        let px = &mut self.pixels[pixel];
+        let mut total = Rgb::ZERO;
+        for (l, v) in value.iter().enumerate() {
+            let v = sanitize(*v);
+            total += v;
+            for c in 0..3 {
+                px.sum[l][c] += v[c] as f64;
+            }
+            let y = luminance(v) as f64;
+            px.sum_sq[l] += y * y;
+        }
+        let y = luminance(total) as f64;
+        px.sum_sq[4] += y * y;
+        px.phases += 1;
+        px.camera_rays += camera_rays;
+    }
+
+    /// Adds another worker's sums for the same image.
+    pub fn merge(&mut self, other: &Accumulator) {
+        assert_eq!((self.width, self.height), (other.width, other.height), "merging sums of different images");
+        for (a, b) in self.pixels.iter_mut().zip(&other.pixels) {
+            for l in 0..4 {
+                for c in 0..3 {
+                    a.sum[l][c] += b.sum[l][c];
+                }
+            }
+            for i in 0..5 {
+                a.sum_sq[i] += b.sum_sq[i];
+            }
+            a.phases += b.phases;
+            a.camera_rays += b.camera_rays;
+        }
+    }
+
+    /// Mean of one layer at a pixel.
+    pub fn mean(&self, pixel: usize, layer: Layer) -> [f64; 3] {
+        let px = &self.pixels[pixel];
+        let n = px.phases.max(1) as f64;
+        let s = px.sum[layer as usize];
+        [s[0] / n, s[1] / n, s[2] / n]
+    }
+
+    /// Mean of the total at a pixel.
+    pub fn mean_total(&self, pixel: usize) -> [f64; 3] {
+        let mut t = [0.0; 3];
+        for l in Layer::ALL {
+            let m = self.mean(pixel, l);
+            for c in 0..3 {
+                t[c] += m[c];
+            }
+        }
+        t
+    }
+
+    /// Squared standard error of the mean of the total luminance at a pixel (paper eq. 7).
+    pub fn sem2(&self, pixel: usize) -> f64 {
+        let px = &self.pixels[pixel];
+        if px.phases < 2 {
+            return f64::INFINITY;
+        }
+        let n = px.phases as f64;
+        let mean = luminance_f64(self.mean_total(pixel));
+        ((px.sum_sq[4] / n - mean * mean) / n).max(0.0)
+    }
+
+    /// True when the pixel sees an emitter directly (its visible-lights layer is not zero).
+    pub fn sees_light(&self, pixel: usize) -> bool {
+        self.pixels[pixel].sum[Layer::VisibleLights as usize].iter().any(|&v| v > 0.0)
+    }
+
+    /// δ (paper eq. 6) over all pixels and over unlit pixels.
+    pub fn error(&self) -> ErrorEstimate {
+        let (mut num_all, mut den_all, mut num_unlit, mut den_unlit) = (0.0, 0.0, 0.0, 0.0);
+        let mut min_phases = u32::MAX;
+        for i in 0..self.pixels.len() {
+            min_phases = min_phases.min(self.pixels[i].phases);
+            let l = luminance_f64(self.mean_total(i));
+            let s = self.sem2(i);
+            num_all += s;
+            den_all += l * l;
+            if !self.sees_light(i) {
+                num_unlit += s;
+                den_unlit += l * l;
+            }
+        }
+        let ratio = |n: f64, d: f64| if d > 0.0 { (n / d).sqrt() } else { f64::INFINITY };
+        ErrorEstimate {
+            delta_all: ratio(num_all, den_all),
+            delta_unlit: ratio(num_unlit, den_unlit),
+            min_phases: if self.pixels.is_empty() { 0 } else { min_phases },
+        }
+    }
+
+    /// Bytes of the sums per pixel.
+    pub fn bytes_per_pixel() -> usize {
+        std::mem::size_of::<PixelSums>()
+    }
+}
+
+/// No NaN or infinity may ever reach the sums: such a sample is dropped (and is a bug to find).
+#[inline]
+fn sanitize(v: Rgb) -> Rgb {
+    if v.is_finite() {
+        v
+    } else {
+        Rgb::ZERO
+    }
+}
+
+/// Relative RMSE of `image` against `reference` in luminance, over the pixels `include` selects: the true
+/// error that δ estimates.
+pub fn relative_rmse(image: &[[f64; 3]], reference: &[[f64; 3]], include: impl Fn(usize) -> bool) -> f64 {
+    let (mut num, mut den) = (0.0, 0.0);
+    for i in 0..image.len().min(reference.len()) {
+        if !include(i) {
+            continue;
+        }
+        let a = luminance_f64(image[i]);
+        let b = luminance_f64(reference[i]);
+        num += (a - b) * (a - b);
+        den += b * b;
+    }
+    if den > 0.0 {
+        (num / den).sqrt()
+    } else {
+        f64::INFINITY
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sem_of_known_samples_matches_the_textbook_formula() {
+        let mut acc = Accumulator::new(1, 1);
+        let samples = [1.0f32, 2.0, 3.0, 6.0];
+        for s in samples {
+            acc.add_phase(0, &[Rgb::ZERO, Rgb::splat(s), Rgb::ZERO, Rgb::ZERO], 1);
+        }
+        // Luminance of grey s is s. Population variance of {1,2,3,6} = 3.5, SEM² = 3.5 / 4.
+        assert!((acc.sem2(0) - 3.5 / 4.0).abs() < 1e-6);
+        let e = acc.error();
+        assert!((e.delta_all - (3.5f64 / 4.0).sqrt() / 3.0).abs() < 1e-6);
+        assert_eq!(e.min_phases, 4);
+    }
+
+    #[test]
+    fn merged_sums_equal_sums_of_all_phases() {
+        let v = |x: f32| [Rgb::splat(x), Rgb::ZERO, Rgb::splat(2.0 * x), Rgb::ZERO];
+        let mut a = Accumulator::new(2, 1);
+        let mut b = Accumulator::new(2, 1);
+        let mut all = Accumulator::new(2, 1);
+        for (i, x) in [0.5f32, 1.5, 2.5, 4.0].iter().enumerate() {
+            if i % 2 == 0 { &mut a } else { &mut b }.add_phase(1, &v(*x), 1);
+            all.add_phase(1, &v(*x), 1);
+        }
+        a.merge(&b);
+        assert_eq!(a, all);
+    }
+
+    #[test]
+    fn non_finite_samples_never_reach_the_sums() {
+        let mut acc = Accumulator::new(1, 1);
+        acc.add_phase(0, &[Rgb::splat(f32::NAN), Rgb::splat(f32::INFINITY), Rgb::ONE, Rgb::ZERO], 1);
+        assert!(acc.pixels[0].sum.iter().flatten().all(|v| v.is_finite()));
+        assert_eq!(acc.mean_total(0), [1.0, 1.0, 1.0]);
+    }
+
+    #[test]
+    fn unlit_delta_ignores_pixels_that_see_a_light() {
+        let mut acc = Accumulator::new(2, 1);
+        for x in [1.0f32, 3.0] {
+            acc.add_phase(0, &[Rgb::splat(100.0), Rgb::ZERO, Rgb::ZERO, Rgb::ZERO], 1);
+            acc.add_phase(1, &[Rgb::ZERO, Rgb::splat(x), Rgb::ZERO, Rgb::ZERO], 1);
+        }
+        let e = acc.error();
+        // Pixel 1 alone: mean 2, SEM² = 1/2.
+        assert!((e.delta_unlit - (0.5f64).sqrt() / 2.0).abs() < 1e-9);
+        assert!(e.delta_all < e.delta_unlit);
+    }
+}

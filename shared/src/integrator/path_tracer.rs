@@ -1,0 +1,86 @@
+//! The reference path tracer: unidirectional, next-event estimation with MIS (power heuristic), Russian
+//! roulette. It splits its estimate into the same layers as PBPM so that every layer can be compared.
+
+use super::{sample_direct, Layer, LayerValues};
+use crate::color::Rgb;
+use crate::geometry::{ray::offset_origin, Ray};
+use crate::material::Transport;
+use crate::sampling::{power_heuristic, Sampler};
+use crate::scene::Scene;
+use glam::Vec3;
+
+/// What the previous vertex of a camera path was, which decides how an emitter hit is counted.
+#[derive(Clone, Copy)]
+enum Previous {
+    /// The camera or a specular vertex.
+    Specular,
+    /// A diffuse vertex at `p` whose cosine sample had solid-angle pdf `pdf`.
+    Diffuse { p: Vec3, pdf: f32 },
+}
+
+/// Counters of one path.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PathStats {
+    /// Rays traced: path segments and shadow rays.
+    pub rays: u64,
+}
+
+/// The layer light belongs to, given how many diffuse vertices the camera path had before reaching it and
+/// whether the last step before the light was specular.
+fn layer_of(diffuse_vertices: u32, through_specular: bool) -> Layer {
+    match (diffuse_vertices, through_specular) {
+        (0, _) => Layer::VisibleLights,
+        (1, false) => Layer::Direct,
+        (1, true) => Layer::Caustic,
+        _ => Layer::Indirect,
+    }
+}
+
+/// Estimates the radiance arriving along `ray`, split into layers; `max_depth` counts path segments.
+pub fn trace(scene: &Scene, max_depth: u32, mut ray: Ray, sampler: &mut Sampler, stats: &mut PathStats) -> LayerValues {
+    let mut out: LayerValues = [Rgb::ZERO; 4];
+    let mut beta = Rgb::ONE;
+    let mut previous = Previous::Specular;
+    let mut diffuse_vertices = 0u32;
+    let mut segments = 0u32;
+    loop {
+        stats.rays += 1;
+        let Some(hit) = scene.geometry.intersect(&ray) else { break };
+        segments += 1;
+        let le = scene.lights.emitted(&hit, ray.direction);
+        if le != Rgb::ZERO {
+            match previous {
+                Previous::Specular => out[layer_of(diffuse_vertices, diffuse_vertices > 0) as usize] += beta * le,
+                Previous::Diffuse { p, pdf } => {
+                    let w = power_heuristic(pdf, scene.lights.pdf_incident(p, &hit));
+                    out[layer_of(diffuse_vertices, false) as usize] += beta * le * w;
+                }
+            }
+        }
+        if segments >= max_depth {
+            break;
+        }
+        let material = scene.material(&hit);
+        let wo = -ray.direction;
+        if let Some(albedo) = material.diffuse_albedo() {
+            diffuse_vertices += 1;
+            stats.rays += 1;
+            if let Some(d) = sample_direct(scene, &hit, wo, albedo, sampler) {
+                let w = if d.delta { 1.0 } else { power_heuristic(d.light_pdf, d.bsdf_pdf) };
+                out[layer_of(diffuse_vertices, false) as usize] += beta * d.value * w;
+            }
+        }
+        let Some(s) = material.sample(&hit, wo, sampler.next_2d(), Transport::Radiance) else { break };
+        beta *= s.weight;
+        previous = if s.delta { Previous::Specular } else { Previous::Diffuse { p: hit.p, pdf: s.pdf } };
+        if segments >= 3 {
+            let q = beta.max_element().min(1.0);
+            if sampler.next_f32() >= q {
+                break;
+            }
+            beta /= q;
+        }
+        ray = Ray::new(offset_origin(hit.p, hit.ng, s.wi), s.wi);
+    }
+    out
+}

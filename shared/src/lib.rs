@@ -1,0 +1,15 @@
+//! photonfarm's renderer library: scenes, ray tracing, progressive backward photon mapping (PBPM), the
+//! reference path tracer, accumulation with the SEM error estimate, and image output.
+
+pub mod accumulation;
+pub mod camera;
+pub mod color;
+pub mod geometry;
+pub mod integrator;
+pub mod light;
+pub mod material;
+pub mod output;
+pub mod pbpm;
+pub mod render;
+pub mod sampling;
+pub mod scene;

@@ -1,0 +1,228 @@
+//! Light sources: emissive triangles (one-sided, front = CCW winding), point lights and spot lights, chosen by
+//! power both for next-event estimation and for emitting light paths.
+
+use crate::color::{luminance, Rgb};
+use crate::geometry::{SceneGeometry, SurfaceHit};
+use crate::sampling::cosine_hemisphere;
+use crate::sampling::{uniform_cone, uniform_sphere, uniform_triangle, Discrete, Frame};
+use glam::{Vec2, Vec3};
+use std::f32::consts::PI;
+
+/// One light source.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Light {
+    /// One triangle of an emissive object, radiance `emission` (W·sr⁻¹·m⁻²) from its front side.
+    Area { triangle: u32, emission: Rgb, area: f32, normal: Vec3 },
+    /// Isotropic point light of `intensity` (W/sr).
+    Point { position: Vec3, intensity: Rgb },
+    /// A point light restricted to a cone, with a smooth falloff between `cos_falloff_start` and `cos_total`.
+    Spot { position: Vec3, direction: Vec3, intensity: Rgb, cos_total: f32, cos_falloff_start: f32 },
+}
+
+/// Incident light at a point, sampled for next-event estimation.
+#[derive(Clone, Copy, Debug)]
+pub struct IncidentSample {
+    /// Unit direction from the shading point toward the light.
+    pub wi: Vec3,
+    /// The point on the light (for the shadow ray).
+    pub point: Vec3,
+    /// Incident radiance (area lights) or intensity / d² (point and spot lights).
+    pub li: Rgb,
+    /// Solid-angle pdf including the light's selection probability; for delta lights, the selection
+    /// probability alone.
+    pub pdf: f32,
+    /// True for point and spot lights, which MIS cannot weigh.
+    pub delta: bool,
+}
+
+/// The start of a light path.
+#[derive(Clone, Copy, Debug)]
+pub struct EmissionSample {
+    pub origin: Vec3,
+    /// Surface normal at the origin (zero for point lights): the first ray is offset along it.
+    pub normal: Vec3,
+    pub direction: Vec3,
+    /// Flux carried by the path: Le · cos / (pdf_select · pdf_position · pdf_direction).
+    pub beta: Rgb,
+    /// Which light emitted it, for per-light statistics.
+    pub light: u32,
+}
+
+/// All lights of a scene and the power distribution that selects among them.
+pub struct Lights {
+    lights: Vec<Light>,
+    by_power: Option<Discrete>,
+    /// Light index of every scene triangle, u32::MAX for non-emitters.
+    light_of_triangle: Vec<u32>,
+}
+
+impl Light {
+    /// Emitted power in luminance units, the weight that chooses this light.
+    pub fn power(&self) -> f32 {
+        match *self {
+            Light::Area { emission, area, .. } => PI * area * luminance(emission),
+            Light::Point { intensity, .. } => 4.0 * PI * luminance(intensity),
+            Light::Spot { intensity, cos_total, cos_falloff_start, .. } => {
+                2.0 * PI * (1.0 - 0.5 * (cos_total + cos_falloff_start)) * luminance(intensity)
+            }
+        }
+    }
+}
+
+fn smoothstep(x: f32, a: f32, b: f32) -> f32 {
+    if a == b {
+        return if x < a { 0.0 } else { 1.0 };
+    }
+    let t = ((x - a) / (b - a)).clamp(0.0, 1.0);
+    t * t * (3.0 - 2.0 * t)
+}
+
+fn spot_falloff(cos_theta: f32, cos_total: f32, cos_falloff_start: f32) -> f32 {
+    smoothstep(cos_theta, cos_total, cos_falloff_start)
+}
+
+impl Lights {
+    /// Collects the lights; `triangle_count` sizes the triangle → light table.
+    pub fn new(lights: Vec<Light>, triangle_count: usize) -> Self {
+        let mut light_of_triangle = vec![u32::MAX; triangle_count];
+        for (i, l) in lights.iter().enumerate() {
+            if let Light::Area { triangle, .. } = l {
+                light_of_triangle[*triangle as usize] = i as u32;
+            }
+        }
+        let powers: Vec<f32> = lights.iter().map(Light::power).collect();
+        Lights { by_power: Discrete::new(&powers), lights, light_of_triangle }
+    }
+
+    /// The lights, in index order.
+    pub fn all(&self) -> &[Light] {
+        &self.lights
+    }
+
+    /// True when the scene has at least one light with power.
+    pub fn any(&self) -> bool {
+        self.by_power.is_some()
+    }
+
+    /// Radiance leaving an emitter hit toward the viewer at `-ray_dir` (zero from the back side).
+    pub fn emitted(&self, hit: &SurfaceHit, ray_dir: Vec3) -> Rgb {
+        if hit.triangle == u32::MAX {
+            return Rgb::ZERO;
+        }
+        match self.light_of_triangle.get(hit.triangle as usize) {
+            Some(&l) if l != u32::MAX => match self.lights[l as usize] {
+                Light::Area { emission, normal, .. } if ray_dir.dot(normal) < 0.0 => emission,
+                _ => Rgb::ZERO,
+            },
+            _ => Rgb::ZERO,
+        }
+    }
+
+    /// Solid-angle pdf with which next-event estimation from `from` would have chosen the emitter point `hit`.
+    pub fn pdf_incident(&self, from: Vec3, hit: &SurfaceHit) -> f32 {
+        let Some(dist) = &self.by_power else { return 0.0 };
+        let Some(&l) = self.light_of_triangle.get(hit.triangle as usize) else {
+            return 0.0;
+        };
+        if l == u32::MAX {
+            return 0.0;
+        }
+        let Light::Area { area, normal, .. } = self.lights[l as usize] else {
+            return 0.0;
+        };
+        let d = hit.p - from;
+        let d2 = d.length_squared();
+        let cos_l = (-d.normalize()).dot(normal);
+        if cos_l <= 0.0 {
+            return 0.0;
+        }
+        dist.pmf(l as usize) * d2 / (area * cos_l)
+    }
+
+    /// Samples light arriving at `p` (paper eq. 3/5's light-sampling term).
+    pub fn sample_incident(&self, geometry: &SceneGeometry, p: Vec3, u_select: f32, u: Vec2) -> Option<IncidentSample> {
+        let (index, pmf) = self.by_power.as_ref()?.sample(u_select);
+        match self.lights[index] {
+            Light::Area { triangle, emission, area, normal } => {
+                let tri = geometry.triangle(triangle);
+                let b = uniform_triangle(u);
+                let q = tri.v[0] * (1.0 - b.x - b.y) + tri.v[1] * b.x + tri.v[2] * b.y;
+                let d = q - p;
+                let d2 = d.length_squared();
+                if d2 <= 0.0 {
+                    return None;
+                }
+                let wi = d / d2.sqrt();
+                let cos_l = (-wi).dot(normal);
+                if cos_l <= 0.0 {
+                    return None;
+                }
+                Some(IncidentSample { wi, point: q, li: emission, pdf: pmf * d2 / (area * cos_l), delta: false })
+            }
+            Light::Point { position, intensity } => {
+                let d = position - p;
+                let d2 = d.length_squared();
+                Some(IncidentSample { wi: d / d2.sqrt(), point: position, li: intensity / d2, pdf: pmf, delta: true })
+            }
+            Light::Spot { position, direction, intensity, cos_total, cos_falloff_start } => {
+                let d = position - p;
+                let d2 = d.length_squared();
+                let wi = d / d2.sqrt();
+                let falloff = spot_falloff((-wi).dot(direction), cos_total, cos_falloff_start);
+                if falloff <= 0.0 {
+                    return None;
+                }
+                Some(IncidentSample { wi, point: position, li: intensity * falloff / d2, pdf: pmf, delta: true })
+            }
+        }
+    }
+
+    /// Starts a light path: a light chosen by power, a point on it and a direction.
+    pub fn sample_emission(
+        &self,
+        geometry: &SceneGeometry,
+        u_select: f32,
+        u_pos: Vec2,
+        u_dir: Vec2,
+    ) -> Option<EmissionSample> {
+        let (index, pmf) = self.by_power.as_ref()?.sample(u_select);
+        let sample = match self.lights[index] {
+            Light::Area { triangle, emission, area, normal } => {
+                let tri = geometry.triangle(triangle);
+                let b = uniform_triangle(u_pos);
+                let origin = tri.v[0] * (1.0 - b.x - b.y) + tri.v[1] * b.x + tri.v[2] * b.y;
+                let local = cosine_hemisphere(u_dir);
+                if local.z <= 0.0 {
+                    return None;
+                }
+                // Le cos / ((1/A) (cos/π)) = Le π A
+                EmissionSample {
+                    origin,
+                    normal,
+                    direction: Frame::from_normal(normal).to_world(local),
+                    beta: emission * (PI * area / pmf),
+                    light: index as u32,
+                }
+            }
+            Light::Point { position, intensity } => EmissionSample {
+                origin: position,
+                normal: Vec3::ZERO,
+                direction: uniform_sphere(u_dir),
+                beta: intensity * (4.0 * PI / pmf),
+                light: index as u32,
+            },
+            Light::Spot { position, direction, intensity, cos_total, cos_falloff_start } => {
+                let local = uniform_cone(u_dir, cos_total);
+                let falloff = spot_falloff(local.z, cos_total, cos_falloff_start);
+                EmissionSample {
+                    origin: position,
+                    normal: Vec3::ZERO,
+                    direction: Frame::from_normal(direction).to_world(local),
+                    beta: intensity * (falloff * 2.0 * PI * (1.0 - cos_total) / pmf),
+                    light: index as u32,
+                }
+            }
+        };
+        Some(sample)
+    }
+}

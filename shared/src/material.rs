@@ -1,0 +1,213 @@
+//! Materials and their scattering: the Lambertian diffuse surface, where photons are stored and gathered, and
+//! the delta (specular) surfaces that camera and light paths follow by sampling.
+
+use crate::color::{luminance, Rgb};
+use crate::geometry::SurfaceHit;
+use crate::sampling::{cosine_hemisphere, Frame};
+use glam::{Vec2, Vec3};
+use std::f32::consts::FRAC_1_PI;
+
+/// A surface's scattering behaviour. Emission is a property of the object, not of the material.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Material {
+    /// Lambertian reflector, two-sided.
+    Diffuse { albedo: Rgb },
+    /// Ideal specular reflector, two-sided.
+    Mirror { reflectance: Rgb },
+    /// Smooth dielectric interface with Fresnel reflection and refraction; `ior` on the back side of the
+    /// surface normal (inside), `ext_ior` on the front (outside).
+    Dielectric { ior: f32, ext_ior: f32 },
+    /// A thin partially reflecting coating (e.g. a head-up display combiner): specular reflection with
+    /// `reflectance`, straight-through transmission with `transmittance`, the rest absorbed.
+    Coating { reflectance: Rgb, transmittance: Rgb },
+}
+
+/// Which quantity a path carries across a scattering event: camera paths carry radiance (they are adjoint to
+/// light flow), light paths carry flux (importance transport). Veach's thesis §5.2 gives the two rules.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Transport {
+    Radiance,
+    Importance,
+}
+
+/// The sampled continuation of a path at a surface.
+#[derive(Clone, Copy, Debug)]
+pub struct ScatterSample {
+    /// New direction, pointing away from the surface.
+    pub wi: Vec3,
+    /// f · |cos| / pdf, including the transport-mode corrections.
+    pub weight: Rgb,
+    /// Solid-angle pdf for non-delta sampling (MIS needs it); zero for delta events.
+    pub pdf: f32,
+    /// True for specular (delta) events.
+    pub delta: bool,
+}
+
+impl Material {
+    /// True when scattering is a Dirac delta: such vertices are followed, never used for photons or NEE.
+    pub fn is_delta(&self) -> bool {
+        !matches!(self, Material::Diffuse { .. })
+    }
+
+    /// The Lambertian albedo, for diffuse surfaces.
+    pub fn diffuse_albedo(&self) -> Option<Rgb> {
+        match self {
+            Material::Diffuse { albedo } => Some(*albedo),
+            _ => None,
+        }
+    }
+
+    /// Samples an incident direction for outgoing direction `wo` (unit, pointing away from the surface).
+    /// Returns None when the path is absorbed or would leave through the wrong side of the geometry.
+    pub fn sample(&self, hit: &SurfaceHit, wo: Vec3, u: Vec2, mode: Transport) -> Option<ScatterSample> {
+        let front = wo.dot(hit.ng) >= 0.0;
+        // Normals turned to the side wo lies on: every material here is two-sided or handles sides itself.
+        let (ng, ns) = if front { (hit.ng, hit.ns) } else { (-hit.ng, -hit.ns) };
+        let sample = match *self {
+            Material::Diffuse { albedo } => {
+                if albedo == Rgb::ZERO {
+                    return None;
+                }
+                let local = cosine_hemisphere(u);
+                let wi = Frame::from_normal(ns).to_world(local);
+                if wi.dot(ng) <= 0.0 || local.z <= 0.0 {
+                    return None;
+                }
+                ScatterSample { wi, weight: albedo, pdf: local.z * FRAC_1_PI, delta: false }
+            }
+            Material::Mirror { reflectance } => {
+                ScatterSample { wi: reflect(wo, ns), weight: reflectance, pdf: 0.0, delta: true }
+            }
+            Material::Coating { reflectance, transmittance } => {
+                let (lr, lt) = (luminance(reflectance), luminance(transmittance));
+                if lr + lt <= 0.0 {
+                    return None;
+                }
+                let p_reflect = lr / (lr + lt);
+                if u.x < p_reflect {
+                    ScatterSample { wi: reflect(wo, ns), weight: reflectance / p_reflect, pdf: 0.0, delta: true }
+                } else {
+                    ScatterSample { wi: -wo, weight: transmittance / (1.0 - p_reflect), pdf: 0.0, delta: true }
+                }
+            }
+            Material::Dielectric { ior, ext_ior } => {
+                let (eta_o, eta_t) = if front { (ext_ior, ior) } else { (ior, ext_ior) };
+                let cos_o = wo.dot(ns).clamp(-1.0, 1.0).abs();
+                let f = fresnel_dielectric(cos_o, eta_o, eta_t);
+                if u.x < f {
+                    ScatterSample { wi: reflect(wo, ns), weight: Rgb::ONE, pdf: 0.0, delta: true }
+                } else {
+                    let eta = eta_o / eta_t;
+                    let sin2_t = eta * eta * (1.0 - cos_o * cos_o);
+                    let cos_t = (1.0 - sin2_t).max(0.0).sqrt();
+                    let wi = (-wo * eta + ns * (eta * cos_o - cos_t)).normalize();
+                    // Radiance is not invariant across an interface, L/η² is: the camera side sees the far
+                    // side's radiance scaled by (η_o/η_t)². Flux (importance transport) needs no factor.
+                    let scale = match mode {
+                        Transport::Radiance => eta * eta,
+                        Transport::Importance => 1.0,
+                    };
+                    ScatterSample { wi, weight: Rgb::splat(scale), pdf: 0.0, delta: true }
+                }
+            }
+        };
+        if mode == Transport::Importance {
+            // Shading normals make BSDFs non-reciprocal; the adjoint carries this factor (Veach §5.3).
+            let num = wo.dot(hit.ns).abs() * sample.wi.dot(hit.ng).abs();
+            let den = wo.dot(hit.ng).abs() * sample.wi.dot(hit.ns).abs();
+            if den <= 0.0 {
+                return None;
+            }
+            return Some(ScatterSample { weight: sample.weight * (num / den), ..sample });
+        }
+        Some(sample)
+    }
+}
+
+/// Mirror reflection of `wo` about `n`.
+#[inline]
+pub fn reflect(wo: Vec3, n: Vec3) -> Vec3 {
+    2.0 * wo.dot(n) * n - wo
+}
+
+/// Unpolarised Fresnel reflectance at a smooth interface for light arriving at cos θ_i from the medium of
+/// index `eta_i` (1 under total internal reflection).
+pub fn fresnel_dielectric(cos_i: f32, eta_i: f32, eta_t: f32) -> f32 {
+    let cos_i = cos_i.clamp(0.0, 1.0);
+    let sin_t = eta_i / eta_t * (1.0 - cos_i * cos_i).max(0.0).sqrt();
+    if sin_t >= 1.0 {
+        return 1.0;
+    }
+    let cos_t = (1.0 - sin_t * sin_t).max(0.0).sqrt();
+    let r_parl = (eta_t * cos_i - eta_i * cos_t) / (eta_t * cos_i + eta_i * cos_t);
+    let r_perp = (eta_i * cos_i - eta_t * cos_t) / (eta_i * cos_i + eta_t * cos_t);
+    0.5 * (r_parl * r_parl + r_perp * r_perp)
+}
+
+/// Lambertian BSDF value for the pair of directions, zero when they lie on different sides of the surface.
+#[inline]
+pub fn diffuse_f(albedo: Rgb, ng: Vec3, wo: Vec3, wi: Vec3) -> Rgb {
+    if wo.dot(ng) * wi.dot(ng) > 0.0 {
+        albedo * FRAC_1_PI
+    } else {
+        Rgb::ZERO
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn flat_hit(n: Vec3) -> SurfaceHit {
+        SurfaceHit { t: 1.0, p: Vec3::ZERO, ng: n, ns: n, object: 0, triangle: 0 }
+    }
+
+    #[test]
+    fn fresnel_at_normal_incidence_is_four_percent_for_glass() {
+        assert!((fresnel_dielectric(1.0, 1.0, 1.5) - 0.04).abs() < 1e-6);
+        assert!((fresnel_dielectric(1.0, 1.5, 1.0) - 0.04).abs() < 1e-6);
+        assert_eq!(fresnel_dielectric(0.1, 1.5, 1.0), 1.0, "total internal reflection");
+    }
+
+    #[test]
+    fn refraction_obeys_snell_and_radiance_scales_by_eta_squared() {
+        let glass = Material::Dielectric { ior: 1.5, ext_ior: 1.0 };
+        let hit = flat_hit(Vec3::Z);
+        let wo = Vec3::new(0.5, 0.0, 0.75f32.sqrt());
+        // u.x = 0.999 selects transmission (F is small here).
+        let s = glass.sample(&hit, wo, Vec2::new(0.999, 0.0), Transport::Radiance).unwrap();
+        let sin_o = 0.5f32;
+        let sin_t = (s.wi.x * s.wi.x + s.wi.y * s.wi.y).sqrt();
+        assert!((sin_o - 1.5 * sin_t).abs() < 1e-5);
+        assert!(s.wi.z < 0.0 && s.wi.x < 0.0);
+        assert!((s.weight.x - 1.0 / 2.25).abs() < 1e-5);
+        let s = glass.sample(&hit, wo, Vec2::new(0.999, 0.0), Transport::Importance).unwrap();
+        assert!((s.weight.x - 1.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn diffuse_sampling_stays_on_the_side_of_the_outgoing_direction() {
+        let m = Material::Diffuse { albedo: Rgb::splat(0.5) };
+        let hit = flat_hit(Vec3::Z);
+        for i in 0..64 {
+            let u = Vec2::new((i as f32 + 0.5) / 64.0, ((i * 37 % 64) as f32 + 0.5) / 64.0);
+            let s = m.sample(&hit, -Vec3::Z, u, Transport::Radiance).unwrap();
+            assert!(s.wi.z < 0.0);
+            assert_eq!(s.weight, Rgb::splat(0.5));
+        }
+    }
+
+    #[test]
+    fn coating_splits_energy_between_reflection_and_transmission() {
+        let m = Material::Coating { reflectance: Rgb::splat(0.25), transmittance: Rgb::splat(0.7) };
+        let hit = flat_hit(Vec3::Z);
+        let wo = Vec3::new(0.0, 0.6, 0.8);
+        let mut sum = Rgb::ZERO;
+        let n = 1000;
+        for i in 0..n {
+            let s = m.sample(&hit, wo, Vec2::new((i as f32 + 0.5) / n as f32, 0.5), Transport::Radiance).unwrap();
+            sum += s.weight;
+        }
+        assert!(((sum / n as f32).x - 0.95).abs() < 1e-3);
+    }
+}

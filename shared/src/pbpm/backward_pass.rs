@@ -1,0 +1,134 @@
+//! The backward pass (paper §2 step 1): camera paths that add directly visible light and direct light (with
+//! MIS, paper eq. 5) to their pixel and store backward photons at their first `backward_diffuse_depth`
+//! diffuse vertices.
+
+use super::photon::BackwardPhoton;
+use super::radius::RadiusSchedule;
+use crate::color::Rgb;
+use crate::geometry::{ray::offset_origin, Ray};
+use crate::integrator::{sample_direct, Layer, LayerValues};
+use crate::material::Transport;
+use crate::sampling::{power_heuristic, Sampler};
+use crate::scene::Scene;
+use glam::Vec3;
+
+/// What the backward pass needs to know besides the scene.
+#[derive(Clone, Copy, Debug)]
+pub struct BackwardSettings {
+    pub max_depth: u32,
+    pub backward_diffuse_depth: u32,
+    pub radius: RadiusSchedule,
+    /// 1-based phase number, for the radius schedule.
+    pub phase: u64,
+}
+
+/// Counters of the backward pass.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct BackwardStats {
+    /// Rays traced: path segments and shadow rays.
+    pub rays: u64,
+    /// Backward photons stored.
+    pub photons: u64,
+}
+
+/// Traces one camera path for `pixel`, returns its visible-light and next-event contributions per layer and
+/// hands every backward photon to `store`.
+pub fn trace_camera_path(
+    scene: &Scene,
+    settings: &BackwardSettings,
+    pixel: u32,
+    mut ray: Ray,
+    sampler: &mut Sampler,
+    stats: &mut BackwardStats,
+    store: &mut impl FnMut(BackwardPhoton),
+) -> LayerValues {
+    let mut out: LayerValues = [Rgb::ZERO; 4];
+    let mut beta = Rgb::ONE;
+    let mut k = 0u32; // diffuse vertices so far
+    let mut segments = 0u32;
+    let mut path_length = 0.0f32;
+    // Set when the previous vertex was diffuse vertex D_k at `p` with BSDF pdf `pdf`: an emitter hit now is
+    // D_k's direct light, weighted against its next-event estimate.
+    let mut from_diffuse: Option<(Vec3, f32)> = None;
+    loop {
+        stats.rays += 1;
+        let Some(hit) = scene.geometry.intersect(&ray) else { break };
+        segments += 1;
+        path_length += hit.t;
+        let le = scene.lights.emitted(&hit, ray.direction);
+        if le != Rgb::ZERO {
+            match (k, from_diffuse) {
+                (0, _) => out[Layer::VisibleLights as usize] += beta * le,
+                (_, Some((p, pdf))) => {
+                    let w = power_heuristic(pdf, scene.lights.pdf_incident(p, &hit));
+                    out[direct_layer(k) as usize] += beta * le * w;
+                }
+                // Emitter reached from a diffuse vertex through specular surfaces: a caustic, which the forward
+                // pass counts.
+                _ => {}
+            }
+        }
+        if segments >= settings.max_depth {
+            break;
+        }
+        let material = scene.material(&hit);
+        let wo = -ray.direction;
+        let continues;
+        if let Some(albedo) = material.diffuse_albedo() {
+            if albedo == Rgb::ZERO {
+                break;
+            }
+            k += 1;
+            continues = k < settings.backward_diffuse_depth;
+            stats.rays += 1;
+            if let Some(d) = sample_direct(scene, &hit, wo, albedo, sampler) {
+                // Without a BSDF continuation nothing else finds this light: next-event estimation takes it all.
+                let w = if d.delta || !continues { 1.0 } else { power_heuristic(d.light_pdf, d.bsdf_pdf) };
+                out[direct_layer(k) as usize] += beta * d.value * w;
+            }
+            // A merge needs at least two light segments (y1 is next-event estimation's).
+            if segments + 2 <= settings.max_depth {
+                let r = settings.radius.radius(path_length, settings.phase);
+                let normal = if wo.dot(hit.ng) >= 0.0 { hit.ng } else { -hit.ng };
+                let weight = beta * albedo * (std::f32::consts::FRAC_1_PI / (std::f32::consts::PI * r * r));
+                if weight.is_finite() && r > 0.0 {
+                    stats.photons += 1;
+                    store(BackwardPhoton {
+                        position: hit.p,
+                        normal,
+                        weight,
+                        radius2: r * r,
+                        pixel,
+                        k: k as u8,
+                        segments: segments.min(255) as u8,
+                    });
+                }
+            }
+            if !continues {
+                break;
+            }
+        }
+        let Some(s) = material.sample(&hit, wo, sampler.next_2d(), Transport::Radiance) else { break };
+        beta *= s.weight;
+        from_diffuse = (!s.delta).then_some((hit.p, s.pdf));
+        if segments >= 4 {
+            // Long specular chains (light trapped in glass) end by roulette, unbiased.
+            let q = beta.max_element().min(1.0);
+            if sampler.next_f32() >= q {
+                break;
+            }
+            beta /= q;
+        }
+        ray = Ray::new(offset_origin(hit.p, hit.ng, s.wi), s.wi);
+    }
+    out
+}
+
+/// The layer of light that arrives at diffuse vertex k straight from an emitter.
+fn direct_layer(k: u32) -> Layer {
+    if k == 1 {
+        Layer::Direct
+    } else {
+        Layer::Indirect
+    }
+}

@@ -1,0 +1,127 @@
+//! The forward pass (paper §2 step 3): light paths that gather into the backward photon map at their diffuse
+//! vertices y_m, m ≥ 2, adding τ · f · ΔΦ / (π r²) (paper eq. 4) to the photon's pixel.
+
+use super::photon_map::PhotonMap;
+use crate::color::Rgb;
+use crate::geometry::{ray::offset_origin, Ray, SurfaceHit};
+use crate::integrator::Layer;
+use crate::material::Transport;
+use crate::sampling::Sampler;
+use crate::scene::Scene;
+use glam::Vec3;
+
+/// Counters of the forward pass.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ForwardStats {
+    /// Light paths traced.
+    pub light_paths: u64,
+    /// Rays traced along light paths.
+    pub rays: u64,
+    /// Light-path vertices that found a backward photon (intersections of forward rays with backward photons).
+    pub merges: u64,
+    /// Paths that `max_depth` stopped while they still carried flux.
+    pub capped: u64,
+}
+
+/// Where gathered light goes: (pixel, layer, τ · f · ΔΦ / (π r²)).
+pub trait Gather {
+    fn add(&mut self, pixel: u32, layer: Layer, value: Rgb);
+}
+
+impl<F: FnMut(u32, Layer, Rgb)> Gather for F {
+    #[inline]
+    fn add(&mut self, pixel: u32, layer: Layer, value: Rgb) {
+        self(pixel, layer, value)
+    }
+}
+
+/// Normals of a photon's surface and the gathering surface must agree this well (cos 25°), so that light on
+/// one wall of a corner is not gathered by photons on the other.
+const NORMAL_AGREEMENT: f32 = 0.9;
+
+/// Traces one light path and gathers it into `map`.
+pub fn trace_light_path(
+    scene: &Scene,
+    max_depth: u32,
+    backward_diffuse_depth: u32,
+    map: &PhotonMap,
+    sampler: &mut Sampler,
+    stats: &mut ForwardStats,
+    sink: &mut impl Gather,
+) {
+    stats.light_paths += 1;
+    let u_select = sampler.next_f32();
+    let (u_pos, u_dir) = (sampler.next_2d(), sampler.next_2d());
+    let Some(e) = scene.lights.sample_emission(&scene.geometry, u_select, u_pos, u_dir) else { return };
+    let origin = if e.normal == Vec3::ZERO { e.origin } else { offset_origin(e.origin, e.normal, e.direction) };
+    let mut ray = Ray::new(origin, e.direction);
+    let mut beta = e.beta;
+    let beta0 = e.beta.max_element();
+    // True while y1 … y_{m−1} are all specular.
+    let mut all_specular = true;
+    let mut m = 0u32;
+    loop {
+        stats.rays += 1;
+        let Some(hit) = scene.geometry.intersect(&ray) else { break };
+        m += 1;
+        let material = scene.material(&hit);
+        let wi = -ray.direction;
+        if material.diffuse_albedo().is_some() {
+            if m >= 2 {
+                gather(map, &hit, wi, beta, m, max_depth, backward_diffuse_depth, all_specular, stats, sink);
+            }
+            all_specular = false;
+        }
+        // The next vertex y_{m+1} can still merge only with a photon one segment from the eye.
+        if m + 2 > max_depth {
+            if beta != Rgb::ZERO {
+                stats.capped += 1;
+            }
+            break;
+        }
+        let Some(s) = material.sample(&hit, wi, sampler.next_2d(), Transport::Importance) else { break };
+        beta *= s.weight;
+        if m >= 3 {
+            let q = (beta.max_element() / beta0).min(1.0);
+            if sampler.next_f32() >= q {
+                break;
+            }
+            beta /= q;
+        }
+        ray = Ray::new(offset_origin(hit.p, hit.ng, s.wi), s.wi);
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn gather(
+    map: &PhotonMap,
+    hit: &SurfaceHit,
+    wi: Vec3,
+    flux: Rgb,
+    m: u32,
+    max_depth: u32,
+    backward_diffuse_depth: u32,
+    all_specular: bool,
+    stats: &mut ForwardStats,
+    sink: &mut impl Gather,
+) {
+    for b in map.candidates(hit.p) {
+        if (b.position - hit.p).length_squared() > b.radius2
+            || wi.dot(b.normal) <= 0.0
+            || hit.ng.dot(b.normal).abs() < NORMAL_AGREEMENT
+            || b.segments as u32 + m > max_depth
+        {
+            continue;
+        }
+        // DESIGN §1's partition: every light path is counted by exactly one photon depth.
+        let layer = match (b.k, all_specular) {
+            (1, true) => Layer::Caustic,
+            (1, false) if backward_diffuse_depth == 1 => Layer::Indirect,
+            (1, false) => continue,
+            _ => Layer::Indirect,
+        };
+        stats.merges += 1;
+        sink.add(b.pixel, layer, b.weight * flux); // eq. 4
+    }
+}

@@ -1,0 +1,176 @@
+//! The backward photon map: a hashed uniform grid built by counting sort each phase. Each photon is entered in
+//! every cell its sphere overlaps, so a gather looks at a single cell.
+
+use super::photon::BackwardPhoton;
+use glam::Vec3;
+
+/// Backward photons of one phase and the grid over them; buffers are kept and reused across phases so memory
+/// stays flat.
+#[derive(Default)]
+pub struct PhotonMap {
+    photons: Vec<BackwardPhoton>,
+    inv_cell: f32,
+    mask: u32,
+    /// starts[h]..starts[h+1] are the entries of bucket h.
+    starts: Vec<u32>,
+    entries: Vec<u32>,
+}
+
+#[inline]
+fn bucket(ix: i32, iy: i32, iz: i32, mask: u32) -> usize {
+    let h = (ix as u32).wrapping_mul(73_856_093)
+        ^ (iy as u32).wrapping_mul(19_349_663)
+        ^ (iz as u32).wrapping_mul(83_492_791);
+    (h & mask) as usize
+}
+
+impl PhotonMap {
+    /// An empty map.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Forgets the photons of the previous phase (the grid is rebuilt by `build`).
+    pub fn clear(&mut self) {
+        self.photons.clear();
+        self.entries.clear();
+        self.starts.clear();
+    }
+
+    /// Adds a photon; call `build` before gathering.
+    pub fn push(&mut self, photon: BackwardPhoton) {
+        self.photons.push(photon);
+    }
+
+    /// Adds many photons.
+    pub fn extend(&mut self, photons: &[BackwardPhoton]) {
+        self.photons.extend_from_slice(photons);
+    }
+
+    /// The photons, in insertion order.
+    pub fn photons(&self) -> &[BackwardPhoton] {
+        &self.photons
+    }
+
+    /// Bytes held by the map's buffers.
+    pub fn capacity_bytes(&self) -> usize {
+        self.photons.capacity() * std::mem::size_of::<BackwardPhoton>()
+            + (self.starts.capacity() + self.entries.capacity()) * 4
+    }
+
+    fn cell_range(&self, p: Vec3, r: f32) -> ([i32; 3], [i32; 3]) {
+        let lo = ((p - Vec3::splat(r)) * self.inv_cell).floor();
+        let hi = ((p + Vec3::splat(r)) * self.inv_cell).floor();
+        ([lo.x as i32, lo.y as i32, lo.z as i32], [hi.x as i32, hi.y as i32, hi.z as i32])
+    }
+
+    /// Builds the grid over the current photons; cells are twice the mean radius wide.
+    pub fn build(&mut self) {
+        self.starts.clear();
+        self.entries.clear();
+        if self.photons.is_empty() {
+            return;
+        }
+        let mean_r = self.photons.iter().map(|p| p.radius2.sqrt() as f64).sum::<f64>() / self.photons.len() as f64;
+        self.inv_cell = 1.0 / (2.0 * mean_r as f32).max(1e-12);
+        let mut cells = 0usize;
+        for p in &self.photons {
+            let (lo, hi) = self.cell_range(p.position, p.radius2.sqrt());
+            cells += ((hi[0] - lo[0] + 1) * (hi[1] - lo[1] + 1) * (hi[2] - lo[2] + 1)) as usize;
+        }
+        let size = (2 * cells).next_power_of_two().max(16);
+        self.mask = (size - 1) as u32;
+        self.starts.resize(size + 1, 0);
+        let visit = |map: &mut PhotonMap, f: &mut dyn FnMut(&mut PhotonMap, usize, u32)| {
+            // A photon whose cells collide in one bucket must be entered there once, or it would be gathered twice.
+            let mut buckets: Vec<usize> = Vec::with_capacity(27);
+            for i in 0..map.photons.len() {
+                let p = map.photons[i];
+                let (lo, hi) = map.cell_range(p.position, p.radius2.sqrt());
+                buckets.clear();
+                for z in lo[2]..=hi[2] {
+                    for y in lo[1]..=hi[1] {
+                        for x in lo[0]..=hi[0] {
+                            buckets.push(bucket(x, y, z, map.mask));
+                        }
+                    }
+                }
+                buckets.sort_unstable();
+                buckets.dedup();
+                for &b in &buckets {
+                    f(map, b, i as u32);
+                }
+            }
+        };
+        visit(self, &mut |m, b, _| m.starts[b + 1] += 1);
+        for h in 0..size {
+            self.starts[h + 1] += self.starts[h];
+        }
+        self.entries.resize(self.starts[size] as usize, 0);
+        // Fill using a moving cursor per bucket, kept in `starts` shifted by one and restored afterwards.
+        visit(self, &mut |m, b, i| {
+            let slot = m.starts[b] as usize;
+            m.entries[slot] = i;
+            m.starts[b] += 1;
+        });
+        for h in (1..=size).rev() {
+            self.starts[h] = self.starts[h - 1];
+        }
+        self.starts[0] = 0;
+    }
+
+    /// Photons whose sphere may contain `p` (a superset: callers test the distance).
+    #[inline]
+    pub fn candidates(&self, p: Vec3) -> impl Iterator<Item = &BackwardPhoton> {
+        let range = if self.starts.is_empty() {
+            0..0
+        } else {
+            let c = (p * self.inv_cell).floor();
+            let b = bucket(c.x as i32, c.y as i32, c.z as i32, self.mask);
+            self.starts[b] as usize..self.starts[b + 1] as usize
+        };
+        self.entries[range].iter().map(move |&i| &self.photons[i as usize])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::color::Rgb;
+    use crate::sampling::{Pass, Sampler};
+
+    fn photon(p: Vec3, r: f32, pixel: u32) -> BackwardPhoton {
+        BackwardPhoton { position: p, normal: Vec3::Y, weight: Rgb::ONE, radius2: r * r, pixel, k: 1, segments: 1 }
+    }
+
+    #[test]
+    fn gather_finds_exactly_the_photons_whose_sphere_contains_the_point() {
+        let mut s = Sampler::new(1, Pass::Camera, 1, 1);
+        let mut map = PhotonMap::new();
+        let mut all = Vec::new();
+        for i in 0..2000 {
+            let p = Vec3::new(s.next_f32(), s.next_f32(), s.next_f32());
+            let r = 0.01 + 0.08 * s.next_f32();
+            all.push(photon(p, r, i));
+            map.push(photon(p, r, i));
+        }
+        map.build();
+        for _ in 0..500 {
+            let q = Vec3::new(s.next_f32(), s.next_f32(), s.next_f32());
+            let mut expect: Vec<u32> =
+                all.iter().filter(|b| (b.position - q).length_squared() <= b.radius2).map(|b| b.pixel).collect();
+            let mut got: Vec<u32> =
+                map.candidates(q).filter(|b| (b.position - q).length_squared() <= b.radius2).map(|b| b.pixel).collect();
+            expect.sort();
+            got.sort();
+            assert_eq!(got, expect);
+        }
+    }
+
+    #[test]
+    fn empty_map_has_no_candidates() {
+        let mut map = PhotonMap::new();
+        map.build();
+        assert_eq!(map.candidates(Vec3::ZERO).count(), 0);
+    }
+}

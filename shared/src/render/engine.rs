@@ -1,0 +1,192 @@
+//! The single-threaded progressive engine: the reference every parallel method must agree with.
+
+use super::settings::{Method, RenderSettings};
+use crate::accumulation::Accumulator;
+use crate::color::Rgb;
+use crate::integrator::{path_tracer, Layer, LayerValues};
+use crate::pbpm::{
+    backward_pass::BackwardStats, trace_camera_path, trace_light_path, BackwardSettings, ForwardStats, PhotonMap,
+};
+use crate::sampling::{Pass, Sampler};
+use crate::scene::Scene;
+use serde::{Deserialize, Serialize};
+
+/// Counts accumulated over a run.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RayTotals {
+    pub phases: u64,
+    /// Rays of camera paths (segments and shadow rays).
+    pub backward_rays: u64,
+    /// Rays of light paths.
+    pub forward_rays: u64,
+    pub light_paths: u64,
+    pub backward_photons: u64,
+    /// Light-path vertices that met a backward photon.
+    pub merges: u64,
+    /// Light paths stopped by `max_depth` while still carrying flux.
+    pub capped_light_paths: u64,
+}
+
+/// What one phase did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PhaseReport {
+    pub phase: u64,
+    pub backward_rays: u64,
+    pub forward_rays: u64,
+    pub light_paths: u64,
+    pub merges: u64,
+}
+
+/// Runs phases over the whole image on the calling thread and keeps the running sums.
+pub struct Engine<'s> {
+    scene: &'s Scene,
+    settings: RenderSettings,
+    sums: Accumulator,
+    map: PhotonMap,
+    phase_values: Vec<LayerValues>,
+    /// Gathered (indirect, caustic) luminance of the phase, before division by the light-path count.
+    gathered: Vec<[Rgb; 2]>,
+    totals: RayTotals,
+}
+
+impl<'s> Engine<'s> {
+    /// An engine with empty sums.
+    pub fn new(scene: &'s Scene, settings: RenderSettings) -> Self {
+        let pixels = scene.camera.pixel_count();
+        Engine {
+            scene,
+            settings,
+            sums: Accumulator::new(scene.camera.width, scene.camera.height),
+            map: PhotonMap::new(),
+            phase_values: vec![[Rgb::ZERO; 4]; pixels],
+            gathered: vec![[Rgb::ZERO; 2]; pixels],
+            totals: RayTotals::default(),
+        }
+    }
+
+    /// An engine continuing from earlier sums and totals (resume).
+    pub fn resume(scene: &'s Scene, settings: RenderSettings, sums: Accumulator, totals: RayTotals) -> Self {
+        let mut e = Engine::new(scene, settings);
+        e.sums = sums;
+        e.totals = totals;
+        e
+    }
+
+    /// The running sums.
+    pub fn sums(&self) -> &Accumulator {
+        &self.sums
+    }
+
+    /// Totals so far.
+    pub fn totals(&self) -> RayTotals {
+        self.totals
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &RenderSettings {
+        &self.settings
+    }
+
+    /// Bytes held per pixel by the sums, the phase buffers and the photon map.
+    pub fn bytes_per_pixel(&self) -> f64 {
+        let pixels = self.phase_values.len().max(1);
+        let fixed = self.sums.pixels.capacity() * std::mem::size_of::<crate::accumulation::PixelSums>()
+            + self.phase_values.capacity() * std::mem::size_of::<LayerValues>()
+            + self.gathered.capacity() * std::mem::size_of::<[Rgb; 2]>();
+        (fixed + self.map.capacity_bytes()) as f64 / pixels as f64
+    }
+
+    /// Renders one more phase and closes it into the sums.
+    pub fn run_phase(&mut self) -> PhaseReport {
+        let report = match self.settings.method {
+            Method::Pbpm => self.pbpm_phase(),
+            Method::Path => self.path_phase(),
+        };
+        self.totals.phases += 1;
+        self.totals.backward_rays += report.backward_rays;
+        self.totals.forward_rays += report.forward_rays;
+        self.totals.light_paths += report.light_paths;
+        self.totals.merges += report.merges;
+        report
+    }
+
+    fn path_phase(&mut self) -> PhaseReport {
+        let phase = self.totals.phases + 1;
+        let cam = &self.scene.camera;
+        let mut stats = path_tracer::PathStats::default();
+        for pixel in 0..cam.pixel_count() {
+            let (x, y) = ((pixel % cam.width as usize) as u32, (pixel / cam.width as usize) as u32);
+            let mut s = Sampler::new(self.settings.seed, Pass::Path, phase, pixel as u64);
+            let ray = cam.generate_ray(x, y, s.next_2d(), s.next_2d());
+            let v = path_tracer::trace(self.scene, self.settings.max_depth, ray, &mut s, &mut stats);
+            self.sums.add_phase(pixel, &v, 1);
+        }
+        PhaseReport { phase, backward_rays: stats.rays, ..Default::default() }
+    }
+
+    fn pbpm_phase(&mut self) -> PhaseReport {
+        let phase = self.totals.phases + 1;
+        let scene = self.scene;
+        let cam = &scene.camera;
+        let bs = BackwardSettings {
+            max_depth: self.settings.max_depth,
+            backward_diffuse_depth: self.settings.backward_diffuse_depth,
+            radius: self.settings.radius_schedule(scene),
+            phase,
+        };
+        // 1. Backward pass.
+        self.map.clear();
+        let mut bstats = BackwardStats::default();
+        for pixel in 0..cam.pixel_count() {
+            let (x, y) = ((pixel % cam.width as usize) as u32, (pixel / cam.width as usize) as u32);
+            let mut s = Sampler::new(self.settings.seed, Pass::Camera, phase, pixel as u64);
+            let ray = cam.generate_ray(x, y, s.next_2d(), s.next_2d());
+            let map = &mut self.map;
+            self.phase_values[pixel] =
+                trace_camera_path(scene, &bs, pixel as u32, ray, &mut s, &mut bstats, &mut |b| map.push(b));
+        }
+        // 2. Backward photon map.
+        self.map.build();
+        // 3. Forward pass.
+        let n = self.settings.light_paths_per_phase(cam.pixel_count());
+        let mut fstats = ForwardStats::default();
+        for g in self.gathered.iter_mut() {
+            *g = [Rgb::ZERO; 2];
+        }
+        let gathered = &mut self.gathered;
+        let mut sink = |pixel: u32, layer: Layer, v: Rgb| {
+            let slot = if layer == Layer::Caustic { 1 } else { 0 };
+            gathered[pixel as usize][slot] += v;
+        };
+        for i in 0..n {
+            let mut s = Sampler::new(self.settings.seed, Pass::Light, phase, i);
+            trace_light_path(
+                scene,
+                self.settings.max_depth,
+                self.settings.backward_diffuse_depth,
+                &self.map,
+                &mut s,
+                &mut fstats,
+                &mut sink,
+            );
+        }
+        // 4. Close the phase: the gathered sums are normalised by the number of light paths traced against
+        // the map.
+        let inv_n = 1.0 / n as f32;
+        for pixel in 0..cam.pixel_count() {
+            let mut v = self.phase_values[pixel];
+            v[Layer::Indirect as usize] += self.gathered[pixel][0] * inv_n;
+            v[Layer::Caustic as usize] += self.gathered[pixel][1] * inv_n;
+            self.sums.add_phase(pixel, &v, 1);
+        }
+        self.totals.backward_photons += bstats.photons;
+        self.totals.capped_light_paths += fstats.capped;
+        PhaseReport {
+            phase,
+            backward_rays: bstats.rays,
+            forward_rays: fstats.rays,
+            light_paths: fstats.light_paths,
+            merges: fstats.merges,
+        }
+    }
+}

@@ -1,0 +1,38 @@
+//! Images made from the running sums: the mean of every layer, the total and the per-pixel SEM.
+
+use crate::accumulation::Accumulator;
+use crate::color::luminance_f64;
+use crate::integrator::Layer;
+use crate::output::exr_file::LayerImage;
+
+/// Layers written to the EXR: the four components, their total, and the total's standard error (grey).
+pub fn layer_images(sums: &Accumulator) -> Vec<LayerImage> {
+    let (w, h) = (sums.width as usize, sums.height as usize);
+    let mut out: Vec<LayerImage> = Layer::ALL.iter().map(|l| LayerImage::new(l.name(), w, h)).collect();
+    let mut total = LayerImage::new("total", w, h);
+    let mut sem = LayerImage::new("sem", w, h);
+    for i in 0..w * h {
+        for (k, l) in Layer::ALL.iter().enumerate() {
+            let m = sums.mean(i, *l);
+            out[k].rgb[i] = [m[0] as f32, m[1] as f32, m[2] as f32];
+        }
+        let t = sums.mean_total(i);
+        total.rgb[i] = [t[0] as f32, t[1] as f32, t[2] as f32];
+        let s = sums.sem2(i);
+        let s = if s.is_finite() { s.sqrt() as f32 } else { 0.0 };
+        sem.rgb[i] = [s; 3];
+    }
+    out.push(total);
+    out.push(sem);
+    out
+}
+
+/// The mean total image, f64 per channel.
+pub fn total_image(sums: &Accumulator) -> Vec<[f64; 3]> {
+    (0..sums.pixels.len()).map(|i| sums.mean_total(i)).collect()
+}
+
+/// Luminance of an RGB f32 pixel, in f64.
+pub fn luminance_of(p: [f32; 3]) -> f64 {
+    luminance_f64([p[0] as f64, p[1] as f64, p[2] as f64])
+}

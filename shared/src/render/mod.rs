@@ -1,0 +1,12 @@
+//! Rendering runs: settings, the single-threaded progressive engine, images from the sums, memory and the run
+//! record.
+
+pub mod engine;
+pub mod images;
+pub mod memory;
+pub mod record;
+pub mod session;
+pub mod settings;
+
+pub use engine::{Engine, PhaseReport, RayTotals};
+pub use settings::{Method, RenderSettings};

@@ -1,0 +1,52 @@
+//! The JSON record of a run: enough to reproduce it (scene hash, settings, seed) and to chart its speed against
+//! its accuracy (rays and δ after every phase).
+
+use super::engine::RayTotals;
+use super::settings::RenderSettings;
+use crate::accumulation::ErrorEstimate;
+use serde::{Deserialize, Serialize};
+
+/// δ and ray counts after one phase.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HistoryEntry {
+    pub phase: u64,
+    pub time_s: f64,
+    pub delta_all: f64,
+    pub delta_unlit: f64,
+    pub backward_rays: u64,
+    pub forward_rays: u64,
+}
+
+/// Error against a reference image.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrueError {
+    /// The reference EXR.
+    pub reference: String,
+    /// Relative RMSE of luminance over all pixels.
+    pub rmse_all: f64,
+    /// Relative RMSE over pixels that do not see a light directly.
+    pub rmse_unlit: f64,
+}
+
+/// The record written as `run.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunRecord {
+    pub photonfarm_version: String,
+    pub scene: String,
+    pub scene_hash: String,
+    pub width: u32,
+    pub height: u32,
+    pub settings: RenderSettings,
+    /// Photon radius of a phase-1 photon at 1 m camera-path length (m): the footprint-derived scale.
+    pub radius_at_1m: f32,
+    pub threads: u32,
+    /// Why the run stopped: "time", "phases", "target-error", "interrupted" or "running".
+    pub stop_reason: String,
+    pub totals: RayTotals,
+    pub wall_time_s: f64,
+    pub peak_memory_bytes: Option<u64>,
+    pub bytes_per_pixel: f64,
+    pub error: ErrorEstimate,
+    pub true_error: Option<TrueError>,
+    pub history: Vec<HistoryEntry>,
+}

@@ -1,0 +1,100 @@
+//! A progressive run: phases until a time, phase or error target is met, or the user interrupts.
+
+use super::engine::Engine;
+use super::record::HistoryEntry;
+use serde::{Deserialize, Serialize};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+/// Which δ a target error refers to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ErrorOver {
+    /// Pixels that do not see a light directly (default: the lights would flatter δ).
+    Unlit,
+    /// Every pixel, the paper's eq. 6.
+    All,
+}
+
+/// When to stop; the first rule met wins. With no rule at all the run would never end, so callers set one.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StopRule {
+    pub time: Option<Duration>,
+    pub phases: Option<u64>,
+    pub target_error: Option<f64>,
+    pub error_over: ErrorOver,
+}
+
+/// Why a run ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StopReason {
+    Time,
+    Phases,
+    TargetError,
+    Interrupted,
+}
+
+impl StopReason {
+    /// The name used in the run record.
+    pub fn name(self) -> &'static str {
+        match self {
+            StopReason::Time => "time",
+            StopReason::Phases => "phases",
+            StopReason::TargetError => "target-error",
+            StopReason::Interrupted => "interrupted",
+        }
+    }
+}
+
+/// Runs phases until `stop` or `interrupted`; `on_phase` sees the engine after every phase. `elapsed_before`
+/// is wall time spent in earlier sessions of the same run (resume).
+pub fn run(
+    engine: &mut Engine,
+    stop: &StopRule,
+    interrupted: &AtomicBool,
+    history: &mut Vec<HistoryEntry>,
+    elapsed_before: Duration,
+    mut on_phase: impl FnMut(&Engine, &HistoryEntry),
+) -> StopReason {
+    let start = Instant::now();
+    loop {
+        if interrupted.load(Ordering::Relaxed) {
+            return StopReason::Interrupted;
+        }
+        if let Some(n) = stop.phases {
+            if engine.totals().phases >= n {
+                return StopReason::Phases;
+            }
+        }
+        engine.run_phase();
+        let e = engine.sums().error();
+        let t = engine.totals();
+        let entry = HistoryEntry {
+            phase: t.phases,
+            time_s: (elapsed_before + start.elapsed()).as_secs_f64(),
+            delta_all: e.delta_all,
+            delta_unlit: e.delta_unlit,
+            backward_rays: t.backward_rays,
+            forward_rays: t.forward_rays,
+        };
+        history.push(entry);
+        on_phase(engine, &entry);
+        if let Some(target) = stop.target_error {
+            let d = match stop.error_over {
+                ErrorOver::Unlit => e.delta_unlit,
+                ErrorOver::All => e.delta_all,
+            };
+            if d <= target {
+                return StopReason::TargetError;
+            }
+        }
+        if let Some(limit) = stop.time {
+            if start.elapsed() + elapsed_before >= limit {
+                return StopReason::Time;
+            }
+        }
+        if stop.phases.is_some_and(|n| t.phases >= n) {
+            return StopReason::Phases;
+        }
+    }
+}

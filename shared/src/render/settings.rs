@@ -1,0 +1,68 @@
+//! Settings of one rendering run.
+
+use crate::pbpm::RadiusSchedule;
+use crate::scene::{Scene, SceneRenderSettings};
+use serde::{Deserialize, Serialize};
+
+/// The estimator a run uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    /// Progressive backward photon mapping, single thread.
+    Pbpm,
+    /// The reference path tracer (one sample per pixel per phase).
+    Path,
+}
+
+impl Method {
+    /// The name used on the command line and in records.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Pbpm => "pbpm",
+            Method::Path => "path",
+        }
+    }
+}
+
+/// Everything that, with the scene, determines a run's result.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RenderSettings {
+    pub method: Method,
+    /// Job seed: with the phase and the pixel or light-path index it seeds every random stream.
+    pub seed: u64,
+    pub max_depth: u32,
+    pub backward_diffuse_depth: u32,
+    /// Initial photon radius in pixel footprints.
+    pub radius_scale: f32,
+    /// Knaus–Zwicker α.
+    pub radius_alpha: f32,
+    /// Light paths per phase, per pixel.
+    pub light_paths_per_pixel: f32,
+}
+
+impl RenderSettings {
+    /// The scene's own settings with the given method and seed.
+    pub fn for_scene(scene: &Scene, method: Method, seed: u64) -> Self {
+        let SceneRenderSettings { max_depth, backward_diffuse_depth, radius_scale, light_paths_per_pixel } =
+            scene.render;
+        RenderSettings {
+            method,
+            seed,
+            max_depth,
+            backward_diffuse_depth,
+            radius_scale,
+            radius_alpha: 2.0 / 3.0,
+            light_paths_per_pixel,
+        }
+    }
+
+    /// The photon radius schedule for this scene's camera.
+    pub fn radius_schedule(&self, scene: &Scene) -> RadiusSchedule {
+        RadiusSchedule { scale: self.radius_scale, alpha: self.radius_alpha, pixel_angle: scene.camera.pixel_angle() }
+    }
+
+    /// Light paths traced per phase for an image of `pixels` pixels.
+    pub fn light_paths_per_phase(&self, pixels: usize) -> u64 {
+        ((self.light_paths_per_pixel as f64 * pixels as f64).round() as u64).max(1)
+    }
+}

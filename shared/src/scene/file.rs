@@ -1,0 +1,153 @@
+//! The TOML scene format as it is written on disk (see `scenes/README.md` for the reference).
+
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use toml::Spanned;
+
+/// A whole scene file.
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct SceneFile {
+    #[serde(default)]
+    pub render: RenderSection,
+    pub camera: Spanned<CameraSection>,
+    #[serde(default)]
+    pub materials: BTreeMap<String, Spanned<MaterialSection>>,
+    #[serde(default)]
+    pub objects: Vec<Spanned<ObjectSection>>,
+    #[serde(default)]
+    pub lights: Vec<Spanned<LightSection>>,
+}
+
+/// Integrator settings stored with the scene, so that a scene renders the same everywhere.
+#[derive(Deserialize, Debug, Default)]
+#[serde(deny_unknown_fields)]
+pub struct RenderSection {
+    pub max_depth: Option<Spanned<u32>>,
+    pub backward_diffuse_depth: Option<Spanned<u32>>,
+    pub radius_scale: Option<Spanned<f32>>,
+    pub light_paths_per_pixel: Option<Spanned<f32>>,
+}
+
+/// The camera.
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct CameraSection {
+    #[serde(rename = "type", default = "pinhole")]
+    pub kind: Spanned<String>,
+    pub position: Spanned<[f32; 3]>,
+    pub look_at: Spanned<[f32; 3]>,
+    #[serde(default = "up_y")]
+    pub up: Spanned<[f32; 3]>,
+    pub fov_y_deg: Spanned<f32>,
+    pub width: Spanned<u32>,
+    pub height: Spanned<u32>,
+    pub lens_radius: Option<Spanned<f32>>,
+    pub focus_distance: Option<Spanned<f32>>,
+}
+
+fn pinhole() -> Spanned<String> {
+    Spanned::new(0..0, "pinhole".to_string())
+}
+
+fn up_y() -> Spanned<[f32; 3]> {
+    Spanned::new(0..0, [0.0, 1.0, 0.0])
+}
+
+/// A material definition; `type` selects the kind.
+#[derive(Deserialize, Debug)]
+#[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
+pub enum MaterialSection {
+    Diffuse {
+        albedo: [f32; 3],
+    },
+    Mirror {
+        #[serde(default = "ones")]
+        reflectance: [f32; 3],
+    },
+    Dielectric {
+        ior: f32,
+        #[serde(default = "one")]
+        ext_ior: f32,
+    },
+    Coating {
+        reflectance: [f32; 3],
+        transmittance: [f32; 3],
+    },
+}
+
+fn ones() -> [f32; 3] {
+    [1.0; 3]
+}
+
+fn one() -> f32 {
+    1.0
+}
+
+/// One scene object: exactly one shape, a material and optionally emission.
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct ObjectSection {
+    pub name: Option<String>,
+    pub material: Spanned<String>,
+    pub emission: Option<Spanned<[f32; 3]>>,
+    pub mesh: Option<Spanned<String>>,
+    pub quad: Option<Spanned<QuadSection>>,
+    #[serde(rename = "box")]
+    pub box_shape: Option<Spanned<BoxSection>>,
+    pub sphere: Option<Spanned<SphereSection>>,
+    pub lens_surface: Option<Spanned<LensSurfaceSection>>,
+}
+
+/// A parallelogram: corner and two edges; the front face is along edge1 × edge2.
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct QuadSection {
+    pub corner: [f32; 3],
+    pub edge1: [f32; 3],
+    pub edge2: [f32; 3],
+}
+
+/// An axis-aligned box with outward faces.
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct BoxSection {
+    pub min: [f32; 3],
+    pub max: [f32; 3],
+}
+
+/// An analytic sphere.
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct SphereSection {
+    pub center: [f32; 3],
+    pub radius: f32,
+}
+
+/// An analytic spherical (or flat, radius 0) lens surface with a circular aperture.
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct LensSurfaceSection {
+    pub vertex: [f32; 3],
+    pub axis: [f32; 3],
+    pub curvature_radius: f32,
+    pub aperture_radius: f32,
+}
+
+/// A point or spot light.
+#[derive(Deserialize, Debug)]
+#[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
+pub enum LightSection {
+    Point {
+        position: [f32; 3],
+        intensity: [f32; 3],
+    },
+    Spot {
+        position: [f32; 3],
+        direction: [f32; 3],
+        intensity: [f32; 3],
+        cone_angle_deg: f32,
+        #[serde(default)]
+        falloff_start_deg: Option<f32>,
+    },
+}

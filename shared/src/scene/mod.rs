@@ -1,0 +1,572 @@
+//! Scenes: the TOML file format, its validation with precise errors, and the loaded scene the renderer uses.
+
+pub mod error;
+pub mod file;
+
+pub use error::SceneError;
+
+use crate::camera::{Camera, Lens};
+use crate::color::Rgb;
+use crate::geometry::{Analytic, LensSurface, Mesh, MeshTriangle, SceneGeometry, Sphere, SurfaceHit};
+use crate::light::{Light, Lights};
+use crate::material::Material;
+use error::line_of;
+use file::{LightSection, MaterialSection, SceneFile};
+use glam::Vec3;
+use sha2::{Digest, Sha256};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use toml::Spanned;
+
+/// One object of the scene.
+#[derive(Clone, Debug)]
+pub struct SceneObject {
+    pub name: String,
+    pub material: u32,
+    pub emission: Option<Rgb>,
+}
+
+/// Integrator settings a scene carries (the `[render]` table), each overridable from the command line.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SceneRenderSettings {
+    /// Longest path in segments over the joined camera and light sub-paths: 1 = emitters seen directly.
+    pub max_depth: u32,
+    /// Diffuse vertices on a camera path that store backward photons (paper §2: 2).
+    pub backward_diffuse_depth: u32,
+    /// Initial photon radius in pixel footprints.
+    pub radius_scale: f32,
+    /// Light paths per phase, per pixel of the image.
+    pub light_paths_per_pixel: f32,
+}
+
+impl Default for SceneRenderSettings {
+    fn default() -> Self {
+        SceneRenderSettings { max_depth: 12, backward_diffuse_depth: 2, radius_scale: 3.0, light_paths_per_pixel: 1.0 }
+    }
+}
+
+/// A loaded, validated scene.
+pub struct Scene {
+    /// The scene file it came from.
+    pub path: PathBuf,
+    pub camera: Camera,
+    pub materials: Vec<Material>,
+    pub objects: Vec<SceneObject>,
+    pub geometry: SceneGeometry,
+    pub lights: Lights,
+    pub render: SceneRenderSettings,
+    /// SHA-256 over the scene file and every mesh it references, in order.
+    pub hash: String,
+    /// True when any object has a specular material (then caustics exist).
+    pub has_delta_surfaces: bool,
+}
+
+impl Scene {
+    /// Reads and validates a scene file; meshes are resolved relative to its folder.
+    pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        let text = std::fs::read_to_string(path).map_err(|e| SceneError {
+            file: path.to_path_buf(),
+            line: None,
+            field: None,
+            message: format!("cannot read the scene file: {e}"),
+        })?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        Scene::from_toml(&text, path, base)
+    }
+
+    /// Parses scene text; `file` names it in errors and `base_dir` resolves mesh paths.
+    pub fn from_toml(text: &str, file: &Path, base_dir: &Path) -> Result<Scene, SceneError> {
+        Loader { text, file, base_dir, hasher: Sha256::new() }.load()
+    }
+
+    /// The material of the surface hit.
+    #[inline]
+    pub fn material(&self, hit: &SurfaceHit) -> &Material {
+        &self.materials[self.objects[hit.object as usize].material as usize]
+    }
+}
+
+struct Loader<'a> {
+    text: &'a str,
+    file: &'a Path,
+    base_dir: &'a Path,
+    hasher: Sha256,
+}
+
+impl Loader<'_> {
+    fn error(
+        &self,
+        span: Option<std::ops::Range<usize>>,
+        field: impl Into<String>,
+        message: impl Into<String>,
+    ) -> SceneError {
+        SceneError {
+            file: self.file.to_path_buf(),
+            line: span.filter(|s| !(s.start == 0 && s.end == 0)).map(|s| line_of(self.text, s.start)),
+            field: Some(field.into()),
+            message: message.into(),
+        }
+    }
+
+    fn vec3(&self, v: [f32; 3], span: &std::ops::Range<usize>, field: &str) -> Result<Vec3, SceneError> {
+        if v.iter().all(|x| x.is_finite()) {
+            Ok(Vec3::from(v))
+        } else {
+            Err(self.error(Some(span.clone()), field, format!("every component must be a finite number, got {v:?}")))
+        }
+    }
+
+    fn scalar(
+        &self,
+        x: f32,
+        span: &std::ops::Range<usize>,
+        field: &str,
+        ok: impl Fn(f32) -> bool,
+        rule: &str,
+    ) -> Result<f32, SceneError> {
+        if x.is_finite() && ok(x) {
+            Ok(x)
+        } else {
+            Err(self.error(Some(span.clone()), field, format!("must be {rule}, got {x}")))
+        }
+    }
+
+    fn colour(
+        &self,
+        v: [f32; 3],
+        span: &std::ops::Range<usize>,
+        field: &str,
+        max: Option<f32>,
+    ) -> Result<Rgb, SceneError> {
+        let c = self.vec3(v, span, field)?;
+        if c.min_element() < 0.0 {
+            return Err(self.error(Some(span.clone()), field, format!("must not be negative, got {v:?}")));
+        }
+        if let Some(m) = max {
+            if c.max_element() > m {
+                return Err(self.error(
+                    Some(span.clone()),
+                    field,
+                    format!("must be at most {m} (a surface cannot reflect more than it receives), got {v:?}"),
+                ));
+            }
+        }
+        Ok(c)
+    }
+
+    fn load(mut self) -> Result<Scene, SceneError> {
+        self.hasher.update(self.text.as_bytes());
+        let parsed: SceneFile = toml::from_str(self.text).map_err(|e| {
+            let line = e.span().map(|s| line_of(self.text, s.start));
+            let field = line.and_then(|l| {
+                let src = self.text.lines().nth(l - 1)?;
+                let key = src.split('=').next()?.trim();
+                (!key.is_empty() && src.contains('=')).then(|| key.to_string())
+            });
+            SceneError { file: self.file.to_path_buf(), line, field, message: e.message().trim().to_string() }
+        })?;
+
+        let render = self.render_settings(&parsed)?;
+        let camera = self.camera(&parsed.camera)?;
+
+        let mut materials = Vec::new();
+        let mut material_index = BTreeMap::new();
+        for (name, m) in &parsed.materials {
+            material_index.insert(name.clone(), materials.len() as u32);
+            materials.push(self.material(name, m)?);
+        }
+
+        let mut objects = Vec::new();
+        let mut triangles: Vec<(u32, MeshTriangle)> = Vec::new();
+        let mut analytic = Vec::new();
+        let mut lights = Vec::new();
+        for (i, o) in parsed.objects.iter().enumerate() {
+            let span = o.span();
+            let obj = o.get_ref();
+            let field = |f: &str| format!("objects[{i}].{f}");
+            let Some(&material) = material_index.get(obj.material.get_ref()) else {
+                let known: Vec<&String> = material_index.keys().collect();
+                return Err(self.error(
+                    Some(obj.material.span()),
+                    field("material"),
+                    format!("unknown material '{}' (defined: {known:?})", obj.material.get_ref()),
+                ));
+            };
+            let emission = match &obj.emission {
+                Some(e) => Some(self.colour(*e.get_ref(), &e.span(), &field("emission"), None)?),
+                None => None,
+            };
+            let shapes = [
+                obj.mesh.is_some(),
+                obj.quad.is_some(),
+                obj.box_shape.is_some(),
+                obj.sphere.is_some(),
+                obj.lens_surface.is_some(),
+            ];
+            let count = shapes.iter().filter(|&&s| s).count();
+            if count != 1 {
+                return Err(self.error(
+                    Some(span.clone()),
+                    format!("objects[{i}]"),
+                    format!("needs exactly one shape (mesh, quad, box, sphere or lens_surface), found {count}"),
+                ));
+            }
+            let id = objects.len() as u32;
+            let mesh = if let Some(m) = &obj.mesh {
+                Some(self.mesh(m, &field("mesh"))?)
+            } else if let Some(q) = &obj.quad {
+                let s = q.span();
+                let q = q.get_ref();
+                let (c, e1, e2) = (
+                    self.vec3(q.corner, &s, &field("quad.corner"))?,
+                    self.vec3(q.edge1, &s, &field("quad.edge1"))?,
+                    self.vec3(q.edge2, &s, &field("quad.edge2"))?,
+                );
+                if e1.cross(e2).length_squared() <= 0.0 {
+                    return Err(self.error(
+                        Some(s),
+                        field("quad"),
+                        "edge1 and edge2 are parallel: the quad has no area",
+                    ));
+                }
+                Some(Mesh::quad(c, e1, e2))
+            } else if let Some(b) = &obj.box_shape {
+                let s = b.span();
+                let (lo, hi) = (
+                    self.vec3(b.get_ref().min, &s, &field("box.min"))?,
+                    self.vec3(b.get_ref().max, &s, &field("box.max"))?,
+                );
+                if (hi - lo).min_element() <= 0.0 {
+                    return Err(self.error(Some(s), field("box"), "max must exceed min on every axis"));
+                }
+                Some(Mesh::axis_box(lo, hi))
+            } else {
+                None
+            };
+            match mesh {
+                Some(mesh) => {
+                    for t in mesh.triangles {
+                        if let Some(le) = emission {
+                            if le != Rgb::ZERO {
+                                let c = t.cross();
+                                lights.push(Light::Area {
+                                    triangle: triangles.len() as u32,
+                                    emission: le,
+                                    area: 0.5 * c.length(),
+                                    normal: c.normalize(),
+                                });
+                            }
+                        }
+                        triangles.push((id, t));
+                    }
+                }
+                None => {
+                    if emission.is_some_and(|e| e != Rgb::ZERO) {
+                        return Err(self.error(
+                            obj.emission.as_ref().map(|e| e.span()),
+                            field("emission"),
+                            "analytic surfaces (sphere, lens_surface) cannot emit; use a mesh, quad or box",
+                        ));
+                    }
+                    analytic.push((id, self.analytic(obj, &field)?));
+                }
+            }
+            objects.push(SceneObject {
+                name: obj.name.clone().unwrap_or_else(|| format!("object {i}")),
+                material,
+                emission,
+            });
+        }
+
+        for (i, l) in parsed.lights.iter().enumerate() {
+            lights.push(self.light(l, i)?);
+        }
+        let geometry = SceneGeometry::build(triangles, analytic);
+        let lights = Lights::new(lights, geometry.triangle_count());
+        if !lights.any() {
+            return Err(SceneError {
+                file: self.file.to_path_buf(),
+                line: None,
+                field: None,
+                message: "the scene has no light: give an object an `emission` or add a [[lights]] entry".into(),
+            });
+        }
+        let has_delta_surfaces = objects.iter().any(|o| materials[o.material as usize].is_delta());
+        Ok(Scene {
+            path: self.file.to_path_buf(),
+            camera,
+            materials,
+            objects,
+            geometry,
+            lights,
+            render,
+            hash: format!("{:x}", self.hasher.finalize()),
+            has_delta_surfaces,
+        })
+    }
+
+    fn render_settings(&self, f: &SceneFile) -> Result<SceneRenderSettings, SceneError> {
+        let mut s = SceneRenderSettings::default();
+        let r = &f.render;
+        if let Some(d) = &r.max_depth {
+            if !(1..=1024).contains(d.get_ref()) {
+                return Err(self.error(
+                    Some(d.span()),
+                    "render.max_depth",
+                    format!("must be 1..=1024, got {}", d.get_ref()),
+                ));
+            }
+            s.max_depth = *d.get_ref();
+        }
+        if let Some(d) = &r.backward_diffuse_depth {
+            if !(1..=2).contains(d.get_ref()) {
+                return Err(self.error(
+                    Some(d.span()),
+                    "render.backward_diffuse_depth",
+                    format!("must be 1 or 2, got {}", d.get_ref()),
+                ));
+            }
+            s.backward_diffuse_depth = *d.get_ref();
+        }
+        if let Some(x) = &r.radius_scale {
+            s.radius_scale =
+                self.scalar(*x.get_ref(), &x.span(), "render.radius_scale", |v| v > 0.0, "a positive number")?;
+        }
+        if let Some(x) = &r.light_paths_per_pixel {
+            s.light_paths_per_pixel = self.scalar(
+                *x.get_ref(),
+                &x.span(),
+                "render.light_paths_per_pixel",
+                |v| v > 0.0 && v <= 1000.0,
+                "in (0, 1000]",
+            )?;
+        }
+        Ok(s)
+    }
+
+    fn camera(&self, c: &Spanned<file::CameraSection>) -> Result<Camera, SceneError> {
+        let cam = c.get_ref();
+        let position = self.vec3(*cam.position.get_ref(), &cam.position.span(), "camera.position")?;
+        let look_at = self.vec3(*cam.look_at.get_ref(), &cam.look_at.span(), "camera.look_at")?;
+        let up = self.vec3(*cam.up.get_ref(), &cam.up.span(), "camera.up")?;
+        let forward = look_at - position;
+        if forward.length_squared() == 0.0 {
+            return Err(self.error(Some(cam.look_at.span()), "camera.look_at", "must differ from camera.position"));
+        }
+        if forward.normalize().cross(up).length_squared() < 1e-8 {
+            return Err(self.error(Some(cam.up.span()), "camera.up", "must not be parallel to the view direction"));
+        }
+        let fov = self.scalar(
+            *cam.fov_y_deg.get_ref(),
+            &cam.fov_y_deg.span(),
+            "camera.fov_y_deg",
+            |v| v > 0.0 && v < 180.0,
+            "between 0 and 180 degrees",
+        )?;
+        for (v, name) in [(&cam.width, "camera.width"), (&cam.height, "camera.height")] {
+            if !(1..=16384).contains(v.get_ref()) {
+                return Err(self.error(Some(v.span()), name, format!("must be 1..=16384 pixels, got {}", v.get_ref())));
+            }
+        }
+        let lens = match cam.kind.get_ref().as_str() {
+            "pinhole" => Lens::Pinhole,
+            "thin_lens" => {
+                let radius = cam.lens_radius.as_ref().ok_or_else(|| {
+                    self.error(Some(c.span()), "camera.lens_radius", "a thin_lens camera needs lens_radius (m)")
+                })?;
+                let focus = cam.focus_distance.as_ref().ok_or_else(|| {
+                    self.error(Some(c.span()), "camera.focus_distance", "a thin_lens camera needs focus_distance (m)")
+                })?;
+                Lens::Thin {
+                    radius: self.scalar(
+                        *radius.get_ref(),
+                        &radius.span(),
+                        "camera.lens_radius",
+                        |v| v > 0.0,
+                        "a positive number",
+                    )?,
+                    focus_distance: self.scalar(
+                        *focus.get_ref(),
+                        &focus.span(),
+                        "camera.focus_distance",
+                        |v| v > 0.0,
+                        "a positive number",
+                    )?,
+                }
+            }
+            other => {
+                return Err(self.error(
+                    Some(cam.kind.span()),
+                    "camera.type",
+                    format!("unknown camera type '{other}' (known: pinhole, thin_lens)"),
+                ));
+            }
+        };
+        Ok(Camera::new(position, look_at, up, fov, *cam.width.get_ref(), *cam.height.get_ref(), lens))
+    }
+
+    fn material(&self, name: &str, m: &Spanned<MaterialSection>) -> Result<Material, SceneError> {
+        let s = m.span();
+        let f = |x: &str| format!("materials.{name}.{x}");
+        Ok(match m.get_ref() {
+            MaterialSection::Diffuse { albedo } => {
+                Material::Diffuse { albedo: self.colour(*albedo, &s, &f("albedo"), Some(1.0))? }
+            }
+            MaterialSection::Mirror { reflectance } => {
+                Material::Mirror { reflectance: self.colour(*reflectance, &s, &f("reflectance"), Some(1.0))? }
+            }
+            MaterialSection::Dielectric { ior, ext_ior } => Material::Dielectric {
+                ior: self.scalar(*ior, &s, &f("ior"), |v| v > 0.0, "a positive index of refraction")?,
+                ext_ior: self.scalar(*ext_ior, &s, &f("ext_ior"), |v| v > 0.0, "a positive index of refraction")?,
+            },
+            MaterialSection::Coating { reflectance, transmittance } => {
+                let r = self.colour(*reflectance, &s, &f("reflectance"), Some(1.0))?;
+                let t = self.colour(*transmittance, &s, &f("transmittance"), Some(1.0))?;
+                if (r + t).max_element() > 1.0 + 1e-6 {
+                    return Err(self.error(
+                        Some(s),
+                        f("transmittance"),
+                        "reflectance + transmittance must not exceed 1 in any channel",
+                    ));
+                }
+                Material::Coating { reflectance: r, transmittance: t }
+            }
+        })
+    }
+
+    fn analytic(&self, obj: &file::ObjectSection, field: &dyn Fn(&str) -> String) -> Result<Analytic, SceneError> {
+        if let Some(sp) = &obj.sphere {
+            let s = sp.span();
+            let center = self.vec3(sp.get_ref().center, &s, &field("sphere.center"))?;
+            let radius =
+                self.scalar(sp.get_ref().radius, &s, &field("sphere.radius"), |v| v > 0.0, "a positive radius")?;
+            return Ok(Analytic::Sphere(Sphere { center, radius }));
+        }
+        let Some(l) = &obj.lens_surface else {
+            unreachable!("the caller checked that the object has exactly one shape")
+        };
+        let s = l.span();
+        let lens = l.get_ref();
+        let vertex = self.vec3(lens.vertex, &s, &field("lens_surface.vertex"))?;
+        let axis = self.vec3(lens.axis, &s, &field("lens_surface.axis"))?;
+        if axis.length_squared() == 0.0 {
+            return Err(self.error(Some(s), field("lens_surface.axis"), "must not be the zero vector"));
+        }
+        let aperture = self.scalar(
+            lens.aperture_radius,
+            &s,
+            &field("lens_surface.aperture_radius"),
+            |v| v > 0.0,
+            "a positive radius",
+        )?;
+        let r = self.scalar(
+            lens.curvature_radius,
+            &s,
+            &field("lens_surface.curvature_radius"),
+            |_| true,
+            "a finite number",
+        )?;
+        if r != 0.0 && r.abs() <= aperture {
+            return Err(self.error(
+                Some(s),
+                field("lens_surface.aperture_radius"),
+                format!("must be smaller than |curvature_radius| = {}", r.abs()),
+            ));
+        }
+        Ok(Analytic::Lens(LensSurface {
+            vertex,
+            axis: axis.normalize(),
+            curvature_radius: r,
+            aperture_radius: aperture,
+        }))
+    }
+
+    fn mesh(&mut self, m: &Spanned<String>, field: &str) -> Result<Mesh, SceneError> {
+        let path = self.base_dir.join(m.get_ref());
+        let bytes = std::fs::read(&path)
+            .map_err(|e| self.error(Some(m.span()), field, format!("cannot read mesh {}: {e}", path.display())))?;
+        self.hasher.update(&bytes);
+        let (models, _) = tobj::load_obj_buf(
+            &mut std::io::BufReader::new(&bytes[..]),
+            &tobj::LoadOptions { triangulate: true, single_index: true, ignore_points: true, ignore_lines: true },
+            |_| Err(tobj::LoadError::OpenFileFailed),
+        )
+        .map_err(|e| self.error(Some(m.span()), field, format!("cannot parse OBJ {}: {e}", path.display())))?;
+        let mut mesh = Mesh::default();
+        for model in &models {
+            let pos = &model.mesh.positions;
+            let nrm = &model.mesh.normals;
+            let vertex = |i: u32| Vec3::new(pos[3 * i as usize], pos[3 * i as usize + 1], pos[3 * i as usize + 2]);
+            let normal = |i: u32| Vec3::new(nrm[3 * i as usize], nrm[3 * i as usize + 1], nrm[3 * i as usize + 2]);
+            for (k, tri) in model.mesh.indices.chunks_exact(3).enumerate() {
+                let v = [vertex(tri[0]), vertex(tri[1]), vertex(tri[2])];
+                let bad = |what: &str| {
+                    self.error(
+                        Some(m.span()),
+                        field,
+                        format!("{}: triangle {k} of '{}' {what}", path.display(), model.name),
+                    )
+                };
+                if !v.iter().all(|p| p.is_finite()) {
+                    return Err(bad("has a coordinate that is not a finite number"));
+                }
+                let t = MeshTriangle {
+                    v,
+                    n: if nrm.is_empty() { None } else { Some([normal(tri[0]), normal(tri[1]), normal(tri[2])]) },
+                };
+                let scale = (v[1] - v[0]).length().max((v[2] - v[0]).length());
+                if t.area() <= 1e-7 * scale * scale || t.area() == 0.0 {
+                    return Err(bad("is degenerate (zero area)"));
+                }
+                if let Some(n) = t.n {
+                    if !n.iter().all(|x| x.is_finite() && x.length_squared() > 0.0) {
+                        return Err(bad("has a vertex normal that is zero or not finite"));
+                    }
+                }
+                mesh.triangles.push(t);
+            }
+        }
+        if mesh.triangles.is_empty() {
+            return Err(self.error(Some(m.span()), field, format!("{} contains no triangles", path.display())));
+        }
+        Ok(mesh)
+    }
+
+    fn light(&self, l: &Spanned<LightSection>, i: usize) -> Result<Light, SceneError> {
+        let s = l.span();
+        let f = |x: &str| format!("lights[{i}].{x}");
+        Ok(match l.get_ref() {
+            LightSection::Point { position, intensity } => Light::Point {
+                position: self.vec3(*position, &s, &f("position"))?,
+                intensity: self.colour(*intensity, &s, &f("intensity"), None)?,
+            },
+            LightSection::Spot { position, direction, intensity, cone_angle_deg, falloff_start_deg } => {
+                let dir = self.vec3(*direction, &s, &f("direction"))?;
+                if dir.length_squared() == 0.0 {
+                    return Err(self.error(Some(s), f("direction"), "must not be the zero vector"));
+                }
+                let cone = self.scalar(
+                    *cone_angle_deg,
+                    &s,
+                    &f("cone_angle_deg"),
+                    |v| v > 0.0 && v <= 90.0,
+                    "in (0, 90] degrees",
+                )?;
+                let start = self.scalar(
+                    falloff_start_deg.unwrap_or(cone),
+                    &s,
+                    &f("falloff_start_deg"),
+                    |v| (0.0..=cone).contains(&v),
+                    "between 0 and cone_angle_deg",
+                )?;
+                Light::Spot {
+                    position: self.vec3(*position, &s, &f("position"))?,
+                    direction: dir.normalize(),
+                    intensity: self.colour(*intensity, &s, &f("intensity"), None)?,
+                    cos_total: cone.to_radians().cos(),
+                    cos_falloff_start: start.to_radians().cos(),
+                }
+            }
+        })
+    }
+}
