@@ -1,0 +1,78 @@
+//! Helpers shared by the renderer's integration tests: scenes from TOML text and per-phase statistics.
+#![allow(dead_code)]
+
+use photonfarm::integrator::Layer;
+use photonfarm::render::{Engine, Method, RenderSettings};
+use photonfarm::scene::Scene;
+use std::path::Path;
+
+/// A scene from TOML text whose meshes resolve against the repository's scenes/ folder.
+pub fn scene(toml: &str) -> Scene {
+    let base = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+    Scene::from_toml(toml, Path::new("test.toml"), &base).unwrap_or_else(|e| panic!("test scene is invalid: {e}"))
+}
+
+/// A shipped scene by file name, e.g. "cornell.toml".
+pub fn shipped(name: &str) -> Scene {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes").join(name);
+    Scene::load(&path).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Settings of the scene with the given method and seed.
+pub fn settings(scene: &Scene, method: Method, seed: u64) -> RenderSettings {
+    RenderSettings::for_scene(scene, method, seed)
+}
+
+/// Mean and standard error of samples.
+pub fn mean_sem(samples: &[f64]) -> (f64, f64) {
+    let n = samples.len() as f64;
+    let mean = samples.iter().sum::<f64>() / n;
+    let var = samples.iter().map(|s| (s - mean) * (s - mean)).sum::<f64>() / (n - 1.0);
+    (mean, (var / n).sqrt())
+}
+
+/// Runs `phases` phases and returns, per phase, the mean luminance of `layer` (None: the total) over the
+/// pixels `region` selects. Phase values of one phase share light paths, so the region's SEM must come from
+/// these per-phase means, not from per-pixel SEMs.
+pub fn region_phase_means(
+    engine: &mut Engine,
+    phases: usize,
+    layer: Option<Layer>,
+    region: &dyn Fn(u32, u32) -> bool,
+) -> Vec<f64> {
+    let w = engine.sums().width;
+    let h = engine.sums().height;
+    let pixels: Vec<usize> = (0..w * h).filter(|&i| region(i % w, i / w)).map(|i| i as usize).collect();
+    assert!(!pixels.is_empty(), "empty test region");
+    let value = |e: &Engine| -> f64 {
+        pixels
+            .iter()
+            .map(|&p| {
+                let px = &e.sums().pixels[p];
+                let rgb = match layer {
+                    Some(l) => px.sum[l as usize],
+                    None => {
+                        let mut t = [0.0; 3];
+                        for l in 0..4 {
+                            for c in 0..3 {
+                                t[c] += px.sum[l][c];
+                            }
+                        }
+                        t
+                    }
+                };
+                photonfarm::color::luminance_f64(rgb)
+            })
+            .sum::<f64>()
+            / pixels.len() as f64
+    };
+    let mut out = Vec::with_capacity(phases);
+    let mut before = value(engine);
+    for _ in 0..phases {
+        engine.run_phase();
+        let after = value(engine);
+        out.push(after - before);
+        before = after;
+    }
+    out
+}
