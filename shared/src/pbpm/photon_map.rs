@@ -37,6 +37,11 @@ impl PhotonMap {
         self.starts.clear();
     }
 
+    /// Reserves room for `n` photons, so that a phase never grows the buffer (memory stays flat).
+    pub fn reserve(&mut self, n: usize) {
+        self.photons.reserve(n.saturating_sub(self.photons.len()));
+    }
+
     /// Adds a photon; call `build` before gathering.
     pub fn push(&mut self, photon: BackwardPhoton) {
         self.photons.push(photon);

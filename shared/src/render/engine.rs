@@ -53,11 +53,14 @@ impl<'s> Engine<'s> {
     /// An engine with empty sums.
     pub fn new(scene: &'s Scene, settings: RenderSettings) -> Self {
         let pixels = scene.camera.pixel_count();
+        let mut map = PhotonMap::new();
+        // At most one photon per diffuse vertex of each camera path.
+        map.reserve(pixels * settings.backward_diffuse_depth as usize);
         Engine {
             scene,
             settings,
             sums: Accumulator::new(scene.camera.width, scene.camera.height),
-            map: PhotonMap::new(),
+            map,
             phase_values: vec![[Rgb::ZERO; 4]; pixels],
             gathered: vec![[Rgb::ZERO; 2]; pixels],
             totals: RayTotals::default(),

@@ -1,0 +1,190 @@
+//! Malformed scene files give an error naming the file, the line and the field, never a panic.
+
+use photonfarm::scene::{Scene, SceneError};
+use std::path::Path;
+
+const GOOD: &str = r#"
+[camera]
+position = [0.0, 0.0, -1.0]
+look_at = [0.0, 0.0, 0.0]
+fov_y_deg = 40
+width = 8
+height = 8
+
+[materials.white]
+type = "diffuse"
+albedo = [0.5, 0.5, 0.5]
+
+[[objects]]
+name = "floor"
+material = "white"
+quad = { corner = [-1.0, -1.0, 0.0], edge1 = [2.0, 0.0, 0.0], edge2 = [0.0, 2.0, 0.0] }
+
+[[lights]]
+type = "point"
+position = [0.0, 0.0, -0.5]
+intensity = [1.0, 1.0, 1.0]
+"#;
+
+fn load(text: &str) -> Result<Scene, SceneError> {
+    Scene::from_toml(text, Path::new("bad.toml"), &Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes"))
+}
+
+/// Loads `text`, expects an error on `line` whose message contains every one of `needles`.
+fn expect_error(text: &str, line: Option<usize>, needles: &[&str]) {
+    let err = match load(text) {
+        Ok(_) => panic!("scene was accepted:\n{text}"),
+        Err(e) => e,
+    };
+    let msg = err.to_string();
+    assert!(msg.starts_with("bad.toml"), "error does not name the file: {msg}");
+    assert_eq!(err.line, line, "wrong line in: {msg}");
+    for n in needles {
+        assert!(msg.contains(n), "error {msg:?} does not mention {n:?}");
+    }
+}
+
+fn line_of(text: &str, needle: &str) -> Option<usize> {
+    text.lines().position(|l| l.contains(needle)).map(|i| i + 1)
+}
+
+#[test]
+fn the_good_scene_loads() {
+    load(GOOD).unwrap();
+}
+
+#[test]
+fn unknown_material_names_the_field_and_the_known_materials() {
+    let t = GOOD.replace("material = \"white\"", "material = \"whtie\"");
+    expect_error(&t, line_of(&t, "whtie"), &["objects[0].material", "whtie", "white"]);
+}
+
+#[test]
+fn a_number_that_is_not_a_number_names_the_line() {
+    let t = GOOD.replace("fov_y_deg = 40", "fov_y_deg = \"forty\"");
+    expect_error(&t, line_of(&t, "forty"), &["fov_y_deg", "expected"]);
+}
+
+#[test]
+fn nan_is_refused() {
+    let t = GOOD.replace("albedo = [0.5, 0.5, 0.5]", "albedo = [0.5, nan, 0.5]");
+    expect_error(&t, line_of(&t, "[materials.white]"), &["materials.white.albedo", "finite"]);
+}
+
+#[test]
+fn albedo_above_one_is_refused() {
+    let t = GOOD.replace("albedo = [0.5, 0.5, 0.5]", "albedo = [0.5, 1.5, 0.5]");
+    expect_error(&t, line_of(&t, "[materials.white]"), &["albedo", "at most 1"]);
+}
+
+#[test]
+fn missing_mesh_file_is_named() {
+    let t = GOOD.replace(
+        "quad = { corner = [-1.0, -1.0, 0.0], edge1 = [2.0, 0.0, 0.0], edge2 = [0.0, 2.0, 0.0] }",
+        "mesh = \"nowhere/missing.obj\"",
+    );
+    expect_error(&t, line_of(&t, "missing.obj"), &["objects[0].mesh", "missing.obj", "cannot read"]);
+}
+
+#[test]
+fn degenerate_triangle_in_an_obj_is_located() {
+    let dir = std::env::temp_dir().join(format!("photonfarm-bad-scene-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("flat.obj"), "v 0 0 0\nv 1 0 0\nv 2 0 0\nv 0 1 0\nf 1 2 4\nf 1 2 3\n").unwrap();
+    let t = GOOD.replace(
+        "quad = { corner = [-1.0, -1.0, 0.0], edge1 = [2.0, 0.0, 0.0], edge2 = [0.0, 2.0, 0.0] }",
+        "mesh = \"flat.obj\"",
+    );
+    let err = Scene::from_toml(&t, Path::new("bad.toml"), &dir).err().expect("degenerate triangle accepted");
+    let msg = err.to_string();
+    assert_eq!(err.line, line_of(&t, "flat.obj"));
+    assert!(msg.contains("triangle 1") && msg.contains("degenerate"), "{msg}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn unknown_field_is_refused_with_its_name() {
+    let t = GOOD.replace("fov_y_deg = 40", "fov_y_deg = 40\nfocal_lenght = 50");
+    expect_error(&t, line_of(&t, "focal_lenght"), &["focal_lenght"]);
+}
+
+#[test]
+fn missing_required_field_is_named() {
+    let t = GOOD.replace("width = 8\n", "");
+    let err = load(&t).err().expect("accepted a camera without width");
+    assert!(err.to_string().contains("width"), "{err}");
+}
+
+#[test]
+fn object_with_two_shapes_is_refused() {
+    let t = GOOD.replace("name = \"floor\"", "name = \"floor\"\nsphere = { center = [0.0, 0.0, 0.0], radius = 1.0 }");
+    expect_error(&t, line_of(&t, "[[objects]]"), &["objects[0]", "exactly one shape"]);
+}
+
+#[test]
+fn zero_sized_image_is_refused() {
+    let t = GOOD.replace("height = 8", "height = 0");
+    expect_error(&t, line_of(&t, "height = 0"), &["camera.height", "1..=16384"]);
+}
+
+#[test]
+fn camera_looking_at_itself_is_refused() {
+    let t = GOOD.replace("look_at = [0.0, 0.0, 0.0]", "look_at = [0.0, 0.0, -1.0]");
+    expect_error(&t, line_of(&t, "look_at"), &["camera.look_at", "differ"]);
+}
+
+#[test]
+fn scene_without_light_is_refused() {
+    let t = GOOD.split("[[lights]]").next().unwrap().to_string();
+    let err = load(&t).err().expect("accepted a scene with no light");
+    assert!(err.to_string().contains("no light"), "{err}");
+}
+
+#[test]
+fn emission_on_an_analytic_sphere_is_refused() {
+    let t = GOOD.replace(
+        "quad = { corner = [-1.0, -1.0, 0.0], edge1 = [2.0, 0.0, 0.0], edge2 = [0.0, 2.0, 0.0] }",
+        "sphere = { center = [0.0, 0.0, 0.0], radius = 0.5 }\nemission = [1.0, 1.0, 1.0]",
+    );
+    expect_error(&t, line_of(&t, "emission"), &["objects[0].emission", "cannot emit"]);
+}
+
+#[test]
+fn lens_aperture_larger_than_its_curvature_is_refused() {
+    let t = GOOD.replace(
+        "quad = { corner = [-1.0, -1.0, 0.0], edge1 = [2.0, 0.0, 0.0], edge2 = [0.0, 2.0, 0.0] }",
+        "lens_surface = { vertex = [0.0, 0.0, 0.0], axis = [0.0, 0.0, 1.0], curvature_radius = 0.01, aperture_radius = 0.02 }",
+    );
+    expect_error(&t, line_of(&t, "lens_surface"), &["aperture_radius", "smaller"]);
+}
+
+#[test]
+fn unknown_material_type_is_refused() {
+    let t = GOOD.replace("type = \"diffuse\"", "type = \"velvet\"");
+    let err = load(&t).err().expect("accepted an unknown material type");
+    assert!(err.to_string().contains("velvet"), "{err}");
+    assert!(err.line.is_some());
+}
+
+#[test]
+fn broken_toml_syntax_names_the_line() {
+    let t = GOOD.replace("width = 8", "width = [8");
+    let err = load(&t).err().expect("accepted broken TOML");
+    assert!(err.line.is_some(), "{err}");
+}
+
+#[test]
+fn a_missing_scene_file_is_an_error_naming_it() {
+    let err = Scene::load(Path::new("no/such/scene.toml")).err().expect("loaded a missing file");
+    assert!(err.to_string().contains("no/such/scene.toml"), "{err}");
+}
+
+#[test]
+fn the_shipped_scenes_load() {
+    for name in ["cornell.toml", "caustic.toml"] {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes").join(name);
+        let s = Scene::load(&path).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!((s.camera.width, s.camera.height), (256, 256));
+        assert_eq!(s.render.max_depth, 12);
+    }
+}

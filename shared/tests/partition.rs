@@ -1,0 +1,99 @@
+//! The layer partition of DESIGN §1 counts every light path exactly once: on a scene where all four layers
+//! are non-zero, PBPM converges to the path tracer, layer by layer and in total.
+
+mod common;
+
+use common::{scene, settings};
+use photonfarm::accumulation::relative_rmse;
+use photonfarm::color::luminance_f64;
+use photonfarm::integrator::Layer;
+use photonfarm::render::images::total_image;
+use photonfarm::render::{Engine, Method};
+
+/// A Cornell box with a large ceiling light, a glass sphere (caustic, and lights seen through glass) and a
+/// mirror box (caustic by reflection).
+const SCENE: &str = r#"
+[render]
+max_depth = 10
+[camera]
+position = [0.278, 0.273, -0.8]
+look_at = [0.278, 0.273, 0.0]
+fov_y_deg = 39.3
+width = 32
+height = 32
+[materials.white]
+type = "diffuse"
+albedo = [0.8, 0.8, 0.8]
+[materials.red]
+type = "diffuse"
+albedo = [0.6, 0.1, 0.1]
+[materials.green]
+type = "diffuse"
+albedo = [0.1, 0.6, 0.1]
+[materials.glass]
+type = "dielectric"
+ior = 1.5
+[materials.mirror]
+type = "mirror"
+reflectance = [0.9, 0.9, 0.9]
+[materials.black]
+type = "diffuse"
+albedo = [0.0, 0.0, 0.0]
+[[objects]]
+mesh = "cornell/floor.obj"
+material = "white"
+[[objects]]
+mesh = "cornell/ceiling.obj"
+material = "white"
+[[objects]]
+mesh = "cornell/backwall.obj"
+material = "white"
+[[objects]]
+mesh = "cornell/leftwall.obj"
+material = "red"
+[[objects]]
+mesh = "cornell/rightwall.obj"
+material = "green"
+[[objects]]
+mesh = "cornell/tallbox.obj"
+material = "mirror"
+[[objects]]
+material = "glass"
+sphere = { center = [0.17, 0.1, 0.2], radius = 0.1 }
+[[objects]]
+material = "black"
+emission = [4.0, 4.0, 4.0]
+quad = { corner = [0.128, 0.548, 0.142], edge1 = [0.3, 0.0, 0.0], edge2 = [0.0, 0.0, 0.275] }
+"#;
+
+#[test]
+fn pbpm_total_converges_to_the_path_tracer_when_all_four_layers_are_lit() {
+    let sc = scene(SCENE);
+    let mut pbpm = Engine::new(&sc, settings(&sc, Method::Pbpm, 1));
+    let mut path = Engine::new(&sc, settings(&sc, Method::Path, 2));
+    for _ in 0..1500 {
+        pbpm.run_phase();
+    }
+    for _ in 0..6000 {
+        path.run_phase();
+    }
+    let (a, b) = (pbpm.sums(), path.sums());
+    let pixels = a.pixels.len();
+    for layer in Layer::ALL {
+        let mean = |s: &photonfarm::accumulation::Accumulator| {
+            (0..pixels).map(|i| luminance_f64(s.mean(i, layer))).sum::<f64>() / pixels as f64
+        };
+        let (ma, mb) = (mean(a), mean(b));
+        assert!(mb > 0.0, "layer {} is zero in the path tracer: the test scene must light every layer", layer.name());
+        eprintln!("{:>15}: PBPM {ma:.5}  path {mb:.5}  ratio {:.4}", layer.name(), ma / mb);
+        // Camera-side layers are unbiased; gathered layers carry the density-estimation bias of this coarse
+        // 32×32 image's large photon radius (light lost at corners), a few per cent.
+        let tolerance = if matches!(layer, Layer::VisibleLights | Layer::Direct) { 0.01 } else { 0.05 };
+        assert!((ma / mb - 1.0).abs() < tolerance, "layer {}: PBPM {ma} vs path {mb}", layer.name());
+    }
+    let rmse = relative_rmse(&total_image(a), &total_image(b), |_| true);
+    let e = a.error();
+    let f = b.error();
+    eprintln!("relative RMSE {rmse:.4}; δ PBPM {:.4}, δ path {:.4}", e.delta_all, f.delta_all);
+    assert!(rmse < 0.02, "PBPM and the path tracer differ by {:.2}% relative RMSE", 100.0 * rmse);
+}
