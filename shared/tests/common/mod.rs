@@ -1,5 +1,5 @@
 //! Helpers shared by the renderer's integration tests: scenes from TOML text and per-phase statistics.
-#![allow(dead_code)]
+#![allow(dead_code, clippy::needless_range_loop)]
 
 use photonfarm::integrator::Layer;
 use photonfarm::render::{Engine, Method, RenderSettings};

@@ -1,0 +1,73 @@
+//! δ is an honest error figure: on the shipped scenes, PBPM's true relative RMSE against the long path-traced
+//! reference in `scenes/references/` stays within a factor of 2 of δ once δ < 10%. The reference has noise of
+//! its own (its `sem` layer), which adds in quadrature to the error measured against it.
+
+mod common;
+
+use common::{settings, shipped};
+use photonfarm::color::luminance_f64;
+use photonfarm::output::exr_file::{find_layer, read_exr};
+use photonfarm::render::images::luminance_of;
+use photonfarm::render::{Engine, Method};
+use std::path::Path;
+
+fn check_calibration(scene_file: &str, reference_file: &str) {
+    let sc = shipped(scene_file);
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/references").join(reference_file);
+    let layers = read_exr(&path).unwrap_or_else(|e| panic!("{e}"));
+    let reference = find_layer(&layers, &path, "total").unwrap();
+    let ref_sem = find_layer(&layers, &path, "sem").unwrap();
+    let ref_visible = find_layer(&layers, &path, "visible_lights").unwrap();
+
+    let mut engine = Engine::new(&sc, settings(&sc, Method::Pbpm, 2024));
+    let mut phases = 0;
+    loop {
+        engine.run_phase();
+        phases += 1;
+        let e = engine.sums().error();
+        if e.delta_unlit < 0.10 && phases >= 8 {
+            break;
+        }
+        assert!(phases < 400, "{scene_file}: δ (unlit) still {} after {phases} phases", e.delta_unlit);
+    }
+    let sums = engine.sums();
+    // Pixels that see a light in either image are "lit"; δ and the true error use the same pixel sets.
+    let lit: Vec<bool> =
+        (0..sums.pixels.len()).map(|i| sums.sees_light(i) || ref_visible.rgb[i].iter().any(|&c| c > 0.0)).collect();
+    for (name, include) in [("all pixels", None), ("unlit pixels", Some(false))] {
+        let (mut sem2, mut ref_sem2, mut err2, mut norm) = (0.0, 0.0, 0.0, 0.0);
+        for i in 0..sums.pixels.len() {
+            if include.is_some_and(|want| lit[i] != want) {
+                continue;
+            }
+            let mine = luminance_f64(sums.mean_total(i));
+            let theirs = luminance_of(reference.rgb[i]);
+            sem2 += sums.sem2(i);
+            ref_sem2 += luminance_of(ref_sem.rgb[i]).powi(2);
+            err2 += (mine - theirs).powi(2);
+            norm += theirs * theirs;
+        }
+        let delta = (sem2 / norm).sqrt();
+        let delta_ref = (ref_sem2 / norm).sqrt();
+        let true_error = (err2 / norm).sqrt();
+        let expected = (delta * delta + delta_ref * delta_ref).sqrt();
+        let ratio = true_error / expected;
+        eprintln!(
+            "{scene_file}, {name}, {phases} phases: δ {:.2}%, reference δ {:.2}%, true relative RMSE {:.2}%, ratio {ratio:.2}",
+            100.0 * delta,
+            100.0 * delta_ref,
+            100.0 * true_error
+        );
+        assert!((0.5..=2.0).contains(&ratio), "{scene_file} ({name}): true error / δ = {ratio:.2}");
+    }
+}
+
+#[test]
+fn delta_is_calibrated_against_the_path_traced_reference_on_cornell() {
+    check_calibration("cornell.toml", "cornell-path.exr");
+}
+
+#[test]
+fn delta_is_calibrated_against_the_path_traced_reference_on_caustic() {
+    check_calibration("caustic.toml", "caustic-path.exr");
+}
