@@ -94,8 +94,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
         history: history.to_vec(),
     };
 
-    let mut saved_history_len = 0;
-    let reason = session::run(&mut engine, &stop, &interrupted, &mut history, Duration::ZERO, |engine, entry| {
+    let reason = session::run(&mut engine, &stop, &interrupted, &mut history, Duration::ZERO, |engine, history| {
+        let Some(entry) = history.last() else { return };
         let secs = entry.time_s.max(1e-9);
         let rays = (entry.backward_rays + entry.forward_rays) as f64;
         let delta = match stop.error_over {
@@ -111,14 +111,11 @@ pub fn run(args: RenderArgs) -> Result<()> {
         ));
         if last_save.elapsed() >= save_interval && save_error.is_none() {
             last_save = Instant::now();
-            saved_history_len = entry.phase;
-            // The closure cannot see `history`; the periodic record carries totals and δ, the final one all.
-            if let Err(e) = output_folder::save(&dir, engine.sums(), &record_of(engine, &[], "running")) {
+            if let Err(e) = output_folder::save(&dir, engine.sums(), &record_of(engine, history, "running")) {
                 save_error = Some(e);
             }
         }
     });
-    let _ = saved_history_len;
     bar.finish_and_clear();
     if let Some(e) = save_error {
         return Err(e.context("writing the periodic results failed; the run was stopped"));

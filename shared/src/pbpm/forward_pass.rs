@@ -39,15 +39,28 @@ impl<F: FnMut(u32, Layer, Rgb)> Gather for F {
 /// one wall of a corner is not gathered by photons on the other.
 const NORMAL_AGREEMENT: f32 = 0.9;
 
-/// Traces one light path and gathers it into `map`.
+/// A diffuse light-path vertex y_m (m ≥ 2) where backward photons may gather light.
+#[derive(Clone, Copy, Debug)]
+pub struct LightVertex<'a> {
+    pub hit: &'a SurfaceHit,
+    /// Unit direction toward the previous light-path vertex.
+    pub wi: Vec3,
+    /// ΔΦ: the flux the path carries into this vertex.
+    pub flux: Rgb,
+    /// Light segments from the light to this vertex.
+    pub m: u32,
+    /// True when y1 … y_{m−1} are all specular.
+    pub all_specular: bool,
+}
+
+/// Traces one light path and hands every diffuse vertex with m ≥ 2 to `visit`, which gathers it into one or
+/// more photon maps.
 pub fn trace_light_path(
     scene: &Scene,
     max_depth: u32,
-    backward_diffuse_depth: u32,
-    map: &PhotonMap,
     sampler: &mut Sampler,
     stats: &mut ForwardStats,
-    sink: &mut impl Gather,
+    visit: &mut impl FnMut(&LightVertex),
 ) {
     stats.light_paths += 1;
     let u_select = sampler.next_f32();
@@ -57,7 +70,6 @@ pub fn trace_light_path(
     let mut ray = Ray::new(origin, e.direction);
     let mut beta = e.beta;
     let beta0 = e.beta.max_element();
-    // True while y1 … y_{m−1} are all specular.
     let mut all_specular = true;
     let mut m = 0u32;
     loop {
@@ -68,7 +80,7 @@ pub fn trace_light_path(
         let wi = -ray.direction;
         if material.diffuse_albedo().is_some() {
             if m >= 2 {
-                gather(map, &hit, wi, beta, m, max_depth, backward_diffuse_depth, all_specular, stats, sink);
+                visit(&LightVertex { hit: &hit, wi, flux: beta, m, all_specular });
             }
             all_specular = false;
         }
@@ -92,36 +104,34 @@ pub fn trace_light_path(
     }
 }
 
-#[allow(clippy::too_many_arguments)]
+/// Gathers a light vertex into `map`: every photon whose sphere contains the vertex, whose surface agrees and
+/// on whose side the light arrives receives τ · f · ΔΦ / (π r²). Returns the number of merges.
 #[inline]
-fn gather(
+pub fn gather(
     map: &PhotonMap,
-    hit: &SurfaceHit,
-    wi: Vec3,
-    flux: Rgb,
-    m: u32,
+    v: &LightVertex,
     max_depth: u32,
     backward_diffuse_depth: u32,
-    all_specular: bool,
-    stats: &mut ForwardStats,
     sink: &mut impl Gather,
-) {
-    for b in map.candidates(hit.p) {
-        if (b.position - hit.p).length_squared() > b.radius2
-            || wi.dot(b.normal) <= 0.0
-            || hit.ng.dot(b.normal).abs() < NORMAL_AGREEMENT
-            || b.segments as u32 + m > max_depth
+) -> u64 {
+    let mut merges = 0;
+    for b in map.candidates(v.hit.p) {
+        if (b.position - v.hit.p).length_squared() > b.radius2
+            || v.wi.dot(b.normal) <= 0.0
+            || v.hit.ng.dot(b.normal).abs() < NORMAL_AGREEMENT
+            || b.segments as u32 + v.m > max_depth
         {
             continue;
         }
         // DESIGN §1's partition: every light path is counted by exactly one photon depth.
-        let layer = match (b.k, all_specular) {
+        let layer = match (b.k, v.all_specular) {
             (1, true) => Layer::Caustic,
             (1, false) if backward_diffuse_depth == 1 => Layer::Indirect,
             (1, false) => continue,
             _ => Layer::Indirect,
         };
-        stats.merges += 1;
-        sink.add(b.pixel, layer, b.weight * flux); // eq. 4
+        merges += 1;
+        sink.add(b.pixel, layer, b.weight * v.flux); // eq. 4
     }
+    merges
 }

@@ -9,7 +9,7 @@ pub mod photon_map;
 pub mod radius;
 
 pub use backward_pass::{trace_camera_path, BackwardSettings};
-pub use forward_pass::{trace_light_path, ForwardStats, Gather};
+pub use forward_pass::{gather, trace_light_path, ForwardStats, Gather, LightVertex};
 pub use photon::BackwardPhoton;
 pub use photon_map::PhotonMap;
 pub use radius::RadiusSchedule;

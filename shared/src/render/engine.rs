@@ -5,7 +5,8 @@ use crate::accumulation::Accumulator;
 use crate::color::Rgb;
 use crate::integrator::{path_tracer, Layer, LayerValues};
 use crate::pbpm::{
-    backward_pass::BackwardStats, trace_camera_path, trace_light_path, BackwardSettings, ForwardStats, PhotonMap,
+    backward_pass::BackwardStats, gather, trace_camera_path, trace_light_path, BackwardSettings, ForwardStats,
+    PhotonMap,
 };
 use crate::sampling::{Pass, Sampler};
 use crate::scene::Scene;
@@ -161,18 +162,16 @@ impl<'s> Engine<'s> {
             let slot = if layer == Layer::Caustic { 1 } else { 0 };
             gathered[pixel as usize][slot] += v;
         };
+        let (max_depth, bdd) = (self.settings.max_depth, self.settings.backward_diffuse_depth);
+        let map = &self.map;
+        let mut merges = 0;
         for i in 0..n {
             let mut s = Sampler::new(self.settings.seed, Pass::Light, phase, i);
-            trace_light_path(
-                scene,
-                self.settings.max_depth,
-                self.settings.backward_diffuse_depth,
-                &self.map,
-                &mut s,
-                &mut fstats,
-                &mut sink,
-            );
+            trace_light_path(scene, max_depth, &mut s, &mut fstats, &mut |v| {
+                merges += gather(map, v, max_depth, bdd, &mut sink)
+            });
         }
+        fstats.merges = merges;
         // 4. Close the phase: the gathered sums are normalised by the number of light paths traced against
         // the map.
         let inv_n = 1.0 / n as f32;

@@ -46,7 +46,7 @@ impl StopReason {
     }
 }
 
-/// Runs phases until `stop` or `interrupted`; `on_phase` sees the engine after every phase. `elapsed_before`
+/// Runs phases until `stop` or `interrupted`; `on_phase` sees the engine and the history after every phase. `elapsed_before`
 /// is wall time spent in earlier sessions of the same run (resume).
 pub fn run(
     engine: &mut Engine,
@@ -54,7 +54,7 @@ pub fn run(
     interrupted: &AtomicBool,
     history: &mut Vec<HistoryEntry>,
     elapsed_before: Duration,
-    mut on_phase: impl FnMut(&Engine, &HistoryEntry),
+    mut on_phase: impl FnMut(&Engine, &[HistoryEntry]),
 ) -> StopReason {
     let start = Instant::now();
     loop {
@@ -78,7 +78,7 @@ pub fn run(
             forward_rays: t.forward_rays,
         };
         history.push(entry);
-        on_phase(engine, &entry);
+        on_phase(engine, history);
         if let Some(target) = stop.target_error {
             let d = match stop.error_over {
                 ErrorOver::Unlit => e.delta_unlit,

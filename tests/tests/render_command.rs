@@ -1,0 +1,117 @@
+//! `coordinator render` as a user runs it: outputs written, the run record complete, bad input refused with
+//! a clear message, Ctrl-C still writing every completed phase.
+
+use end_to_end::{binary, repo_root, scratch_dir};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+fn record(dir: &std::path::Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(dir.join("run.json")).expect("run.json written");
+    serde_json::from_str(&text).expect("run.json is JSON")
+}
+
+#[test]
+fn render_writes_layers_preview_and_a_complete_run_record() {
+    let out = scratch_dir("render");
+    let result = Command::new(binary("coordinator"))
+        .args(["render", "scenes/cornell.toml", "--phases", "4", "--quiet", "--out"])
+        .arg(&out)
+        .current_dir(repo_root())
+        .output()
+        .unwrap();
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    let layers = photonfarm::output::exr_file::read_exr(&out.join("image.exr")).unwrap();
+    let mut names: Vec<&str> = layers.iter().map(|l| l.name.as_str()).collect();
+    names.sort();
+    assert_eq!(names, ["caustic", "direct", "indirect", "sem", "total", "visible_lights"]);
+    assert!(layers.iter().all(|l| l.rgb.iter().flatten().all(|v| v.is_finite())));
+    assert!(std::fs::metadata(out.join("preview.png")).unwrap().len() > 1000);
+    let r = record(&out);
+    assert_eq!(r["totals"]["phases"], 4);
+    assert_eq!(r["stop_reason"], "phases");
+    assert_eq!(r["history"].as_array().unwrap().len(), 4);
+    assert!(r["totals"]["backward_rays"].as_u64().unwrap() > 0 && r["totals"]["forward_rays"].as_u64().unwrap() > 0);
+    assert_eq!(r["scene_hash"].as_str().unwrap().len(), 64);
+    assert!(r["peak_memory_bytes"].as_u64().unwrap() > 0);
+    assert!(r["bytes_per_pixel"].as_f64().unwrap() > 100.0);
+    assert!(r["error"]["delta_all"].as_f64().unwrap() > 0.0);
+    let stdout = String::from_utf8_lossy(&result.stdout);
+    assert!(stdout.contains(&format!("wrote {}", out.display())), "{stdout}");
+}
+
+#[test]
+fn render_with_a_reference_reports_the_true_error() {
+    let out = scratch_dir("reference");
+    let result = Command::new(binary("coordinator"))
+        .args([
+            "render",
+            "scenes/cornell.toml",
+            "--phases",
+            "3",
+            "--quiet",
+            "--reference",
+            "scenes/references/cornell-path.exr",
+            "--out",
+        ])
+        .arg(&out)
+        .current_dir(repo_root())
+        .output()
+        .unwrap();
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    let r = record(&out);
+    let t = r["true_error"]["rmse_unlit"].as_f64().unwrap();
+    assert!(t > 0.0 && t < 1.0, "{t}");
+}
+
+#[test]
+fn bad_input_is_refused_with_a_message_and_no_output() {
+    let out = scratch_dir("bad");
+    for (args, needle) in [
+        (vec!["render", "scenes/no-such-scene.toml"], "no-such-scene.toml"),
+        (vec!["render", "scenes/cornell.toml", "--target-error", "0"], "--target-error"),
+        (vec!["render", "scenes/cornell.toml", "--backward-diffuse-depth", "3"], "--backward-diffuse-depth"),
+        (vec!["render", "scenes/cornell.toml", "--reference", "scenes/cornell.toml"], "cornell.toml"),
+    ] {
+        let result = Command::new(binary("coordinator"))
+            .args(&args)
+            .arg("--out")
+            .arg(&out)
+            .current_dir(repo_root())
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&result.stderr);
+        assert!(!result.status.success(), "{args:?} was accepted");
+        assert!(stderr.contains(needle), "{args:?}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+    }
+    assert!(!out.join("run.json").exists());
+}
+
+#[test]
+fn ctrl_c_stops_cleanly_and_writes_every_completed_phase() {
+    let out = scratch_dir("interrupt");
+    let mut child = Command::new(binary("coordinator"))
+        .args(["render", "scenes/cornell.toml", "--time", "120", "--quiet", "--out"])
+        .arg(&out)
+        .current_dir(repo_root())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(2500));
+    let killed = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    assert!(killed.success());
+    let start = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(start.elapsed() < Duration::from_secs(30), "the renderer did not stop after Ctrl-C");
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert!(status.success(), "exit status after Ctrl-C: {status:?}");
+    let r = record(&out);
+    assert_eq!(r["stop_reason"], "interrupted");
+    assert!(r["totals"]["phases"].as_u64().unwrap() >= 1);
+    assert!(out.join("image.exr").exists());
+}
