@@ -18,6 +18,42 @@ pub struct PixelSums {
     pub camera_rays: u32,
 }
 
+impl PixelSums {
+    /// Closes one phase: adds the phase value L_ij of every layer and the squared luminance of each layer and
+    /// of the total.
+    #[inline]
+    pub fn add_phase(&mut self, value: &LayerValues, camera_rays: u32) {
+        let mut total = Rgb::ZERO;
+        for (l, v) in value.iter().enumerate() {
+            let v = sanitize(*v);
+            total += v;
+            for c in 0..3 {
+                self.sum[l][c] += v[c] as f64;
+            }
+            let y = luminance(v) as f64;
+            self.sum_sq[l] += y * y;
+        }
+        let y = luminance(total) as f64;
+        self.sum_sq[4] += y * y;
+        self.phases += 1;
+        self.camera_rays += camera_rays;
+    }
+
+    /// Adds the sums of independent phases of the same pixel.
+    pub fn merge(&mut self, other: &PixelSums) {
+        for l in 0..4 {
+            for c in 0..3 {
+                self.sum[l][c] += other.sum[l][c];
+            }
+        }
+        for i in 0..5 {
+            self.sum_sq[i] += other.sum_sq[i];
+        }
+        self.phases += other.phases;
+        self.camera_rays += other.camera_rays;
+    }
+}
+
 /// The running sums of a whole image.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Accumulator {
@@ -46,37 +82,21 @@ impl Accumulator {
     /// Closes one phase at one pixel: adds the phase value L_ij of every layer and of the total.
     #[inline]
     pub fn add_phase(&mut self, pixel: usize, value: &LayerValues, camera_rays: u32) {
-        let px = &mut self.pixels[pixel];
-        let mut total = Rgb::ZERO;
-        for (l, v) in value.iter().enumerate() {
-            let v = sanitize(*v);
-            total += v;
-            for c in 0..3 {
-                px.sum[l][c] += v[c] as f64;
-            }
-            let y = luminance(v) as f64;
-            px.sum_sq[l] += y * y;
+        self.pixels[pixel].add_phase(value, camera_rays);
+    }
+
+    /// Adds sums kept for a subset of pixels (a group's mask: `local[i]` belongs to pixel `mask[i]`).
+    pub fn merge_local(&mut self, mask: &[u32], local: &[PixelSums]) {
+        for (&p, l) in mask.iter().zip(local) {
+            self.pixels[p as usize].merge(l);
         }
-        let y = luminance(total) as f64;
-        px.sum_sq[4] += y * y;
-        px.phases += 1;
-        px.camera_rays += camera_rays;
     }
 
     /// Adds another worker's sums for the same image.
     pub fn merge(&mut self, other: &Accumulator) {
         assert_eq!((self.width, self.height), (other.width, other.height), "merging sums of different images");
         for (a, b) in self.pixels.iter_mut().zip(&other.pixels) {
-            for l in 0..4 {
-                for c in 0..3 {
-                    a.sum[l][c] += b.sum[l][c];
-                }
-            }
-            for i in 0..5 {
-                a.sum_sq[i] += b.sum_sq[i];
-            }
-            a.phases += b.phases;
-            a.camera_rays += b.camera_rays;
+            a.merge(b);
         }
     }
 

@@ -3,6 +3,8 @@
 
 use super::photon::BackwardPhoton;
 use glam::Vec3;
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicU32, Ordering};
 
 /// Backward photons of one phase and the grid over them; buffers are kept and reused across phases so memory
 /// stays flat.
@@ -124,6 +126,73 @@ impl PhotonMap {
         self.starts[0] = 0;
     }
 
+    /// Buckets of the cells a photon's sphere overlaps, each once.
+    fn buckets_of(&self, p: &BackwardPhoton, out: &mut Vec<usize>) {
+        let (lo, hi) = self.cell_range(p.position, p.radius2.sqrt());
+        out.clear();
+        for z in lo[2]..=hi[2] {
+            for y in lo[1]..=hi[1] {
+                for x in lo[0]..=hi[0] {
+                    out.push(bucket(x, y, z, self.mask));
+                }
+            }
+        }
+        out.sort_unstable();
+        out.dedup();
+    }
+
+    /// Builds the same grid as `build` with the threads of the current rayon pool (a synchronous group):
+    /// counts and scatters with atomics, so the order within a bucket may differ from run to run.
+    pub fn build_parallel(&mut self) {
+        self.starts.clear();
+        self.entries.clear();
+        if self.photons.is_empty() {
+            return;
+        }
+        let sum_r: f64 = self.photons.par_iter().map(|p| p.radius2.sqrt() as f64).sum();
+        let mean_r = sum_r / self.photons.len() as f64;
+        self.inv_cell = 1.0 / (2.0 * mean_r as f32).max(1e-12);
+        let cells: usize = self
+            .photons
+            .par_iter()
+            .map(|p| {
+                let (lo, hi) = self.cell_range(p.position, p.radius2.sqrt());
+                ((hi[0] - lo[0] + 1) * (hi[1] - lo[1] + 1) * (hi[2] - lo[2] + 1)) as usize
+            })
+            .sum();
+        let size = (2 * cells).next_power_of_two().max(16);
+        self.mask = (size - 1) as u32;
+        let counts: Vec<AtomicU32> = (0..size).map(|_| AtomicU32::new(0)).collect();
+        let this = &*self;
+        this.photons.par_iter().for_each_init(Vec::new, |buckets, p| {
+            this.buckets_of(p, buckets);
+            for &b in buckets.iter() {
+                counts[b].fetch_add(1, Ordering::Relaxed);
+            }
+        });
+        let mut starts = Vec::with_capacity(size + 1);
+        starts.push(0u32);
+        let mut acc = 0u32;
+        for c in &counts {
+            acc += c.load(Ordering::Relaxed);
+            starts.push(acc);
+        }
+        // Reuse the counters as per-bucket cursors.
+        for (c, s) in counts.iter().zip(&starts) {
+            c.store(*s, Ordering::Relaxed);
+        }
+        let entries: Vec<AtomicU32> = (0..acc).map(|_| AtomicU32::new(0)).collect();
+        this.photons.par_iter().enumerate().for_each_init(Vec::new, |buckets, (i, p)| {
+            this.buckets_of(p, buckets);
+            for &b in buckets.iter() {
+                let slot = counts[b].fetch_add(1, Ordering::Relaxed);
+                entries[slot as usize].store(i as u32, Ordering::Relaxed);
+            }
+        });
+        self.starts = starts;
+        self.entries.extend(entries.iter().map(|e| e.load(Ordering::Relaxed)));
+    }
+
     /// Photons whose sphere may contain `p` (a superset: callers test the distance).
     #[inline]
     pub fn candidates(&self, p: Vec3) -> impl Iterator<Item = &BackwardPhoton> {
@@ -169,6 +238,28 @@ mod tests {
             expect.sort();
             got.sort();
             assert_eq!(got, expect);
+        }
+    }
+
+    #[test]
+    fn parallel_build_finds_the_same_photons_as_the_sequential_build() {
+        let mut s = Sampler::new(2, Pass::Camera, 1, 1);
+        let mut a = PhotonMap::new();
+        let mut b = PhotonMap::new();
+        for i in 0..3000 {
+            let p = photon(Vec3::new(s.next_f32(), s.next_f32(), s.next_f32()), 0.01 + 0.05 * s.next_f32(), i);
+            a.push(p);
+            b.push(p);
+        }
+        a.build();
+        b.build_parallel();
+        for _ in 0..300 {
+            let q = Vec3::new(s.next_f32(), s.next_f32(), s.next_f32());
+            let mut x: Vec<u32> = a.candidates(q).map(|p| p.pixel).collect();
+            let mut y: Vec<u32> = b.candidates(q).map(|p| p.pixel).collect();
+            x.sort();
+            y.sort();
+            assert_eq!(x, y);
         }
     }
 

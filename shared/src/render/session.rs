@@ -1,10 +1,51 @@
 //! A progressive run: phases until a time, phase or error target is met, or the user interrupts.
 
-use super::engine::Engine;
+use super::engine::{Engine, RayTotals};
 use super::record::HistoryEntry;
+use super::settings::RenderSettings;
+use crate::accumulation::Accumulator;
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
+
+/// A renderer that improves its running sums step by step: the single-threaded engine (a step is a phase) or a
+/// parallel engine (a step is a synchronisation round).
+pub trait Progressive {
+    /// Renders one more step; a parallel step ends early when `interrupted` is set or `deadline` passes,
+    /// always closing the phases it started.
+    fn step(&mut self, interrupted: &AtomicBool, deadline: Option<Instant>);
+    /// The running sums.
+    fn sums(&self) -> &Accumulator;
+    /// Counts so far.
+    fn totals(&self) -> RayTotals;
+    /// The settings.
+    fn settings(&self) -> &RenderSettings;
+    /// Bytes the renderer holds per pixel (sums, phase buffers, photon maps).
+    fn bytes_per_pixel(&self) -> f64;
+    /// Threads it renders with.
+    fn threads(&self) -> usize;
+}
+
+impl Progressive for Engine<'_> {
+    fn step(&mut self, _interrupted: &AtomicBool, _deadline: Option<Instant>) {
+        self.run_phase();
+    }
+    fn sums(&self) -> &Accumulator {
+        Engine::sums(self)
+    }
+    fn totals(&self) -> RayTotals {
+        Engine::totals(self)
+    }
+    fn settings(&self) -> &RenderSettings {
+        Engine::settings(self)
+    }
+    fn bytes_per_pixel(&self) -> f64 {
+        Engine::bytes_per_pixel(self)
+    }
+    fn threads(&self) -> usize {
+        1
+    }
+}
 
 /// Which δ a target error refers to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -16,7 +57,7 @@ pub enum ErrorOver {
     All,
 }
 
-/// When to stop; the first rule met wins. With no rule at all the run would never end, so callers set one.
+/// When to stop; the first rule met wins. `phases` counts the phases every pixel has received. With no rule at all the run would never end, so callers set one.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StopRule {
     pub time: Option<Duration>,
@@ -48,13 +89,13 @@ impl StopReason {
 
 /// Runs phases until `stop` or `interrupted`; `on_phase` sees the engine and the history after every phase. `elapsed_before`
 /// is wall time spent in earlier sessions of the same run (resume).
-pub fn run(
-    engine: &mut Engine,
+pub fn run<R: Progressive + ?Sized>(
+    engine: &mut R,
     stop: &StopRule,
     interrupted: &AtomicBool,
     history: &mut Vec<HistoryEntry>,
     elapsed_before: Duration,
-    mut on_phase: impl FnMut(&Engine, &[HistoryEntry]),
+    mut on_phase: impl FnMut(&R, &[HistoryEntry]),
 ) -> StopReason {
     let start = Instant::now();
     loop {
@@ -62,11 +103,12 @@ pub fn run(
             return StopReason::Interrupted;
         }
         if let Some(n) = stop.phases {
-            if engine.totals().phases >= n {
+            if engine.sums().error().min_phases as u64 >= n {
                 return StopReason::Phases;
             }
         }
-        engine.run_phase();
+        let deadline = stop.time.map(|t| start + t.saturating_sub(elapsed_before));
+        engine.step(interrupted, deadline);
         let e = engine.sums().error();
         let t = engine.totals();
         let entry = HistoryEntry {
@@ -93,7 +135,7 @@ pub fn run(
                 return StopReason::Time;
             }
         }
-        if stop.phases.is_some_and(|n| t.phases >= n) {
+        if stop.phases.is_some_and(|n| e.min_phases as u64 >= n) {
             return StopReason::Phases;
         }
     }

@@ -1,0 +1,281 @@
+//! The semi-synchronous level (paper §4.1, DESIGN §2.2) and the parallel methods as its configurations: the
+//! main thread deals masks, runs the groups until one of them has finished K phases, stops them all, forms the
+//! whole image and deals again.
+
+use crate::group::{Group, GroupMap, GroupStats, RoundContext};
+use crate::map_slot::MapSlot;
+use crate::mask;
+use photonfarm::accumulation::Accumulator;
+use photonfarm::render::session::Progressive;
+use photonfarm::render::{RayTotals, RenderSettings};
+use photonfarm::scene::Scene;
+use serde::{Deserialize, Serialize};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, RecvTimeoutError};
+use std::time::{Duration, Instant};
+
+/// The parallel methods of DESIGN §2 that run inside one process.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ParallelMethod {
+    /// One group of n threads over the whole image.
+    Sync,
+    /// n groups of one thread, each over the whole image with a private map and image.
+    Async,
+    /// n/g groups of g threads over random tile masks, sharing their maps.
+    TwoLevel,
+}
+
+impl ParallelMethod {
+    /// The name used on the command line and in records.
+    pub fn name(self) -> &'static str {
+        match self {
+            ParallelMethod::Sync => "sync",
+            ParallelMethod::Async => "async",
+            ParallelMethod::TwoLevel => "two-level",
+        }
+    }
+}
+
+/// How the engine is laid out: DESIGN §2's table as data.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EngineConfig {
+    pub method: ParallelMethod,
+    pub groups: usize,
+    pub threads_per_group: usize,
+    /// Groups render random tile masks (otherwise every group renders the whole image).
+    pub masks: bool,
+    /// Groups gather into each other's open maps.
+    pub shared_maps: bool,
+    /// Tile edge in pixels.
+    pub tile_size: u32,
+    /// K: the round ends when one group has finished this many phases.
+    pub phases_per_deal: u32,
+    /// Cores to pin to; thread t of group k runs on `cores[(k · g + t) mod len]`.
+    pub cores: Vec<usize>,
+}
+
+/// Why an engine configuration cannot run.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("{0}")]
+    Invalid(String),
+    #[error("cannot start the worker threads: {0}")]
+    Threads(#[from] rayon::ThreadPoolBuildError),
+}
+
+impl EngineConfig {
+    /// The configuration of `method` on `threads` threads, `group_size` threads per group for two-level.
+    pub fn for_method(
+        method: ParallelMethod,
+        threads: usize,
+        group_size: usize,
+        cores: Vec<usize>,
+    ) -> Result<Self, ConfigError> {
+        if threads == 0 {
+            return Err(ConfigError::Invalid("at least one thread is needed".into()));
+        }
+        if cores.is_empty() {
+            return Err(ConfigError::Invalid("the core list is empty".into()));
+        }
+        let (groups, per_group, masks, shared) = match method {
+            ParallelMethod::Sync => (1, threads, false, false),
+            ParallelMethod::Async => (threads, 1, false, false),
+            ParallelMethod::TwoLevel => {
+                if ![1, 2, 4].contains(&group_size) {
+                    return Err(ConfigError::Invalid(format!("the group size must be 1, 2 or 4, got {group_size}")));
+                }
+                let g = group_size.min(threads);
+                if !threads.is_multiple_of(g) {
+                    return Err(ConfigError::Invalid(format!("{threads} threads do not split into groups of {g}")));
+                }
+                (threads / g, g, true, true)
+            }
+        };
+        Ok(EngineConfig {
+            method,
+            groups,
+            threads_per_group: per_group,
+            masks,
+            shared_maps: shared,
+            tile_size: if groups > 16 { 64 } else { 32 },
+            phases_per_deal: 6,
+            cores,
+        })
+    }
+
+    /// Total threads.
+    pub fn threads(&self) -> usize {
+        self.groups * self.threads_per_group
+    }
+}
+
+/// The multi-threaded engine of one process.
+pub struct ParallelEngine<'s> {
+    scene: &'s Scene,
+    settings: RenderSettings,
+    config: EngineConfig,
+    groups: Vec<Group>,
+    slots: Vec<MapSlot<GroupMap>>,
+    sums: Accumulator,
+    deals: u64,
+}
+
+impl<'s> ParallelEngine<'s> {
+    /// Starts the groups' threads (pinned) with empty sums.
+    pub fn new(scene: &'s Scene, settings: RenderSettings, config: EngineConfig) -> Result<Self, ConfigError> {
+        if !(1..=64).contains(&config.phases_per_deal) {
+            return Err(ConfigError::Invalid(format!(
+                "phases per deal must be 1..=64, got {}",
+                config.phases_per_deal
+            )));
+        }
+        if config.tile_size == 0 {
+            return Err(ConfigError::Invalid("the tile size must be at least one pixel".into()));
+        }
+        let slots: Vec<MapSlot<GroupMap>> = (0..config.groups).map(|_| MapSlot::new(GroupMap::default())).collect();
+        // Groups own their slot's token; the slots live in a Vec that is never resized.
+        let mut groups = Vec::with_capacity(config.groups);
+        for (k, slot) in slots.iter().enumerate() {
+            let cores = (0..config.threads_per_group)
+                .map(|t| config.cores[(k * config.threads_per_group + t) % config.cores.len()])
+                .collect();
+            groups.push(Group::new(k, cores, slot.take_owner())?);
+        }
+        Ok(ParallelEngine {
+            scene,
+            settings,
+            sums: Accumulator::new(scene.camera.width, scene.camera.height),
+            config,
+            groups,
+            slots,
+            deals: 0,
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &EngineConfig {
+        &self.config
+    }
+
+    /// Per-group counters.
+    pub fn group_stats(&self) -> Vec<GroupStats> {
+        self.groups.iter().map(|g| g.stats).collect()
+    }
+
+    /// Threads whose pinning the OS accepted, over all groups.
+    pub fn pinned_threads(&self) -> usize {
+        self.groups.iter().map(Group::pinned_threads).sum()
+    }
+
+    /// Synchronisation rounds so far.
+    pub fn deals(&self) -> u64 {
+        self.deals
+    }
+
+    /// Bytes of every buffer of the engine (sums, groups' buffers and maps), measured between rounds.
+    pub fn capacity_bytes(&mut self) -> usize {
+        let sums = self.sums.pixels.capacity() * Accumulator::bytes_per_pixel();
+        sums + self.groups.iter_mut().zip(&self.slots).map(|(g, s)| g.capacity_bytes(s)).sum::<usize>()
+    }
+
+    /// One synchronisation round: deal masks, run every group until one has finished K phases (or the
+    /// deadline passes, or the user interrupts), stop them, add their sums to the whole image.
+    pub fn run_round(&mut self, interrupted: &AtomicBool, deadline: Option<Instant>) {
+        self.deals += 1;
+        let (w, h) = (self.scene.camera.width, self.scene.camera.height);
+        let masks = if self.config.masks {
+            mask::deal(w, h, self.config.tile_size, self.config.groups, self.settings.seed, self.deals)
+        } else {
+            vec![mask::whole_image(w, h); self.config.groups]
+        };
+        for (g, m) in self.groups.iter_mut().zip(masks) {
+            let before = m.iter().map(|&p| self.sums.pixels[p as usize].phases).collect();
+            g.start_deal(m, before, if self.config.masks { 1 } else { self.config.groups as u32 });
+        }
+        let stop = AtomicBool::new(false);
+        let ctx = RoundContext {
+            scene: self.scene,
+            settings: &self.settings,
+            slots: &self.slots,
+            shared_maps: self.config.shared_maps,
+            stop: &stop,
+            deal: self.deals,
+        };
+        let k = self.config.phases_per_deal as u64;
+        let (tx, rx) = mpsc::channel();
+        std::thread::scope(|s| {
+            for g in self.groups.iter_mut() {
+                let (tx, ctx) = (tx.clone(), &ctx);
+                s.spawn(move || g.run_round(ctx, k, &tx));
+            }
+            drop(tx);
+            loop {
+                match rx.recv_timeout(Duration::from_millis(5)) {
+                    Ok(_) | Err(RecvTimeoutError::Disconnected) => break,
+                    Err(RecvTimeoutError::Timeout) => {
+                        if interrupted.load(Ordering::Relaxed) || deadline.is_some_and(|d| Instant::now() >= d) {
+                            break;
+                        }
+                    }
+                }
+            }
+            stop.store(true, Ordering::Release);
+        });
+        for g in &self.groups {
+            self.sums.merge_local(g.mask(), g.local_sums());
+        }
+    }
+}
+
+impl Progressive for ParallelEngine<'_> {
+    fn step(&mut self, interrupted: &AtomicBool, deadline: Option<Instant>) {
+        self.run_round(interrupted, deadline);
+    }
+
+    fn sums(&self) -> &Accumulator {
+        &self.sums
+    }
+
+    fn totals(&self) -> RayTotals {
+        let mut t = RayTotals::default();
+        for g in &self.groups {
+            let s = g.stats;
+            t.phases += s.phases;
+            t.backward_rays += s.backward_rays;
+            t.forward_rays += s.forward_rays;
+            t.light_paths += s.light_paths;
+            t.backward_photons += s.backward_photons;
+            t.merges += s.merges;
+            t.capped_light_paths += s.capped_light_paths;
+        }
+        t
+    }
+
+    fn settings(&self) -> &RenderSettings {
+        &self.settings
+    }
+
+    fn bytes_per_pixel(&self) -> f64 {
+        // Needs the owner tokens (mutable); callers wanting it exactly use `capacity_bytes` between rounds.
+        let pixels = self.sums.pixels.len().max(1);
+        let per_group: usize = self
+            .groups
+            .iter()
+            .map(|g| {
+                g.mask().len()
+                    * (std::mem::size_of::<photonfarm::integrator::LayerValues>()
+                        + std::mem::size_of::<photonfarm::accumulation::PixelSums>()
+                        + 8
+                        + 24
+                        + self.settings.backward_diffuse_depth as usize
+                            * std::mem::size_of::<photonfarm::pbpm::BackwardPhoton>())
+            })
+            .sum();
+        (self.sums.pixels.len() * Accumulator::bytes_per_pixel() + per_group) as f64 / pixels as f64
+    }
+
+    fn threads(&self) -> usize {
+        self.config.threads()
+    }
+}

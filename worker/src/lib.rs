@@ -1,0 +1,13 @@
+//! The worker engine: synchronous groups of pinned threads (level 1) rendering random tile masks and sharing
+//! their backward photon maps through atomic counters (level 2), and the classic parallel methods as
+//! configurations of the same engine (DESIGN §2).
+
+pub mod atomic_image;
+pub mod engine;
+pub mod group;
+pub mod map_slot;
+pub mod mask;
+pub mod sync_primitives;
+pub mod topology;
+
+pub use engine::{ConfigError, EngineConfig, ParallelEngine, ParallelMethod};

@@ -1,0 +1,143 @@
+//! Every parallel method is the same estimator: each converges to the single-threaded engine's image.
+
+use photonfarm::accumulation::{relative_rmse, Accumulator};
+use photonfarm::color::luminance_f64;
+use photonfarm::integrator::Layer;
+use photonfarm::render::images::total_image;
+use photonfarm::render::session::Progressive;
+use photonfarm::render::{Engine, Method, RenderSettings};
+use photonfarm::scene::Scene;
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+use worker::{EngineConfig, ParallelEngine, ParallelMethod};
+
+/// A shipped scene at a test resolution.
+fn scene(name: &str, size: u32) -> Scene {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+    let text = std::fs::read_to_string(dir.join(name)).unwrap();
+    let text =
+        text.replace("width = 256", &format!("width = {size}")).replace("height = 256", &format!("height = {size}"));
+    Scene::from_toml(&text, Path::new(name), &dir).unwrap()
+}
+
+/// Luminance of a pixel's mean without its visible-lights layer. That layer comes from the camera pass alone,
+/// the same code in every method; in the caustic room it is the light seen through glass, whose rare, huge
+/// samples would drown the comparison of what the methods do differently (the forward pass and its maps).
+fn lit_by_scene(sums: &Accumulator, i: usize) -> f64 {
+    luminance_f64(sums.mean_total(i)) - luminance_f64(sums.mean(i, Layer::VisibleLights))
+}
+
+/// Block means (block × block pixels) of `lit_by_scene` and their squared SEM (sum of pixel SEM²/n²).
+fn blocks(sums: &Accumulator, block: u32) -> Vec<(f64, f64)> {
+    let (w, h) = (sums.width, sums.height);
+    let mut out = Vec::new();
+    for by in 0..h / block {
+        for bx in 0..w / block {
+            let (mut m, mut s2) = (0.0, 0.0);
+            for y in by * block..(by + 1) * block {
+                for x in bx * block..(bx + 1) * block {
+                    let i = (y * w + x) as usize;
+                    m += lit_by_scene(sums, i);
+                    s2 += sums.sem2(i);
+                }
+            }
+            let n = (block * block) as f64;
+            out.push((m / n, s2 / (n * n)));
+        }
+    }
+    out
+}
+
+fn reference(sc: &Scene, phases: u64) -> Accumulator {
+    let mut e = Engine::new(sc, RenderSettings::for_scene(sc, Method::Pbpm, 99));
+    for _ in 0..phases {
+        e.run_phase();
+    }
+    e.sums().clone()
+}
+
+fn check(sc: &Scene, name: &str, reference: &Accumulator, config: EngineConfig, min_phases: u32) {
+    let label = format!("{name} {:?} {}×{}", config.method, config.groups, config.threads_per_group);
+    let mut engine = ParallelEngine::new(sc, RenderSettings::for_scene(sc, Method::Pbpm, 5), config).unwrap();
+    let never = AtomicBool::new(false);
+    while engine.sums().error().min_phases < min_phases {
+        engine.run_round(&never, None);
+    }
+    let sums = engine.sums();
+    let rmse = relative_rmse(&total_image(sums), &total_image(reference), |_| true);
+    // Per pixel, z = (a − b) / sqrt(SEM_a² + SEM_b²) has E[z²] = 1 when both estimate the same image (pixels of
+    // one phase share light paths, so block SEMs from pixel SEMs would be too small; z² per pixel is exact).
+    let n = sums.pixels.len();
+    let mean_z2 = (0..n)
+        .map(|i| {
+            let (a, b) = (luminance_f64(sums.mean_total(i)), luminance_f64(reference.mean_total(i)));
+            let s2 = sums.sem2(i) + reference.sem2(i);
+            if s2 > 0.0 {
+                (a - b) * (a - b) / s2
+            } else {
+                0.0
+            }
+        })
+        .sum::<f64>()
+        / n as f64;
+    let a = blocks(sums, sums.width / 4);
+    let b = blocks(reference, sums.width / 4);
+    let mut worst: f64 = 0.0;
+    for ((ma, _), (mb, _)) in a.iter().zip(&b) {
+        worst = worst.max((ma - mb).abs() / mb);
+    }
+    let combined = (sums.error().delta_all.powi(2) + reference.error().delta_all.powi(2)).sqrt();
+    // Relative RMSE of 8×8-block means: the 2% criterion at this budget, with pixel noise averaged down.
+    let (fa, fb) = (blocks(sums, 8), blocks(reference, 8));
+    let block_rmse = (fa.iter().zip(&fb).map(|((a, _), (b, _))| (a - b) * (a - b)).sum::<f64>()
+        / fb.iter().map(|(b, _)| b * b).sum::<f64>())
+    .sqrt();
+    eprintln!(
+        "{label}: {} phases/pixel, RMSE {:.2}% (8×8 blocks {:.2}%), mean z² {mean_z2:.2}, worst quarter-image block {:.2}% (3 × combined δ = {:.2}%)",
+        sums.error().min_phases,
+        100.0 * rmse,
+        100.0 * block_rmse,
+        100.0 * worst,
+        300.0 * combined
+    );
+    assert!((0.6..=1.4).contains(&mean_z2), "{label}: mean z² = {mean_z2:.2}");
+    assert!(worst <= 3.0 * combined, "{label}: a quarter-image block differs by {:.2}%", 100.0 * worst);
+    assert!(block_rmse < 0.02, "{label}: relative RMSE of 8×8 blocks {:.2}%", 100.0 * block_rmse);
+}
+
+fn configs(group_variants: bool) -> Vec<EngineConfig> {
+    let cores = vec![0, 1];
+    let mut configs = vec![
+        EngineConfig::for_method(ParallelMethod::Sync, 2, 2, cores.clone()).unwrap(),
+        EngineConfig::for_method(ParallelMethod::Async, 2, 1, cores.clone()).unwrap(),
+        EngineConfig::for_method(ParallelMethod::TwoLevel, 2, 1, cores.clone()).unwrap(),
+    ];
+    if group_variants {
+        configs.push(EngineConfig::for_method(ParallelMethod::TwoLevel, 2, 2, cores.clone()).unwrap());
+        configs.push(EngineConfig::for_method(ParallelMethod::TwoLevel, 4, 4, cores.clone()).unwrap());
+    }
+    // Tiny tiles force many groups onto two cores.
+    let mut many = EngineConfig::for_method(ParallelMethod::TwoLevel, 8, 1, cores).unwrap();
+    many.tile_size = 8;
+    configs.push(many);
+    configs
+}
+
+#[test]
+fn every_method_and_group_size_converges_to_the_single_thread_image_on_cornell() {
+    let sc = scene("cornell.toml", 64);
+    let reference = reference(&sc, 1200);
+    for c in configs(true) {
+        check(&sc, "cornell", &reference, c, 300);
+    }
+}
+
+#[test]
+fn every_method_converges_to_the_single_thread_image_on_caustic() {
+    // The caustic room is far noisier per phase (a small light focused by glass): a longer budget.
+    let sc = scene("caustic.toml", 64);
+    let reference = reference(&sc, 1600);
+    for c in configs(false) {
+        check(&sc, "caustic", &reference, c, 400);
+    }
+}
