@@ -17,13 +17,19 @@ pub enum Command {
     Render(RenderArgs),
 }
 
-/// Estimators selectable with --method.
+/// Estimators and parallel methods selectable with --method.
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum MethodArg {
-    /// Progressive backward photon mapping (single thread until the parallel engine lands).
+    /// Progressive backward photon mapping on one thread: the reference engine of every parallel method.
     Pbpm,
-    /// The reference path tracer, for comparison.
+    /// The reference path tracer (one thread), for comparison.
     Path,
+    /// PBPM, one synchronous group of all threads over the whole image.
+    Sync,
+    /// PBPM, one single-thread group per thread, each over the whole image with its own map and image.
+    Async,
+    /// PBPM, groups of --group-size threads over random tile masks, sharing their photon maps.
+    TwoLevel,
 }
 
 /// Which pixels δ is computed over for --target-error and the progress display.
@@ -57,7 +63,22 @@ pub struct RenderArgs {
     /// Estimator.
     #[arg(long, value_enum, default_value = "pbpm")]
     pub method: MethodArg,
-    /// Job seed; the same seed and settings give bit-identical sums.
+    /// Threads for the parallel methods (default: every core of --cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Threads per synchronous group for --method two-level: 1, 2 or 4.
+    #[arg(long, default_value_t = 2)]
+    pub group_size: usize,
+    /// Cores to pin threads to, e.g. 0,1 or 0-3 (default: every core this process may use).
+    #[arg(long, value_name = "LIST")]
+    pub cores: Option<String>,
+    /// Tile edge in pixels for the two-level masks (default 32; 64 beyond 16 groups).
+    #[arg(long)]
+    pub tile_size: Option<u32>,
+    /// K: a synchronisation round ends when one group has finished K phases (4–8 in the paper).
+    #[arg(long, default_value_t = 6)]
+    pub phases_per_deal: u32,
+    /// Job seed; the same seed and settings give bit-identical sums on one thread.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Override the scene's max_depth (total path segments).

@@ -3,24 +3,23 @@
 use crate::cli::{ErrorOverArg, MethodArg, RenderArgs};
 use crate::output_folder::{self, Reference};
 use anyhow::{bail, Context, Result};
+use clap::ValueEnum;
 use indicatif::{ProgressBar, ProgressStyle};
 use photonfarm::render::record::{HistoryEntry, RunRecord};
-use photonfarm::render::session::{self, ErrorOver, StopReason, StopRule};
+use photonfarm::render::session::{self, ErrorOver, Progressive, StopReason, StopRule};
 use photonfarm::render::{memory, Engine, Method, RenderSettings};
 use photonfarm::scene::Scene;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
+use worker::{topology, EngineConfig, ParallelEngine, ParallelMethod};
 
 const DEFAULT_TIME_S: f64 = 30.0;
 
 pub fn run(args: RenderArgs) -> Result<()> {
     let stop = stop_rule(&args)?;
     let scene = Scene::load(&args.scene)?;
-    let method = match args.method {
-        MethodArg::Pbpm => Method::Pbpm,
-        MethodArg::Path => Method::Path,
-    };
+    let method = if args.method == MethodArg::Path { Method::Path } else { Method::Pbpm };
     let mut settings = RenderSettings::for_scene(&scene, method, args.seed);
     if let Some(d) = args.max_depth {
         if d == 0 {
@@ -69,21 +68,49 @@ pub fn run(args: RenderArgs) -> Result<()> {
     bar.set_style(ProgressStyle::with_template("{spinner} [{elapsed_precise}] {msg}").expect("static template"));
     bar.enable_steady_tick(Duration::from_millis(200));
 
-    let mut engine = Engine::new(&scene, settings);
+    let (mut engine, layout): (Box<dyn Progressive + '_>, String) = match parallel_method(args.method) {
+        None => (Box::new(Engine::new(&scene, settings)), "1 thread".to_string()),
+        Some(m) => {
+            let cores = match &args.cores {
+                Some(list) => topology::parse_cores(list).map_err(|e| anyhow::anyhow!("--cores: {e}"))?,
+                None => topology::all_cores(),
+            };
+            let threads = args.threads.unwrap_or(cores.len());
+            let mut config = EngineConfig::for_method(m, threads, args.group_size, cores)?;
+            if let Some(t) = args.tile_size {
+                config.tile_size = t;
+            }
+            config.phases_per_deal = args.phases_per_deal;
+            let layout = format!(
+                "{} group{} × {} thread{}{}{}",
+                config.groups,
+                if config.groups == 1 { "" } else { "s" },
+                config.threads_per_group,
+                if config.threads_per_group == 1 { "" } else { "s" },
+                if config.masks { format!(", {}-pixel tile masks", config.tile_size) } else { String::new() },
+                if config.shared_maps { ", shared maps" } else { "" },
+            );
+            (Box::new(ParallelEngine::new(&scene, settings, config)?), layout)
+        }
+    };
     let mut history: Vec<HistoryEntry> = Vec::new();
     let start = Instant::now();
     let mut last_save = Instant::now();
     let mut save_error: Option<anyhow::Error> = None;
     let save_interval = Duration::from_secs_f64(args.save_interval.max(0.5));
-    let record_of = |engine: &Engine, history: &[HistoryEntry], reason: &str| RunRecord {
+    let method_name = args.method.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default();
+    let record_of = |engine: &dyn Progressive, history: &[HistoryEntry], reason: &str| RunRecord {
         photonfarm_version: env!("CARGO_PKG_VERSION").to_string(),
         scene: args.scene.display().to_string(),
         scene_hash: scene.hash.clone(),
         width: scene.camera.width,
         height: scene.camera.height,
+        method: method_name.clone(),
+        layout: layout.clone(),
+        pinned_threads: engine.pinned_threads(),
         settings: *engine.settings(),
         radius_at_1m: engine.settings().radius_schedule(&scene).radius(1.0, 1),
-        threads: 1,
+        threads: engine.threads() as u32,
         stop_reason: reason.to_string(),
         totals: engine.totals(),
         wall_time_s: start.elapsed().as_secs_f64(),
@@ -94,7 +121,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         history: history.to_vec(),
     };
 
-    let reason = session::run(&mut engine, &stop, &interrupted, &mut history, Duration::ZERO, |engine, history| {
+    let reason = session::run(engine.as_mut(), &stop, &interrupted, &mut history, Duration::ZERO, |engine, history| {
         let Some(entry) = history.last() else { return };
         let secs = entry.time_s.max(1e-9);
         let rays = (entry.backward_rays + entry.forward_rays) as f64;
@@ -120,7 +147,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     if let Some(e) = save_error {
         return Err(e.context("writing the periodic results failed; the run was stopped"));
     }
-    let record = record_of(&engine, &history, reason.name());
+    let record = record_of(engine.as_ref(), &history, reason.name());
     output_folder::save(&dir, engine.sums(), &record)?;
     let e = record.error;
     println!(
@@ -146,6 +173,15 @@ pub fn run(args: RenderArgs) -> Result<()> {
     }
     println!("wrote {}", dir.display());
     Ok(())
+}
+
+fn parallel_method(m: MethodArg) -> Option<ParallelMethod> {
+    match m {
+        MethodArg::Pbpm | MethodArg::Path => None,
+        MethodArg::Sync => Some(ParallelMethod::Sync),
+        MethodArg::Async => Some(ParallelMethod::Async),
+        MethodArg::TwoLevel => Some(ParallelMethod::TwoLevel),
+    }
 }
 
 fn stop_rule(args: &RenderArgs) -> Result<StopRule> {

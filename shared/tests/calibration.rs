@@ -2,6 +2,8 @@
 //! reference in `scenes/references/` stays within a factor of 2 of δ once δ < 10%. The reference has noise of
 //! its own (its `sem` layer), which adds in quadrature to the error measured against it.
 
+#![allow(clippy::needless_range_loop)]
+
 mod common;
 
 use common::{settings, shipped};

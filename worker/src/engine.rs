@@ -278,4 +278,8 @@ impl Progressive for ParallelEngine<'_> {
     fn threads(&self) -> usize {
         self.config.threads()
     }
+
+    fn pinned_threads(&self) -> usize {
+        ParallelEngine::pinned_threads(self)
+    }
 }

@@ -36,6 +36,12 @@ pub struct RunRecord {
     pub scene_hash: String,
     pub width: u32,
     pub height: u32,
+    /// The method as the user named it (pbpm, path, sync, async, two-level).
+    pub method: String,
+    /// How the threads were laid out, e.g. "2 groups × 1 thread, tile masks, shared maps".
+    pub layout: String,
+    /// Threads whose pinning to a core the OS accepted.
+    pub pinned_threads: usize,
     pub settings: RenderSettings,
     /// Photon radius of a phase-1 photon at 1 m camera-path length (m): the footprint-derived scale.
     pub radius_at_1m: f32,

@@ -24,6 +24,10 @@ pub trait Progressive {
     fn bytes_per_pixel(&self) -> f64;
     /// Threads it renders with.
     fn threads(&self) -> usize;
+    /// Threads whose pinning to a core the OS accepted (0 when the renderer does not pin).
+    fn pinned_threads(&self) -> usize {
+        0
+    }
 }
 
 impl Progressive for Engine<'_> {
