@@ -15,6 +15,36 @@ pub struct Cli {
 pub enum Command {
     /// Render a scene file and write image.exr, preview.png and run.json into an output folder.
     Render(RenderArgs),
+    /// Run every parallel method at several thread counts for a fixed time and print the paper's Table-1 rows.
+    Bench(BenchArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct BenchArgs {
+    /// Seconds per run.
+    #[arg(long, default_value_t = 20.0)]
+    pub time: f64,
+    /// Scenes by name in scenes/ (their references in scenes/references/ give the true error).
+    #[arg(long, value_delimiter = ',', default_value = "cornell,caustic")]
+    pub scenes: Vec<String>,
+    /// Methods to run.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "sync,async,two-level")]
+    pub methods: Vec<MethodArg>,
+    /// Thread counts to run each method at (speedups are relative to the first).
+    #[arg(long, value_delimiter = ',', default_value = "1,2")]
+    pub threads: Vec<usize>,
+    /// Threads per group for two-level.
+    #[arg(long, default_value_t = 2)]
+    pub group_size: usize,
+    /// Cores to pin to (default: every core this process may use).
+    #[arg(long, value_name = "LIST")]
+    pub cores: Option<String>,
+    /// Job seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Output folder for results.csv and report.md (default: a new folder under out/).
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
 }
 
 /// Estimators and parallel methods selectable with --method.

@@ -1,6 +1,7 @@
 //! `coordinator`: photonfarm's main program. It loads a scene, renders it until a time, phase or error target,
 //! and writes the image, its layers and the run record.
 
+mod bench_command;
 mod cli;
 mod output_folder;
 mod render_command;
@@ -11,6 +12,7 @@ fn main() -> std::process::ExitCode {
     let cli = cli::Cli::parse();
     let result = match cli.command {
         cli::Command::Render(args) => render_command::run(args),
+        cli::Command::Bench(args) => bench_command::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -175,7 +175,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
     Ok(())
 }
 
-fn parallel_method(m: MethodArg) -> Option<ParallelMethod> {
+/// The parallel engine behind a method, None for the single-threaded ones.
+pub fn parallel_method(m: MethodArg) -> Option<ParallelMethod> {
     match m {
         MethodArg::Pbpm | MethodArg::Path => None,
         MethodArg::Sync => Some(ParallelMethod::Sync),

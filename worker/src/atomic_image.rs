@@ -55,14 +55,20 @@ impl GatherBuffer {
 
     /// A sink that adds into this buffer.
     pub fn sink(&self) -> AtomicSink<'_> {
-        AtomicSink { buffer: self, merges: 0 }
+        AtomicSink { buffer: self }
+    }
+
+    /// Records merges made into this buffer (callers count them per light path and add them once).
+    pub fn add_merges(&self, n: u64) {
+        if n > 0 {
+            self.merges.fetch_add(n, Ordering::Relaxed);
+        }
     }
 }
 
-/// Adds gathered light into a `GatherBuffer` from any thread; counts its merges and publishes them on drop.
+/// Adds gathered light into a `GatherBuffer` from any thread.
 pub struct AtomicSink<'a> {
     buffer: &'a GatherBuffer,
-    merges: u64,
 }
 
 impl Gather for AtomicSink<'_> {
@@ -72,13 +78,6 @@ impl Gather for AtomicSink<'_> {
         add_f32(&self.buffer.values[base], value.x);
         add_f32(&self.buffer.values[base + 1], value.y);
         add_f32(&self.buffer.values[base + 2], value.z);
-        self.merges += 1;
-    }
-}
-
-impl Drop for AtomicSink<'_> {
-    fn drop(&mut self) {
-        self.buffer.merges.fetch_add(self.merges, Ordering::Relaxed);
     }
 }
 
@@ -97,6 +96,7 @@ mod tests {
                     for _ in 0..10_000 {
                         sink.add(1, Layer::Caustic, Rgb::new(1.0, 2.0, 0.5));
                     }
+                    b.add_merges(10_000);
                 });
             }
         });

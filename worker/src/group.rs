@@ -176,7 +176,7 @@ impl Group {
     }
 
     /// One phase over the mask: backward pass, map build, forward pass with the map open, close.
-    fn run_phase(&mut self, ctx: &RoundContext) {
+    fn run_phase<'c>(&mut self, ctx: &RoundContext<'c>) {
         let scene = ctx.scene;
         let settings = ctx.settings;
         let key = self.phase_key(ctx.deal);
@@ -242,48 +242,54 @@ impl Group {
         let capped = AtomicU64::new(0);
         let foreign = AtomicU64::new(0);
         let own = slot.owner_data(&self.token);
-        let trace = |index: u64, closing: bool| {
+        // `guards` and `merges` are per-thread scratch, reused from path to path.
+        let trace = |index: u64, closing: bool, guards: &mut Vec<Guard<'c, GroupMap>>, merges: &mut Vec<u64>| {
             let mut s = Sampler::new(settings.seed, Pass::Light, key, index);
             // While closing, the owner takes no other map: two closing owners never wait on each other.
-            let guards: Vec<Guard<GroupMap>> = if ctx.shared_maps && !closing {
-                ctx.slots
-                    .iter()
-                    .enumerate()
-                    .filter(|&(k, _)| k != self.index)
-                    .filter_map(|(_, sl)| sl.try_acquire())
-                    .collect()
-            } else {
-                Vec::new()
-            };
-            let mut own_sink = own.gathered.sink();
-            let mut sinks: Vec<_> = guards.iter().map(|g| g.data().gathered.sink()).collect();
+            guards.clear();
+            if ctx.shared_maps && !closing {
+                guards.extend(
+                    ctx.slots
+                        .iter()
+                        .enumerate()
+                        .filter(|&(k, _)| k != self.index)
+                        .filter_map(|(_, sl)| sl.try_acquire()),
+                );
+            }
+            merges.clear();
+            merges.resize(guards.len() + 1, 0);
             let mut fs = ForwardStats::default();
             trace_light_path(scene, max_depth, &mut s, &mut fs, &mut |v| {
-                gather(&own.photons, v, max_depth, bdd, &mut own_sink);
-                for (g, sink) in guards.iter().zip(sinks.iter_mut()) {
-                    gather(&g.data().photons, v, max_depth, bdd, sink);
+                merges[0] += gather(&own.photons, v, max_depth, bdd, &mut own.gathered.sink());
+                for (g, m) in guards.iter().zip(merges[1..].iter_mut()) {
+                    *m += gather(&g.data().photons, v, max_depth, bdd, &mut g.data().gathered.sink());
                 }
             });
-            drop(sinks);
-            for g in &guards {
+            own.gathered.add_merges(merges[0]);
+            for (g, &m) in guards.iter().zip(&merges[1..]) {
+                g.data().gathered.add_merges(m);
                 g.count_light_path();
             }
             foreign.fetch_add(guards.len() as u64, Ordering::Relaxed);
             forward_rays.fetch_add(fs.rays, Ordering::Relaxed);
             capped.fetch_add(fs.capped, Ordering::Relaxed);
             traced.fetch_add(1, Ordering::Relaxed);
+            guards.clear();
         };
-        (0..required as usize).into_par_iter().with_min_len(16).for_each(|i| {
-            let i = i as u64;
-            if ctx.stop.load(Ordering::Relaxed) && traced.load(Ordering::Relaxed) >= minimum {
-                return;
-            }
-            trace(i, false);
-        });
+        (0..required as usize).into_par_iter().with_min_len(16).for_each_init(
+            || (Vec::new(), Vec::new()),
+            |(guards, merges), i| {
+                if ctx.stop.load(Ordering::Relaxed) && traced.load(Ordering::Relaxed) >= minimum {
+                    return;
+                }
+                trace(i as u64, false, guards, merges);
+            },
+        );
         // Keep tracing useful paths until no other group is inside the map (paper Fig. 9).
         let mut extra = required;
+        let (mut guards, mut merges) = (Vec::new(), Vec::new());
         while !slot.try_close(&self.token) {
-            trace(extra, true);
+            trace(extra, true, &mut guards, &mut merges);
             extra += 1;
         }
         let traced = traced.into_inner();
