@@ -17,6 +17,9 @@ use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::Arc;
 
+/// Light paths traced per acquisition of the other groups' maps.
+const BATCH: u64 = 16;
+
 /// The map data a group shares through its slot: the photon map and the luminance gathered into it.
 #[derive(Default)]
 pub struct GroupMap {
@@ -242,54 +245,64 @@ impl Group {
         let capped = AtomicU64::new(0);
         let foreign = AtomicU64::new(0);
         let own = slot.owner_data(&self.token);
-        // `guards` and `merges` are per-thread scratch, reused from path to path.
-        let trace = |index: u64, closing: bool, guards: &mut Vec<Guard<'c, GroupMap>>, merges: &mut Vec<u64>| {
-            let mut s = Sampler::new(settings.seed, Pass::Light, key, index);
-            // While closing, the owner takes no other map: two closing owners never wait on each other.
-            guards.clear();
-            if ctx.shared_maps && !closing {
-                guards.extend(
-                    ctx.slots
-                        .iter()
-                        .enumerate()
-                        .filter(|&(k, _)| k != self.index)
-                        .filter_map(|(_, sl)| sl.try_acquire()),
-                );
-            }
-            merges.clear();
-            merges.resize(guards.len() + 1, 0);
-            let mut fs = ForwardStats::default();
-            trace_light_path(scene, max_depth, &mut s, &mut fs, &mut |v| {
-                merges[0] += gather(&own.photons, v, max_depth, bdd, &mut own.gathered.sink());
-                for (g, m) in guards.iter().zip(merges[1..].iter_mut()) {
-                    *m += gather(&g.data().photons, v, max_depth, bdd, &mut g.data().gathered.sink());
+        // Light paths are traced in batches: foreign maps are acquired once per batch and each batch's paths
+        // are counted in them at once, so the counters' cache lines move between cores once per batch, not per
+        // path. `guards` and `merges` are per-thread scratch, reused from batch to batch.
+        let trace_batch =
+            |first: u64, count: u64, closing: bool, guards: &mut Vec<Guard<'c, GroupMap>>, merges: &mut Vec<u64>| {
+                // While closing, the owner takes no other map: two closing owners never wait on each other.
+                guards.clear();
+                if ctx.shared_maps && !closing {
+                    guards.extend(
+                        ctx.slots
+                            .iter()
+                            .enumerate()
+                            .filter(|&(k, _)| k != self.index)
+                            .filter_map(|(_, sl)| sl.try_acquire()),
+                    );
                 }
-            });
-            own.gathered.add_merges(merges[0]);
-            for (g, &m) in guards.iter().zip(&merges[1..]) {
-                g.data().gathered.add_merges(m);
-                g.count_light_path();
-            }
-            foreign.fetch_add(guards.len() as u64, Ordering::Relaxed);
-            forward_rays.fetch_add(fs.rays, Ordering::Relaxed);
-            capped.fetch_add(fs.capped, Ordering::Relaxed);
-            traced.fetch_add(1, Ordering::Relaxed);
-            guards.clear();
-        };
-        (0..required as usize).into_par_iter().with_min_len(16).for_each_init(
+                merges.clear();
+                merges.resize(guards.len() + 1, 0);
+                let mut fs = ForwardStats::default();
+                let mut done = 0;
+                for index in first..first + count {
+                    if !closing && ctx.stop.load(Ordering::Relaxed) && traced.load(Ordering::Relaxed) + done >= minimum
+                    {
+                        break;
+                    }
+                    let mut s = Sampler::new(settings.seed, Pass::Light, key, index);
+                    trace_light_path(scene, max_depth, &mut s, &mut fs, &mut |v| {
+                        merges[0] += gather(&own.photons, v, max_depth, bdd, &mut own.gathered.sink());
+                        for (g, m) in guards.iter().zip(merges[1..].iter_mut()) {
+                            *m += gather(&g.data().photons, v, max_depth, bdd, &mut g.data().gathered.sink());
+                        }
+                    });
+                    done += 1;
+                }
+                own.gathered.add_merges(merges[0]);
+                for (g, &m) in guards.iter().zip(&merges[1..]) {
+                    g.data().gathered.add_merges(m);
+                    g.count_light_paths(done);
+                }
+                foreign.fetch_add(guards.len() as u64 * done, Ordering::Relaxed);
+                forward_rays.fetch_add(fs.rays, Ordering::Relaxed);
+                capped.fetch_add(fs.capped, Ordering::Relaxed);
+                traced.fetch_add(done, Ordering::Relaxed);
+                guards.clear();
+            };
+        let batches = required.div_ceil(BATCH);
+        (0..batches as usize).into_par_iter().for_each_init(
             || (Vec::new(), Vec::new()),
-            |(guards, merges), i| {
-                if ctx.stop.load(Ordering::Relaxed) && traced.load(Ordering::Relaxed) >= minimum {
-                    return;
-                }
-                trace(i as u64, false, guards, merges);
+            |(guards, merges), b| {
+                let first = b as u64 * BATCH;
+                trace_batch(first, BATCH.min(required - first), false, guards, merges);
             },
         );
         // Keep tracing useful paths until no other group is inside the map (paper Fig. 9).
         let mut extra = required;
         let (mut guards, mut merges) = (Vec::new(), Vec::new());
         while !slot.try_close(&self.token) {
-            trace(extra, true, &mut guards, &mut merges);
+            trace_batch(extra, 1, true, &mut guards, &mut merges);
             extra += 1;
         }
         let traced = traced.into_inner();

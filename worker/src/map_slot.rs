@@ -9,9 +9,9 @@ use crate::sync_primitives::{AtomicBool, AtomicU32, AtomicU64, Cell, Ordering};
 /// A shared slot holding one group's map data `T`.
 pub struct MapSlot<T> {
     /// 0 = closed; n ≥ 1 = open with n − 1 foreign users inside.
-    state: AtomicU32,
+    state: CacheLine<AtomicU32>,
     /// Light paths traced against the map since it was opened (owner's and foreign).
-    light_paths: AtomicU64,
+    light_paths: CacheLine<AtomicU64>,
     owner_taken: AtomicBool,
     data: Cell<T>,
 }
@@ -22,6 +22,18 @@ pub struct MapSlot<T> {
 // guards read it concurrently (T's own interior mutability must be atomic).
 unsafe impl<T: Send + Sync> Sync for MapSlot<T> {}
 unsafe impl<T: Send> Send for MapSlot<T> {}
+
+/// Keeps a hot atomic on a cache line of its own, so that counters of different slots (or of one slot) do not
+/// share a line that every core writes.
+#[repr(align(64))]
+struct CacheLine<T>(T);
+
+impl<T> std::ops::Deref for CacheLine<T> {
+    type Target = T;
+    fn deref(&self) -> &T {
+        &self.0
+    }
+}
 
 /// The right to open, close and rebuild one slot; exactly one exists per slot.
 pub struct OwnerToken {
@@ -37,8 +49,8 @@ impl<T> MapSlot<T> {
     /// A closed slot.
     pub fn new(data: T) -> Self {
         MapSlot {
-            state: AtomicU32::new(0),
-            light_paths: AtomicU64::new(0),
+            state: CacheLine(AtomicU32::new(0)),
+            light_paths: CacheLine(AtomicU64::new(0)),
             owner_taken: AtomicBool::new(false),
             data: Cell::new(data),
         }
@@ -121,7 +133,12 @@ impl<T> Guard<'_, T> {
 
     /// Counts the guard's light path in the map's statistics.
     pub fn count_light_path(&self) {
-        self.slot.light_paths.fetch_add(1, Ordering::AcqRel);
+        self.count_light_paths(1);
+    }
+
+    /// Counts `n` light paths traced against the map while this guard was held.
+    pub fn count_light_paths(&self, n: u64) {
+        self.slot.light_paths.fetch_add(n, Ordering::AcqRel);
     }
 }
 
