@@ -1,5 +1,8 @@
 //! Every parallel method is the same estimator: each converges to the single-threaded engine's image.
 
+mod common;
+
+use common::{mean_z2, scene};
 use photonfarm::accumulation::{relative_rmse, Accumulator};
 use photonfarm::color::luminance_f64;
 use photonfarm::integrator::Layer;
@@ -7,18 +10,8 @@ use photonfarm::render::images::total_image;
 use photonfarm::render::session::Progressive;
 use photonfarm::render::{Engine, Method, RenderSettings};
 use photonfarm::scene::Scene;
-use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use worker::{EngineConfig, ParallelEngine, ParallelMethod};
-
-/// A shipped scene at a test resolution.
-fn scene(name: &str, size: u32) -> Scene {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
-    let text = std::fs::read_to_string(dir.join(name)).unwrap();
-    let text =
-        text.replace("width = 256", &format!("width = {size}")).replace("height = 256", &format!("height = {size}"));
-    Scene::from_toml(&text, Path::new(name), &dir).unwrap()
-}
 
 /// Luminance of a pixel's mean without its visible-lights layer. That layer comes from the camera pass alone,
 /// the same code in every method; in the caustic room it is the light seen through glass, whose rare, huge
@@ -65,21 +58,7 @@ fn check(sc: &Scene, name: &str, reference: &Accumulator, config: EngineConfig, 
     }
     let sums = engine.sums();
     let rmse = relative_rmse(&total_image(sums), &total_image(reference), |_| true);
-    // Per pixel, z = (a − b) / sqrt(SEM_a² + SEM_b²) has E[z²] = 1 when both estimate the same image (pixels of
-    // one phase share light paths, so block SEMs from pixel SEMs would be too small; z² per pixel is exact).
-    let n = sums.pixels.len();
-    let mean_z2 = (0..n)
-        .map(|i| {
-            let (a, b) = (luminance_f64(sums.mean_total(i)), luminance_f64(reference.mean_total(i)));
-            let s2 = sums.sem2(i) + reference.sem2(i);
-            if s2 > 0.0 {
-                (a - b) * (a - b) / s2
-            } else {
-                0.0
-            }
-        })
-        .sum::<f64>()
-        / n as f64;
+    let mean_z2 = mean_z2(sums, reference);
     let a = blocks(sums, sums.width / 4);
     let b = blocks(reference, sums.width / 4);
     let mut worst: f64 = 0.0;

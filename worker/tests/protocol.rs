@@ -1,27 +1,20 @@
 //! The semi-synchronous stop and the shared-map counters under stress: no deadlock, no lost or double-counted
 //! light path, no change to the expected image when rounds are cut short at random moments.
 
+mod common;
+
+use common::{mean_z2, scene};
 use photonfarm::color::luminance_f64;
 use photonfarm::render::session::Progressive;
 use photonfarm::render::{Engine, Method, RenderSettings};
 use photonfarm::sampling::{Pass, Sampler};
-use photonfarm::scene::Scene;
-use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 use worker::{EngineConfig, ParallelEngine, ParallelMethod};
 
-fn scene(size: u32) -> Scene {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
-    let text = std::fs::read_to_string(dir.join("caustic.toml")).unwrap();
-    let text =
-        text.replace("width = 256", &format!("width = {size}")).replace("height = 256", &format!("height = {size}"));
-    Scene::from_toml(&text, Path::new("caustic.toml"), &dir).unwrap()
-}
-
 #[test]
 fn eight_groups_on_two_cores_run_thousands_of_phases_and_every_light_path_is_counted_exactly() {
-    let sc = scene(16);
+    let sc = scene("caustic.toml", 16);
     let mut settings = RenderSettings::for_scene(&sc, Method::Pbpm, 3);
     settings.light_paths_per_pixel = 0.5;
     let mut config = EngineConfig::for_method(ParallelMethod::TwoLevel, 8, 1, vec![0, 1]).unwrap();
@@ -50,7 +43,7 @@ fn eight_groups_on_two_cores_run_thousands_of_phases_and_every_light_path_is_cou
 
 #[test]
 fn stopping_rounds_at_random_moments_does_not_change_the_expected_image() {
-    let sc = scene(48);
+    let sc = scene("caustic.toml", 48);
     let settings = RenderSettings::for_scene(&sc, Method::Pbpm, 8);
     let run = |cut: bool| {
         let config = EngineConfig::for_method(ParallelMethod::TwoLevel, 2, 1, vec![0, 1]).unwrap();
@@ -73,18 +66,7 @@ fn stopping_rounds_at_random_moments_does_not_change_the_expected_image() {
         e.sums().clone()
     };
     let n = reference.pixels.len();
-    let mean_z2 = (0..n)
-        .map(|i| {
-            let (a, b) = (luminance_f64(interrupted.mean_total(i)), luminance_f64(reference.mean_total(i)));
-            let s2 = interrupted.sem2(i) + reference.sem2(i);
-            if s2 > 0.0 {
-                (a - b) * (a - b) / s2
-            } else {
-                0.0
-            }
-        })
-        .sum::<f64>()
-        / n as f64;
+    let mean_z2 = mean_z2(&interrupted, &reference);
     let mean = |a: &photonfarm::accumulation::Accumulator| {
         (0..n).map(|i| luminance_f64(a.mean_total(i))).sum::<f64>() / n as f64
     };
@@ -96,7 +78,7 @@ fn stopping_rounds_at_random_moments_does_not_change_the_expected_image() {
 
 #[test]
 fn async_memory_grows_with_threads_and_the_other_methods_do_not() {
-    let sc = scene(64);
+    let sc = scene("caustic.toml", 64);
     let settings = RenderSettings::for_scene(&sc, Method::Pbpm, 4);
     let bytes = |method: ParallelMethod, threads: usize| {
         let config = EngineConfig::for_method(method, threads, 2, vec![0, 1]).unwrap();

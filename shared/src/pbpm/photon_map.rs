@@ -71,7 +71,25 @@ impl PhotonMap {
         ([lo.x as i32, lo.y as i32, lo.z as i32], [hi.x as i32, hi.y as i32, hi.z as i32])
     }
 
-    /// Builds the grid over the current photons; cells are twice the mean radius wide.
+    /// Sets the cell size to twice the mean radius.
+    fn set_cell_size(&mut self, mean_radius: f64) {
+        self.inv_cell = 1.0 / (2.0 * mean_radius as f32).max(1e-12);
+    }
+
+    /// Cells a photon's sphere overlaps (before hashing).
+    fn cell_count(&self, p: &BackwardPhoton) -> usize {
+        let (lo, hi) = self.cell_range(p.position, p.radius2.sqrt());
+        ((hi[0] - lo[0] + 1) * (hi[1] - lo[1] + 1) * (hi[2] - lo[2] + 1)) as usize
+    }
+
+    /// Sizes the hash table for `cells` entries (load factor ≤ ½); returns the number of buckets.
+    fn set_table_size(&mut self, cells: usize) -> usize {
+        let size = (2 * cells).next_power_of_two().max(16);
+        self.mask = (size - 1) as u32;
+        size
+    }
+
+    /// Builds the grid over the current photons on the calling thread.
     pub fn build(&mut self) {
         self.starts.clear();
         self.entries.clear();
@@ -79,54 +97,37 @@ impl PhotonMap {
             return;
         }
         let mean_r = self.photons.iter().map(|p| p.radius2.sqrt() as f64).sum::<f64>() / self.photons.len() as f64;
-        self.inv_cell = 1.0 / (2.0 * mean_r as f32).max(1e-12);
-        let mut cells = 0usize;
-        for p in &self.photons {
-            let (lo, hi) = self.cell_range(p.position, p.radius2.sqrt());
-            cells += ((hi[0] - lo[0] + 1) * (hi[1] - lo[1] + 1) * (hi[2] - lo[2] + 1)) as usize;
-        }
-        let size = (2 * cells).next_power_of_two().max(16);
-        self.mask = (size - 1) as u32;
+        self.set_cell_size(mean_r);
+        let cells = self.photons.iter().map(|p| self.cell_count(p)).sum();
+        let size = self.set_table_size(cells);
         self.starts.resize(size + 1, 0);
-        let visit = |map: &mut PhotonMap, f: &mut dyn FnMut(&mut PhotonMap, usize, u32)| {
-            // A photon whose cells collide in one bucket must be entered there once, or it would be gathered twice.
-            let mut buckets: Vec<usize> = Vec::with_capacity(27);
-            for i in 0..map.photons.len() {
-                let p = map.photons[i];
-                let (lo, hi) = map.cell_range(p.position, p.radius2.sqrt());
-                buckets.clear();
-                for z in lo[2]..=hi[2] {
-                    for y in lo[1]..=hi[1] {
-                        for x in lo[0]..=hi[0] {
-                            buckets.push(bucket(x, y, z, map.mask));
-                        }
-                    }
-                }
-                buckets.sort_unstable();
-                buckets.dedup();
-                for &b in &buckets {
-                    f(map, b, i as u32);
-                }
+        let mut buckets = Vec::with_capacity(27);
+        for i in 0..self.photons.len() {
+            self.buckets_of(&self.photons[i], &mut buckets);
+            for &b in &buckets {
+                self.starts[b + 1] += 1;
             }
-        };
-        visit(self, &mut |m, b, _| m.starts[b + 1] += 1);
+        }
         for h in 0..size {
             self.starts[h + 1] += self.starts[h];
         }
         self.entries.resize(self.starts[size] as usize, 0);
-        // Fill using a moving cursor per bucket, kept in `starts` shifted by one and restored afterwards.
-        visit(self, &mut |m, b, i| {
-            let slot = m.starts[b] as usize;
-            m.entries[slot] = i;
-            m.starts[b] += 1;
-        });
+        // Fill with a moving cursor per bucket, kept in `starts` and shifted back afterwards.
+        for i in 0..self.photons.len() {
+            self.buckets_of(&self.photons[i], &mut buckets);
+            for &b in &buckets {
+                self.entries[self.starts[b] as usize] = i as u32;
+                self.starts[b] += 1;
+            }
+        }
         for h in (1..=size).rev() {
             self.starts[h] = self.starts[h - 1];
         }
         self.starts[0] = 0;
     }
 
-    /// Buckets of the cells a photon's sphere overlaps, each once.
+    /// Buckets of the cells a photon's sphere overlaps, each once: a photon whose cells collide in one bucket
+    /// must be entered there once, or it would be gathered twice.
     fn buckets_of(&self, p: &BackwardPhoton, out: &mut Vec<usize>) {
         let (lo, hi) = self.cell_range(p.position, p.radius2.sqrt());
         out.clear();
@@ -150,18 +151,9 @@ impl PhotonMap {
             return;
         }
         let sum_r: f64 = self.photons.par_iter().map(|p| p.radius2.sqrt() as f64).sum();
-        let mean_r = sum_r / self.photons.len() as f64;
-        self.inv_cell = 1.0 / (2.0 * mean_r as f32).max(1e-12);
-        let cells: usize = self
-            .photons
-            .par_iter()
-            .map(|p| {
-                let (lo, hi) = self.cell_range(p.position, p.radius2.sqrt());
-                ((hi[0] - lo[0] + 1) * (hi[1] - lo[1] + 1) * (hi[2] - lo[2] + 1)) as usize
-            })
-            .sum();
-        let size = (2 * cells).next_power_of_two().max(16);
-        self.mask = (size - 1) as u32;
+        self.set_cell_size(sum_r / self.photons.len() as f64);
+        let cells: usize = self.photons.par_iter().map(|p| self.cell_count(p)).sum();
+        let size = self.set_table_size(cells);
         let counts: Vec<AtomicU32> = (0..size).map(|_| AtomicU32::new(0)).collect();
         let this = &*self;
         this.photons.par_iter().for_each_init(Vec::new, |buckets, p| {
