@@ -78,7 +78,8 @@ pub struct RenderArgs {
     /// Stop after this many seconds of rendering. Default when no stop rule is given: 30.
     #[arg(long, value_name = "SECONDS")]
     pub time: Option<f64>,
-    /// Stop after this many phases.
+    /// Stop once every pixel has this many phases (parallel methods stop at the end of a round, so pixels
+    /// may have a few more).
     #[arg(long, value_name = "N")]
     pub phases: Option<u64>,
     /// Stop once the relative error δ (see --error-over) is at or below D, e.g. 0.05.
@@ -90,8 +91,8 @@ pub struct RenderArgs {
     /// Output folder (created if missing). Default: a new folder under out/.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
-    /// Estimator.
-    #[arg(long, value_enum, default_value = "pbpm")]
+    /// Estimator and parallel method.
+    #[arg(long, value_enum, default_value = "two-level")]
     pub method: MethodArg,
     /// Threads for the parallel methods (default: every core of --cores).
     #[arg(long)]

@@ -14,7 +14,7 @@ fn record(dir: &std::path::Path) -> serde_json::Value {
 fn render_writes_layers_preview_and_a_complete_run_record() {
     let out = scratch_dir("render");
     let result = Command::new(binary("coordinator"))
-        .args(["render", "scenes/cornell.toml", "--phases", "4", "--quiet", "--out"])
+        .args(["render", "scenes/cornell.toml", "--method", "pbpm", "--phases", "4", "--quiet", "--out"])
         .arg(&out)
         .current_dir(repo_root())
         .output()
@@ -37,6 +37,35 @@ fn render_writes_layers_preview_and_a_complete_run_record() {
     assert!(r["error"]["delta_all"].as_f64().unwrap() > 0.0);
     let stdout = String::from_utf8_lossy(&result.stdout);
     assert!(stdout.contains(&format!("wrote {}", out.display())), "{stdout}");
+}
+
+#[test]
+fn the_default_parallel_render_gives_every_pixel_at_least_the_phases_asked_for() {
+    let out = scratch_dir("parallel");
+    let result = Command::new(binary("coordinator"))
+        .args([
+            "render",
+            "scenes/cornell.toml",
+            "--phases",
+            "3",
+            "--threads",
+            "2",
+            "--group-size",
+            "1",
+            "--quiet",
+            "--out",
+        ])
+        .arg(&out)
+        .current_dir(repo_root())
+        .output()
+        .unwrap();
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    let r = record(&out);
+    assert_eq!(r["method"], "two-level");
+    assert_eq!(r["threads"], 2);
+    assert!(r["layout"].as_str().unwrap().starts_with("2 groups × 1 thread"), "{}", r["layout"]);
+    assert!(r["error"]["min_phases"].as_u64().unwrap() >= 3);
+    assert!(r["totals"]["merges"].as_u64().unwrap() > 0);
 }
 
 #[test]
