@@ -39,6 +39,10 @@ pub struct BenchArgs {
     /// Cores to pin to (default: every core this process may use).
     #[arg(long, value_name = "LIST")]
     pub cores: Option<String>,
+    /// Runs per configuration (seeds seed, seed + 1, …), interleaved so that a drifting machine affects every
+    /// method alike; the report gives the mean and the range.
+    #[arg(long, default_value_t = 1)]
+    pub repeats: u32,
     /// Job seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
