@@ -2,8 +2,8 @@
 
 use anyhow::{Context, Result};
 use photonfarm::accumulation::{relative_rmse, Accumulator};
-use photonfarm::output::exr_file::{find_layer, read_exr, write_exr, LayerImage};
-use photonfarm::output::preview::{auto_exposure, write_preview_png};
+use photonfarm::image_io::exr_file::{find_layer, read_exr, write_exr, LayerImage};
+use photonfarm::image_io::preview::{auto_exposure, write_preview_png};
 use photonfarm::render::images::{layer_images, total_image};
 use photonfarm::render::record::{RunRecord, TrueError};
 use std::path::{Path, PathBuf};

@@ -3,7 +3,7 @@
 //!
 //! `cargo run --release -p photonfarm --example compare_images -- A.exr B.exr`
 
-use photonfarm::output::exr_file::{find_layer, read_exr};
+use photonfarm::image_io::exr_file::{find_layer, read_exr};
 use photonfarm::render::images::luminance_of;
 use std::path::PathBuf;
 

@@ -8,7 +8,7 @@ mod common;
 
 use common::{settings, shipped};
 use photonfarm::color::luminance_f64;
-use photonfarm::output::exr_file::{find_layer, read_exr};
+use photonfarm::image_io::exr_file::{find_layer, read_exr};
 use photonfarm::render::images::luminance_of;
 use photonfarm::render::{Engine, Method};
 use std::path::Path;

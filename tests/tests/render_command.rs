@@ -5,6 +5,20 @@ use end_to_end::{binary, repo_root, scratch_dir};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+/// Runs `coordinator render` with `args` and `--out out` from the repository root; asserts it succeeded.
+fn render(args: &[&str], out: &std::path::Path) -> std::process::Output {
+    let result = Command::new(binary("coordinator"))
+        .arg("render")
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .current_dir(repo_root())
+        .output()
+        .unwrap();
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    result
+}
+
 fn record(dir: &std::path::Path) -> serde_json::Value {
     let text = std::fs::read_to_string(dir.join("run.json")).expect("run.json written");
     serde_json::from_str(&text).expect("run.json is JSON")
@@ -13,14 +27,8 @@ fn record(dir: &std::path::Path) -> serde_json::Value {
 #[test]
 fn render_writes_layers_preview_and_a_complete_run_record() {
     let out = scratch_dir("render");
-    let result = Command::new(binary("coordinator"))
-        .args(["render", "scenes/cornell.toml", "--method", "pbpm", "--phases", "4", "--quiet", "--out"])
-        .arg(&out)
-        .current_dir(repo_root())
-        .output()
-        .unwrap();
-    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
-    let layers = photonfarm::output::exr_file::read_exr(&out.join("image.exr")).unwrap();
+    let result = render(&["scenes/cornell.toml", "--method", "pbpm", "--phases", "4", "--quiet"], &out);
+    let layers = photonfarm::image_io::exr_file::read_exr(&out.join("image.exr")).unwrap();
     let mut names: Vec<&str> = layers.iter().map(|l| l.name.as_str()).collect();
     names.sort();
     assert_eq!(names, ["caustic", "direct", "indirect", "sem", "total", "visible_lights"]);
@@ -42,24 +50,7 @@ fn render_writes_layers_preview_and_a_complete_run_record() {
 #[test]
 fn the_default_parallel_render_gives_every_pixel_at_least_the_phases_asked_for() {
     let out = scratch_dir("parallel");
-    let result = Command::new(binary("coordinator"))
-        .args([
-            "render",
-            "scenes/cornell.toml",
-            "--phases",
-            "3",
-            "--threads",
-            "2",
-            "--group-size",
-            "1",
-            "--quiet",
-            "--out",
-        ])
-        .arg(&out)
-        .current_dir(repo_root())
-        .output()
-        .unwrap();
-    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    render(&["scenes/cornell.toml", "--phases", "3", "--threads", "2", "--group-size", "1", "--quiet"], &out);
     let r = record(&out);
     assert_eq!(r["method"], "two-level");
     assert_eq!(r["threads"], 2);
@@ -71,22 +62,10 @@ fn the_default_parallel_render_gives_every_pixel_at_least_the_phases_asked_for()
 #[test]
 fn render_with_a_reference_reports_the_true_error() {
     let out = scratch_dir("reference");
-    let result = Command::new(binary("coordinator"))
-        .args([
-            "render",
-            "scenes/cornell.toml",
-            "--phases",
-            "3",
-            "--quiet",
-            "--reference",
-            "scenes/references/cornell-path.exr",
-            "--out",
-        ])
-        .arg(&out)
-        .current_dir(repo_root())
-        .output()
-        .unwrap();
-    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    render(
+        &["scenes/cornell.toml", "--phases", "3", "--quiet", "--reference", "scenes/references/cornell-path.exr"],
+        &out,
+    );
     let r = record(&out);
     let t = r["true_error"]["rmse_unlit"].as_f64().unwrap();
     assert!(t > 0.0 && t < 1.0, "{t}");

@@ -2,8 +2,8 @@
 
 use crate::accumulation::Accumulator;
 use crate::color::luminance_f64;
+use crate::image_io::exr_file::LayerImage;
 use crate::integrator::Layer;
-use crate::output::exr_file::LayerImage;
 
 /// Layers written to the EXR: the four components, their total, and the total's standard error (grey).
 pub fn layer_images(sums: &Accumulator) -> Vec<LayerImage> {
