@@ -65,7 +65,8 @@ pub enum ConfigError {
 }
 
 impl EngineConfig {
-    /// The configuration of `method` on `threads` threads, `group_size` threads per group for two-level.
+    /// The configuration of `method` on `threads` threads, `group_size` threads per group for two-level (or the
+    /// largest of group_size, 2 and 1 that divides the thread count, so that every core is used).
     pub fn for_method(
         method: ParallelMethod,
         threads: usize,
@@ -85,10 +86,12 @@ impl EngineConfig {
                 if ![1, 2, 4].contains(&group_size) {
                     return Err(ConfigError::Invalid(format!("the group size must be 1, 2 or 4, got {group_size}")));
                 }
-                let g = group_size.min(threads);
-                if !threads.is_multiple_of(g) {
-                    return Err(ConfigError::Invalid(format!("{threads} threads do not split into groups of {g}")));
-                }
+                // Groups must be equal: fall back to the largest of g, 2, 1 that divides the thread count.
+                let g = [group_size, 2, 1]
+                    .into_iter()
+                    .filter(|&g| g <= group_size && threads.is_multiple_of(g))
+                    .max()
+                    .unwrap_or(1);
                 (threads / g, g, true, true)
             }
         };
@@ -281,5 +284,28 @@ impl Progressive for ParallelEngine<'_> {
 
     fn pinned_threads(&self) -> usize {
         ParallelEngine::pinned_threads(self)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn methods_map_to_the_layouts_of_the_design_table() {
+        let c = |m, t, g| EngineConfig::for_method(m, t, g, vec![0, 1]).unwrap();
+        let sync = c(ParallelMethod::Sync, 4, 2);
+        assert_eq!((sync.groups, sync.threads_per_group, sync.masks, sync.shared_maps), (1, 4, false, false));
+        let asy = c(ParallelMethod::Async, 4, 2);
+        assert_eq!((asy.groups, asy.threads_per_group, asy.masks, asy.shared_maps), (4, 1, false, false));
+        let two = c(ParallelMethod::TwoLevel, 8, 4);
+        assert_eq!((two.groups, two.threads_per_group, two.masks, two.shared_maps), (2, 4, true, true));
+        // Three cores with the default group size 2: three groups of one, every core used.
+        let three = c(ParallelMethod::TwoLevel, 3, 2);
+        assert_eq!((three.groups, three.threads_per_group), (3, 1));
+        let six = c(ParallelMethod::TwoLevel, 6, 4);
+        assert_eq!((six.groups, six.threads_per_group), (3, 2));
+        assert!(EngineConfig::for_method(ParallelMethod::TwoLevel, 4, 3, vec![0]).is_err());
+        assert!(EngineConfig::for_method(ParallelMethod::Sync, 0, 1, vec![0]).is_err());
     }
 }
