@@ -20,6 +20,9 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let stop = stop_rule(&args)?;
     let scene = Scene::load(&args.scene)?;
     let method = if args.method == MethodArg::Path { Method::Path } else { Method::Pbpm };
+    if parallel_method(args.method).is_none() && (args.threads.is_some() || args.cores.is_some()) {
+        bail!("--threads and --cores apply to the parallel methods (sync, async, two-level); pbpm and path run on one thread");
+    }
     let mut settings = RenderSettings::for_scene(&scene, method, args.seed);
     if let Some(d) = args.max_depth {
         if d == 0 {

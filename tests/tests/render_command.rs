@@ -79,6 +79,9 @@ fn bad_input_is_refused_with_a_message_and_no_output() {
         (vec!["render", "scenes/cornell.toml", "--target-error", "0"], "--target-error"),
         (vec!["render", "scenes/cornell.toml", "--backward-diffuse-depth", "3"], "--backward-diffuse-depth"),
         (vec!["render", "scenes/cornell.toml", "--reference", "scenes/cornell.toml"], "cornell.toml"),
+        (vec!["render", "scenes/cornell.toml", "--method", "path", "--threads", "2"], "--threads"),
+        (vec!["render", "scenes/cornell.toml", "--cores", "0,x"], "--cores"),
+        (vec!["render", "scenes/cornell.toml", "--group-size", "3"], "group size"),
     ] {
         let result = Command::new(binary("coordinator"))
             .args(&args)
