@@ -12,8 +12,3 @@ pub fn luminance(c: Rgb) -> f32 {
 pub fn luminance_f64(c: [f64; 3]) -> f64 {
     0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
 }
-
-/// True when every channel is finite and non-negative: the invariant every contribution must keep.
-pub fn is_valid_radiance(c: Rgb) -> bool {
-    c.is_finite() && c.x >= 0.0 && c.y >= 0.0 && c.z >= 0.0
-}

@@ -94,11 +94,6 @@ impl Lights {
         Lights { by_power: Discrete::new(&powers), lights, light_of_triangle }
     }
 
-    /// The lights, in index order.
-    pub fn all(&self) -> &[Light] {
-        &self.lights
-    }
-
     /// True when the scene has at least one light with power.
     pub fn any(&self) -> bool {
         self.by_power.is_some()

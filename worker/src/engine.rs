@@ -171,11 +171,6 @@ impl<'s> ParallelEngine<'s> {
         self.groups.iter().map(Group::pinned_threads).sum()
     }
 
-    /// Synchronisation rounds so far.
-    pub fn deals(&self) -> u64 {
-        self.deals
-    }
-
     /// Bytes of every buffer of the engine (sums, groups' buffers and maps), measured between rounds.
     pub fn capacity_bytes(&mut self) -> usize {
         let sums = self.sums.pixels.capacity() * Accumulator::bytes_per_pixel();

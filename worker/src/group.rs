@@ -59,7 +59,6 @@ pub struct RoundContext<'a> {
 pub struct Group {
     pub index: usize,
     pool: Arc<rayon::ThreadPool>,
-    cores: Vec<usize>,
     pinned: Arc<AtomicUsize>,
     token: OwnerToken,
     mask: Vec<u32>,
@@ -78,12 +77,12 @@ impl Group {
     /// A group of `cores.len()` threads, thread t pinned to `cores[t]`.
     pub fn new(index: usize, cores: Vec<usize>, token: OwnerToken) -> Result<Self, rayon::ThreadPoolBuildError> {
         let pinned = Arc::new(AtomicUsize::new(0));
-        let (pin_cores, pin_count) = (cores.clone(), pinned.clone());
+        let pin_count = pinned.clone();
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(cores.len())
             .thread_name(move |t| format!("group{index}-t{t}"))
             .start_handler(move |t| {
-                if core_affinity::set_for_current(core_affinity::CoreId { id: pin_cores[t] }) {
+                if core_affinity::set_for_current(core_affinity::CoreId { id: cores[t] }) {
                     pin_count.fetch_add(1, Ordering::Relaxed);
                 }
             })
@@ -91,7 +90,6 @@ impl Group {
         Ok(Group {
             index,
             pool: Arc::new(pool),
-            cores,
             pinned,
             token,
             mask: Vec::new(),
@@ -102,11 +100,6 @@ impl Group {
             pixel_sharers: 1,
             stats: GroupStats::default(),
         })
-    }
-
-    /// The cores the group's threads were asked to run on.
-    pub fn cores(&self) -> &[usize] {
-        &self.cores
     }
 
     /// Threads whose pinning the OS accepted.
@@ -122,11 +115,6 @@ impl Group {
     /// The sums of the current deal, per mask pixel.
     pub fn local_sums(&self) -> &[PixelSums] {
         &self.sums
-    }
-
-    /// Phases completed in the current deal.
-    pub fn phases_this_deal(&self) -> u64 {
-        self.phases_this_deal
     }
 
     /// Bytes of the group's buffers, including its map slot.

@@ -62,11 +62,6 @@ impl<T> MapSlot<T> {
         OwnerToken { slot_address: self as *const _ as usize }
     }
 
-    /// True while the map is open.
-    pub fn is_open(&self) -> bool {
-        self.state.load(Ordering::Acquire) > 0
-    }
-
     /// Foreign access: increments a positive counter by compare-and-swap; None when closed or contended.
     pub fn try_acquire(&self) -> Option<Guard<'_, T>> {
         let v = self.state.load(Ordering::Acquire);

@@ -54,11 +54,6 @@ impl PhotonMap {
         self.photons.extend_from_slice(photons);
     }
 
-    /// The photons, in insertion order.
-    pub fn photons(&self) -> &[BackwardPhoton] {
-        &self.photons
-    }
-
     /// Bytes held by the map's buffers.
     pub fn capacity_bytes(&self) -> usize {
         self.photons.capacity() * std::mem::size_of::<BackwardPhoton>()

@@ -68,14 +68,6 @@ impl<'s> Engine<'s> {
         }
     }
 
-    /// An engine continuing from earlier sums and totals (resume).
-    pub fn resume(scene: &'s Scene, settings: RenderSettings, sums: Accumulator, totals: RayTotals) -> Self {
-        let mut e = Engine::new(scene, settings);
-        e.sums = sums;
-        e.totals = totals;
-        e
-    }
-
     /// The running sums.
     pub fn sums(&self) -> &Accumulator {
         &self.sums
