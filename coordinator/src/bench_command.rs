@@ -33,6 +33,8 @@ struct Row {
     true_all: Option<f64>,
     bytes_per_pixel: f64,
     wall_s: f64,
+    /// Fraction of thread time idle at and between synchronisation rounds (parallel engines).
+    idle: Option<f64>,
 }
 
 impl Row {
@@ -117,6 +119,10 @@ pub fn run(args: BenchArgs) -> Result<()> {
                         true_all: truth.as_ref().map(|x| x.rmse_all),
                         bytes_per_pixel: engine.bytes_per_pixel(),
                         wall_s: history.last().map(|h| h.time_s).unwrap_or(0.0),
+                        idle: engine.stage_seconds().map(|s| {
+                            let total = s.backward + s.build + s.forward + s.closing + s.waiting + s.between_rounds;
+                            (s.waiting + s.between_rounds) / total.max(1e-12)
+                        }),
                     };
                     eprintln!(
                         "{} {} {} threads, run {}: {:.2} M rays, δ unlit {:.2}%",
@@ -161,8 +167,8 @@ fn report(rows: &[Row], args: &BenchArgs) -> String {
          δ range over runs in brackets.\n",
         args.repeats, args.time, args.threads[0]
     );
-    let _ = writeln!(s, "| scene | method | threads | groups×threads | forward rays | backward rays | tracing speedup | δ unlit / all | true error unlit / all | bytes/pixel |");
-    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(s, "| scene | method | threads | groups×threads | forward rays | backward rays | tracing speedup | δ unlit / all | true error unlit / all | bytes/pixel | idle |");
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|");
     let mut keys: Vec<(&str, &str, usize)> = Vec::new();
     for r in rows {
         let k = (r.scene.as_str(), r.method.as_str(), r.threads);
@@ -187,7 +193,7 @@ fn report(rows: &[Row], args: &BenchArgs) -> String {
         };
         let _ = writeln!(
             s,
-            "| {scene} | {method} | {threads} | {} | {:.2} M | {:.2} M | {:.2}× | {:.2}%{range} / {:.2}% | {} / {} | {:.0} |",
+            "| {scene} | {method} | {threads} | {} | {:.2} M | {:.2} M | {:.2}× | {:.2}%{range} / {:.2}% | {} / {} | {:.0} | {} |",
             group[0].layout,
             mean(group.iter().map(|r| r.forward_rays as f64)) / 1e6,
             mean(group.iter().map(|r| r.backward_rays as f64)) / 1e6,
@@ -197,18 +203,19 @@ fn report(rows: &[Row], args: &BenchArgs) -> String {
             pct(opt_mean(&|r| r.true_unlit)),
             pct(opt_mean(&|r| r.true_all)),
             mean(group.iter().map(|r| r.bytes_per_pixel)),
+            pct(opt_mean(&|r| r.idle)),
         );
     }
     s
 }
 
 fn csv(rows: &[Row]) -> String {
-    let mut s = String::from("scene,method,repeat,threads,layout,wall_s,phases,backward_rays,forward_rays,merges,delta_unlit,delta_all,true_unlit,true_all,bytes_per_pixel\n");
+    let mut s = String::from("scene,method,repeat,threads,layout,wall_s,phases,backward_rays,forward_rays,merges,delta_unlit,delta_all,true_unlit,true_all,bytes_per_pixel,idle_fraction\n");
     for r in rows {
         let opt = |x: Option<f64>| x.map(|v| v.to_string()).unwrap_or_default();
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{:.3},{},{},{},{},{},{},{},{},{:.1}",
+            "{},{},{},{},{},{:.3},{},{},{},{},{},{},{},{},{:.1},{}",
             r.scene,
             r.method,
             r.repeat,
@@ -223,7 +230,8 @@ fn csv(rows: &[Row]) -> String {
             r.delta_all,
             opt(r.true_unlit),
             opt(r.true_all),
-            r.bytes_per_pixel
+            r.bytes_per_pixel,
+            opt(r.idle)
         );
     }
     s

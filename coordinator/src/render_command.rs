@@ -116,6 +116,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         threads: engine.threads() as u32,
         stop_reason: reason.to_string(),
         totals: engine.totals(),
+        stage_seconds: engine.stage_seconds(),
         wall_time_s: start.elapsed().as_secs_f64(),
         peak_memory_bytes: memory::peak_rss_bytes(),
         bytes_per_pixel: engine.bytes_per_pixel(),

@@ -6,6 +6,7 @@ use crate::group::{Group, GroupMap, GroupStats, RoundContext};
 use crate::map_slot::MapSlot;
 use crate::mask;
 use photonfarm::accumulation::Accumulator;
+use photonfarm::render::record::StageSeconds;
 use photonfarm::render::session::Progressive;
 use photonfarm::render::{RayTotals, RenderSettings};
 use photonfarm::scene::Scene;
@@ -122,6 +123,10 @@ pub struct ParallelEngine<'s> {
     slots: Vec<MapSlot<GroupMap>>,
     sums: Accumulator,
     deals: u64,
+    /// Thread-nanoseconds idle at round ends and between rounds.
+    waiting_nanos: u64,
+    between_nanos: u64,
+    last_round_end: Option<Instant>,
 }
 
 impl<'s> ParallelEngine<'s> {
@@ -153,6 +158,9 @@ impl<'s> ParallelEngine<'s> {
             groups,
             slots,
             deals: 0,
+            waiting_nanos: 0,
+            between_nanos: 0,
+            last_round_end: None,
         })
     }
 
@@ -180,6 +188,12 @@ impl<'s> ParallelEngine<'s> {
     /// One synchronisation round: deal masks, run every group until one has finished K phases (or the
     /// deadline passes, or the user interrupts), stop them, add their sums to the whole image.
     pub fn run_round(&mut self, interrupted: &AtomicBool, deadline: Option<Instant>) {
+        let threads = self.config.threads() as u64;
+        let round_start = Instant::now();
+        if let Some(end) = self.last_round_end {
+            // Between two rounds: the previous merge (timed at its end) plus the caller's work since.
+            self.between_nanos += threads * round_start.duration_since(end).as_nanos() as u64;
+        }
         self.deals += 1;
         let (w, h) = (self.scene.camera.width, self.scene.camera.height);
         let masks = if self.config.masks {
@@ -202,11 +216,19 @@ impl<'s> ParallelEngine<'s> {
         };
         let k = self.config.phases_per_deal as u64;
         let (tx, rx) = mpsc::channel();
-        std::thread::scope(|s| {
-            for g in self.groups.iter_mut() {
-                let (tx, ctx) = (tx.clone(), &ctx);
-                s.spawn(move || g.run_round(ctx, k, &tx));
-            }
+        let per_group = self.config.threads_per_group as u64;
+        let ends = std::thread::scope(|s| {
+            let handles: Vec<_> = self
+                .groups
+                .iter_mut()
+                .map(|g| {
+                    let (tx, ctx) = (tx.clone(), &ctx);
+                    s.spawn(move || {
+                        g.run_round(ctx, k, &tx);
+                        Instant::now()
+                    })
+                })
+                .collect();
             drop(tx);
             loop {
                 match rx.recv_timeout(Duration::from_millis(5)) {
@@ -219,10 +241,35 @@ impl<'s> ParallelEngine<'s> {
                 }
             }
             stop.store(true, Ordering::Release);
+            handles.into_iter().map(|h| h.join().expect("a group thread panicked")).collect::<Vec<_>>()
         });
+        let round_end = Instant::now();
+        for end in ends {
+            self.waiting_nanos += per_group * round_end.duration_since(end).as_nanos() as u64;
+        }
         for g in &self.groups {
             self.sums.merge_local(g.mask(), g.local_sums());
         }
+        // The merge is between-rounds time; it is added when the next round starts.
+        self.last_round_end = Some(round_end);
+    }
+
+    /// Thread-seconds per stage so far.
+    pub fn stage_seconds(&self) -> StageSeconds {
+        let per_group = self.config.threads_per_group as f64 * 1e-9;
+        let mut s = StageSeconds {
+            waiting: self.waiting_nanos as f64 * 1e-9,
+            between_rounds: self.between_nanos as f64 * 1e-9,
+            ..StageSeconds::default()
+        };
+        for g in &self.groups {
+            let n = g.stats.nanos;
+            s.backward += n.backward as f64 * per_group;
+            s.build += n.build as f64 * per_group;
+            s.forward += n.forward as f64 * per_group;
+            s.closing += n.closing as f64 * per_group;
+        }
+        s
     }
 }
 
@@ -279,6 +326,10 @@ impl Progressive for ParallelEngine<'_> {
 
     fn pinned_threads(&self) -> usize {
         ParallelEngine::pinned_threads(self)
+    }
+
+    fn stage_seconds(&self) -> Option<StageSeconds> {
+        Some(ParallelEngine::stage_seconds(self))
     }
 }
 

@@ -16,6 +16,7 @@ use photonfarm::scene::Scene;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::Arc;
+use std::time::Instant;
 
 /// Light paths traced per acquisition of the other groups' maps.
 const BATCH: u64 = 16;
@@ -43,6 +44,21 @@ pub struct GroupStats {
     pub merges: u64,
     pub backward_photons: u64,
     pub capped_light_paths: u64,
+    /// Wall nanoseconds of the group in each stage (multiply by the group's threads for thread-time).
+    pub nanos: StageNanos,
+}
+
+/// Wall nanoseconds a group spent per stage.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct StageNanos {
+    pub backward: u64,
+    pub build: u64,
+    pub forward: u64,
+    pub closing: u64,
+}
+
+fn nanos_since(t: Instant) -> u64 {
+    t.elapsed().as_nanos() as u64
 }
 
 /// What every group of a round shares.
@@ -178,6 +194,7 @@ impl Group {
         let index = if sharers > 1 { self.index as u64 } else { 0 };
 
         // 1. Backward pass over the mask, in parallel.
+        let t0 = Instant::now();
         let (photons, backward_rays) = self
             .mask
             .par_iter()
@@ -213,6 +230,8 @@ impl Group {
         self.stats.backward_photons += photons.len() as u64;
 
         // 2. Build the map while it is closed.
+        self.stats.nanos.backward += nanos_since(t0);
+        let t0 = Instant::now();
         let slot = &ctx.slots[self.index];
         {
             let data = slot.data_mut(&mut self.token);
@@ -222,8 +241,10 @@ impl Group {
             data.gathered.reset(self.mask.len());
         }
         drop(photons);
+        self.stats.nanos.build += nanos_since(t0);
 
         // 3. Forward pass with the map open to every group.
+        let t0 = Instant::now();
         slot.open(&self.token);
         let required = settings.light_paths_per_phase(self.mask.len());
         // A stop is honoured once a sixteenth of the paths are traced, so no phase is closed on a handful.
@@ -286,6 +307,8 @@ impl Group {
                 trace_batch(first, BATCH.min(required - first), false, guards, merges);
             },
         );
+        self.stats.nanos.forward += nanos_since(t0);
+        let t0 = Instant::now();
         // Keep tracing useful paths until no other group is inside the map (paper Fig. 9).
         let mut extra = required;
         let (mut guards, mut merges) = (Vec::new(), Vec::new());
@@ -314,6 +337,7 @@ impl Group {
             v[Layer::Caustic as usize] += g[1] * inv_n;
             sums.add_phase(&v, 1);
         });
+        self.stats.nanos.closing += nanos_since(t0);
         self.stats.phases += 1;
     }
 }

@@ -100,3 +100,25 @@ fn async_memory_grows_with_threads_and_the_other_methods_do_not() {
     assert!(s4 < 1.25 * s1, "sync memory grew with threads: {s1} → {s4}");
     assert!(t4 < 1.25 * t2, "two-level memory grew with threads: {t2} → {t4}");
 }
+
+#[test]
+fn stage_times_account_for_every_thread_second_of_the_rounds() {
+    let sc = scene("cornell.toml", 32);
+    let settings = RenderSettings::for_scene(&sc, Method::Pbpm, 5);
+    let mut config = EngineConfig::for_method(ParallelMethod::TwoLevel, 2, 1, vec![0, 1]).unwrap();
+    config.tile_size = 8;
+    let mut engine = ParallelEngine::new(&sc, settings, config).unwrap();
+    let never = AtomicBool::new(false);
+    let start = Instant::now();
+    for _ in 0..20 {
+        engine.run_round(&never, None);
+    }
+    let wall = start.elapsed().as_secs_f64();
+    let s = engine.stage_seconds();
+    let parts = [s.backward, s.build, s.forward, s.closing, s.waiting, s.between_rounds];
+    assert!(parts.iter().all(|&x| x >= 0.0) && s.backward > 0.0 && s.forward > 0.0);
+    // Every thread-second between the first round's start and the last round's end is in one stage; only
+    // the spawning of the groups' round threads is outside them.
+    let covered = parts.iter().sum::<f64>() / (2.0 * wall);
+    assert!((0.9..=1.0 + 1e-6).contains(&covered), "stages cover {covered:.3} of the thread time");
+}

@@ -28,6 +28,23 @@ pub struct TrueError {
     pub rmse_unlit: f64,
 }
 
+/// Thread-seconds spent in each stage of the phases, summed over threads: where a parallel engine's time goes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct StageSeconds {
+    /// Camera paths and their backward photons.
+    pub backward: f64,
+    /// Building the photon map.
+    pub build: f64,
+    /// Light paths while the map is open.
+    pub forward: f64,
+    /// The owner's light paths while it waits for other groups to leave its map, and the phase's normalisation.
+    pub closing: f64,
+    /// Threads idle at the end of a synchronisation round, waiting for the other groups to stop.
+    pub waiting: f64,
+    /// Forming the whole image and dealing masks between rounds (every thread idle).
+    pub between_rounds: f64,
+}
+
 /// The record written as `run.json`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RunRecord {
@@ -49,6 +66,9 @@ pub struct RunRecord {
     /// Why the run stopped: "time", "phases", "target-error", "interrupted" or "running".
     pub stop_reason: String,
     pub totals: RayTotals,
+    /// Where the threads' time went (parallel engines only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stage_seconds: Option<StageSeconds>,
     pub wall_time_s: f64,
     pub peak_memory_bytes: Option<u64>,
     pub bytes_per_pixel: f64,

@@ -28,6 +28,10 @@ pub trait Progressive {
     fn pinned_threads(&self) -> usize {
         0
     }
+    /// Thread-seconds per stage, for renderers that measure them.
+    fn stage_seconds(&self) -> Option<super::record::StageSeconds> {
+        None
+    }
 }
 
 impl Progressive for Engine<'_> {
