@@ -58,6 +58,9 @@ pub fn run(args: BenchArgs) -> Result<()> {
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let interrupted = AtomicBool::new(false);
     let mut rows: Vec<Row> = Vec::new();
+    if let Some(m) = args.methods.iter().find(|m| m.is_distributed()) {
+        bail!("the bench runs the in-process methods (pbpm, path, sync, async, two-level); {m:?} runs worker processes: time it with `coordinator render --method three-level`");
+    }
     if args.repeats == 0 {
         bail!("--repeats must be at least 1");
     }

@@ -64,6 +64,17 @@ pub enum MethodArg {
     Async,
     /// PBPM, groups of --group-size threads over random tile masks, sharing their photon maps.
     TwoLevel,
+    /// PBPM, one worker process per NUMA node (and any --worker), each one synchronous group of its cores.
+    Combination,
+    /// PBPM, one worker process per NUMA node (and any --worker), each running two-level on its cores.
+    ThreeLevel,
+}
+
+impl MethodArg {
+    /// Methods that run worker processes.
+    pub fn is_distributed(self) -> bool {
+        matches!(self, MethodArg::Combination | MethodArg::ThreeLevel)
+    }
 }
 
 /// Which pixels δ is computed over for --target-error and the progress display.
@@ -96,9 +107,32 @@ pub struct RenderArgs {
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// Estimator and parallel method.
-    #[arg(long, value_enum, default_value = "two-level")]
+    #[arg(long, value_enum, default_value = "three-level")]
     pub method: MethodArg,
-    /// Threads for the parallel methods (default: every core of --cores).
+    /// NUMA layout for combination and three-level: an hwloc synthetic description such as
+    /// "pack:1 numa:2 core:1 pu:1", or an hwloc XML file (default: this machine's). Cores of a description
+    /// that is not this machine are mapped onto the real cores modulo their count.
+    #[arg(long, value_name = "DESCRIPTION|XML")]
+    pub topology: Option<String>,
+    /// A `worker serve` daemon to render on as well (repeatable), e.g. --worker server:7879.
+    #[arg(long = "worker", value_name = "HOST:PORT")]
+    pub workers: Vec<String>,
+    /// Accept workers that dial in (`worker join ADDR`) on this address, e.g. 0.0.0.0:7878.
+    #[arg(long, value_name = "ADDR")]
+    pub listen: Option<std::net::SocketAddr>,
+    /// Start no local worker: render only on --worker and --listen workers.
+    #[arg(long)]
+    pub remote_only: bool,
+    /// File with the shared secret for remote workers (otherwise $PHOTONFARM_SECRET).
+    #[arg(long, value_name = "FILE")]
+    pub secret_file: Option<PathBuf>,
+    /// Allow remote links without a secret (anyone who can reach the port can join or be driven).
+    #[arg(long)]
+    pub insecure: bool,
+    /// Seconds between a local worker's snapshots.
+    #[arg(long, default_value_t = 1.0, value_name = "SECONDS")]
+    pub snapshot_interval: f64,
+    /// Threads for the in-process parallel methods (default: every core of --cores).
     #[arg(long)]
     pub threads: Option<usize>,
     /// Threads per synchronous group for --method two-level: 1, 2 or 4.

@@ -3,6 +3,7 @@
 
 mod bench_command;
 mod cli;
+mod cluster;
 mod output_folder;
 mod render_command;
 

@@ -1,6 +1,7 @@
 //! `coordinator render`: the main job.
 
 use crate::cli::{ErrorOverArg, MethodArg, RenderArgs};
+use crate::cluster;
 use crate::output_folder::{self, Reference};
 use anyhow::{bail, Context, Result};
 use clap::ValueEnum;
@@ -21,7 +22,15 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let scene = Scene::load(&args.scene)?;
     let method = if args.method == MethodArg::Path { Method::Path } else { Method::Pbpm };
     if parallel_method(args.method).is_none() && (args.threads.is_some() || args.cores.is_some()) {
+        if args.method.is_distributed() {
+            bail!("--threads and --cores apply to the in-process methods; combination and three-level take their cores from the NUMA nodes (see --topology)");
+        }
         bail!("--threads and --cores apply to the parallel methods (sync, async, two-level); pbpm and path run on one thread");
+    }
+    if !args.method.is_distributed()
+        && (!args.workers.is_empty() || args.listen.is_some() || args.remote_only || args.topology.is_some())
+    {
+        bail!("--worker, --listen, --remote-only and --topology apply to --method combination and three-level");
     }
     let mut settings = RenderSettings::for_scene(&scene, method, args.seed);
     if let Some(d) = args.max_depth {
@@ -72,6 +81,10 @@ pub fn run(args: RenderArgs) -> Result<()> {
     bar.enable_steady_tick(Duration::from_millis(200));
 
     let (mut engine, layout): (Box<dyn Progressive + '_>, String) = match parallel_method(args.method) {
+        None if args.method.is_distributed() => {
+            let (cluster, layout, _) = cluster::launch::launch(&args, &scene, settings, &dir)?;
+            (Box::new(cluster), layout)
+        }
         None => (Box::new(Engine::new(&scene, settings)), "1 thread".to_string()),
         Some(m) => {
             let cores = match &args.cores {
@@ -84,15 +97,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
                 config.tile_size = t;
             }
             config.phases_per_deal = args.phases_per_deal;
-            let layout = format!(
-                "{} group{} × {} thread{}{}{}",
-                config.groups,
-                if config.groups == 1 { "" } else { "s" },
-                config.threads_per_group,
-                if config.threads_per_group == 1 { "" } else { "s" },
-                if config.masks { format!(", {}-pixel tile masks", config.tile_size) } else { String::new() },
-                if config.shared_maps { ", shared maps" } else { "" },
-            );
+            let layout = config.layout();
             (Box::new(ParallelEngine::new(&scene, settings, config)?), layout)
         }
     };
@@ -123,6 +128,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         error: engine.sums().error(),
         true_error: reference.as_ref().map(|r| r.compare(engine.sums())),
         history: history.to_vec(),
+        workers: engine.workers(),
     };
 
     let reason = session::run(engine.as_mut(), &stop, &interrupted, &mut history, Duration::ZERO, |engine, history| {
@@ -147,6 +153,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
             }
         }
     });
+    bar.set_message("stopping: collecting the last completed phases");
+    engine.finish();
     bar.finish_and_clear();
     if let Some(e) = save_error {
         return Err(e.context("writing the periodic results failed; the run was stopped"));
@@ -182,7 +190,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
 /// The parallel engine behind a method, None for the single-threaded ones.
 pub fn parallel_method(m: MethodArg) -> Option<ParallelMethod> {
     match m {
-        MethodArg::Pbpm | MethodArg::Path => None,
+        MethodArg::Pbpm | MethodArg::Path | MethodArg::Combination | MethodArg::ThreeLevel => None,
         MethodArg::Sync => Some(ParallelMethod::Sync),
         MethodArg::Async => Some(ParallelMethod::Async),
         MethodArg::TwoLevel => Some(ParallelMethod::TwoLevel),

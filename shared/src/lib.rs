@@ -10,6 +10,7 @@ pub mod integrator;
 pub mod light;
 pub mod material;
 pub mod pbpm;
+pub mod protocol;
 pub mod render;
 pub mod sampling;
 pub mod scene;

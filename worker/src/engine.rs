@@ -15,28 +15,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, RecvTimeoutError};
 use std::time::{Duration, Instant};
 
-/// The parallel methods of DESIGN §2 that run inside one process.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum ParallelMethod {
-    /// One group of n threads over the whole image.
-    Sync,
-    /// n groups of one thread, each over the whole image with a private map and image.
-    Async,
-    /// n/g groups of g threads over random tile masks, sharing their maps.
-    TwoLevel,
-}
-
-impl ParallelMethod {
-    /// The name used on the command line and in records.
-    pub fn name(self) -> &'static str {
-        match self {
-            ParallelMethod::Sync => "sync",
-            ParallelMethod::Async => "async",
-            ParallelMethod::TwoLevel => "two-level",
-        }
-    }
-}
+pub use photonfarm::render::ParallelMethod;
 
 /// How the engine is laid out: DESIGN §2's table as data.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -111,6 +90,19 @@ impl EngineConfig {
     /// Total threads.
     pub fn threads(&self) -> usize {
         self.groups * self.threads_per_group
+    }
+
+    /// The layout in words, e.g. "2 groups × 1 thread, 32-pixel tile masks, shared maps".
+    pub fn layout(&self) -> String {
+        format!(
+            "{} group{} × {} thread{}{}{}",
+            self.groups,
+            if self.groups == 1 { "" } else { "s" },
+            self.threads_per_group,
+            if self.threads_per_group == 1 { "" } else { "s" },
+            if self.masks { format!(", {}-pixel tile masks", self.tile_size) } else { String::new() },
+            if self.shared_maps { ", shared maps" } else { "" },
+        )
     }
 }
 

@@ -5,6 +5,8 @@
 pub mod atomic_image;
 pub mod engine;
 pub mod group;
+pub mod job;
+pub mod link;
 pub mod map_slot;
 pub mod mask;
 pub mod sync_primitives;

@@ -1,12 +1,140 @@
-//! `worker`: the rendering process a coordinator starts on every NUMA node (or dials on a remote server).
-//!
-//! Until the coordinator–worker protocol lands, `coordinator render --method sync|async|two-level` runs this
-//! crate's engine in-process; this program only says so.
+//! `worker`: the rendering process. A coordinator starts one per NUMA node (`worker join`), or a server runs it
+//! as a daemon that coordinators dial (`worker serve`).
+
+use anyhow::{bail, Context, Result};
+use clap::{Parser, Subcommand};
+use photonfarm::protocol::auth::Secret;
+use photonfarm::protocol::Connection;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+use worker::link::{serve_job, FileCache, LinkOptions};
+
+#[derive(Parser)]
+#[command(name = "worker", version, about = "photonfarm's rendering process")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(clap::Args)]
+struct SecretArgs {
+    /// File holding the shared secret (at least 16 bytes); otherwise $PHOTONFARM_SECRET.
+    #[arg(long)]
+    secret_file: Option<PathBuf>,
+    /// Accept links without a secret on non-loopback addresses (anyone who can reach the port can then use
+    /// this machine).
+    #[arg(long)]
+    insecure: bool,
+    /// The name this worker gives the coordinator (default: the host name).
+    #[arg(long)]
+    name: Option<String>,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Dial a coordinator and render its job (what a coordinator or a cluster scheduler starts).
+    Join {
+        /// The coordinator's address, e.g. 10.0.0.5:7878.
+        addr: String,
+        #[command(flatten)]
+        secret: SecretArgs,
+    },
+    /// Listen for coordinators and render their jobs one after another (a render server's daemon).
+    Serve {
+        /// Address to listen on, e.g. 0.0.0.0:7879.
+        #[arg(long)]
+        listen: SocketAddr,
+        #[command(flatten)]
+        secret: SecretArgs,
+    },
+}
+
+fn secret(args: &SecretArgs, loopback: bool) -> Result<Secret> {
+    if let Some(path) = &args.secret_file {
+        return Ok(Secret::from_file(path)?);
+    }
+    if let Some(s) = Secret::from_env()? {
+        return Ok(s);
+    }
+    if args.insecure || loopback {
+        return Ok(Secret::insecure());
+    }
+    bail!("a link that is not loopback needs a shared secret: --secret-file FILE or $PHOTONFARM_SECRET (or --insecure)")
+}
 
 fn main() -> std::process::ExitCode {
-    eprintln!(
-        "worker: the coordinator–worker protocol is not part of this build yet; run `coordinator render SCENE \
-         --method two-level` to use the parallel engine in-process (see README.md)"
-    );
-    std::process::ExitCode::from(2)
+    let cli = Cli::parse();
+    let runtime = match tokio::runtime::Builder::new_current_thread().enable_all().build() {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("worker: cannot start the network runtime: {e}");
+            return std::process::ExitCode::FAILURE;
+        }
+    };
+    match runtime.block_on(run(cli)) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("worker: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+async fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Join { addr, secret: s } => {
+            let addrs: Vec<SocketAddr> = tokio::net::lookup_host(&addr)
+                .await
+                .with_context(|| format!("cannot resolve the coordinator address {addr}"))?
+                .collect();
+            let loopback = !addrs.is_empty() && addrs.iter().all(|a| a.ip().is_loopback());
+            let opts =
+                LinkOptions::new(s.name.clone().unwrap_or_else(worker::topology::hostname), secret(&s, loopback)?);
+            // The coordinator may still be starting: retry for a while.
+            let deadline = Instant::now() + Duration::from_secs(15);
+            let stream = loop {
+                match tokio::net::TcpStream::connect(&addrs[..]).await {
+                    Ok(s) => break s,
+                    Err(e) if Instant::now() < deadline => {
+                        let _ = e;
+                        tokio::time::sleep(Duration::from_millis(200)).await;
+                    }
+                    Err(e) => return Err(e).with_context(|| format!("cannot reach the coordinator at {addr}")),
+                }
+            };
+            let conn = Connection::new(stream)?;
+            let outcome = serve_job(conn, &opts, &mut FileCache::new()).await?;
+            eprintln!(
+                "worker {}: job for {} done, {} snapshots sent, {} acknowledged",
+                opts.name, outcome.coordinator, outcome.snapshots_sent, outcome.snapshots_acked
+            );
+            Ok(())
+        }
+        Command::Serve { listen, secret: s } => {
+            let opts = LinkOptions::new(
+                s.name.clone().unwrap_or_else(worker::topology::hostname),
+                secret(&s, listen.ip().is_loopback())?,
+            );
+            let listener =
+                tokio::net::TcpListener::bind(listen).await.with_context(|| format!("cannot listen on {listen}"))?;
+            eprintln!("worker {}: listening on {}", opts.name, listener.local_addr()?);
+            let mut cache = FileCache::new();
+            loop {
+                let (stream, peer) = listener.accept().await.context("accept failed")?;
+                if opts.secret.is_insecure() && !peer.ip().is_loopback() && !s.insecure {
+                    eprintln!("worker {}: refused {peer}: no secret is set and the link is not loopback", opts.name);
+                    continue;
+                }
+                let conn = Connection::new(stream)?;
+                match serve_job(conn, &opts, &mut cache).await {
+                    Ok(o) => eprintln!(
+                        "worker {}: job from {peer} ({}) done, {} snapshots sent, {} acknowledged",
+                        opts.name, o.coordinator, o.snapshots_sent, o.snapshots_acked
+                    ),
+                    Err(e) => eprintln!("worker {}: link with {peer} ended: {e}", opts.name),
+                }
+            }
+        }
+    }
 }

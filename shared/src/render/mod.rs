@@ -9,4 +9,4 @@ pub mod session;
 pub mod settings;
 
 pub use engine::{Engine, PhaseReport, RayTotals};
-pub use settings::{Method, RenderSettings};
+pub use settings::{Method, ParallelMethod, RenderSettings};

@@ -45,6 +45,28 @@ pub struct StageSeconds {
     pub between_rounds: f64,
 }
 
+/// One worker process of a distributed run.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct WorkerRecord {
+    pub name: String,
+    /// Where its link came from or went to.
+    pub address: String,
+    pub numa_node: Option<u32>,
+    pub cores: Vec<usize>,
+    /// The pinning the worker obtained, in its words.
+    pub binding: String,
+    pub layout: String,
+    /// "connecting", "running", "finished", "lost: …" or "failed: …".
+    pub state: String,
+    /// Snapshots merged, and the bytes of their frames.
+    pub snapshots: u64,
+    pub snapshot_bytes: u64,
+    /// What its merged snapshots contributed.
+    pub totals: RayTotals,
+    /// Pixel-phases merged (Σ over pixels of the phases it added).
+    pub pixel_phases: u64,
+}
+
 /// The record written as `run.json`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RunRecord {
@@ -75,4 +97,7 @@ pub struct RunRecord {
     pub error: ErrorEstimate,
     pub true_error: Option<TrueError>,
     pub history: Vec<HistoryEntry>,
+    /// The worker processes of a distributed run.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub workers: Option<Vec<WorkerRecord>>,
 }

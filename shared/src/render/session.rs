@@ -32,6 +32,16 @@ pub trait Progressive {
     fn stage_seconds(&self) -> Option<super::record::StageSeconds> {
         None
     }
+    /// The worker processes, for distributed renderers.
+    fn workers(&self) -> Option<Vec<super::record::WorkerRecord>> {
+        None
+    }
+    /// False when the renderer can make no more progress (every worker is gone).
+    fn active(&self) -> bool {
+        true
+    }
+    /// Collects the work still in flight once the run has stopped (a distributed renderer's last snapshots).
+    fn finish(&mut self) {}
 }
 
 impl Progressive for Engine<'_> {
@@ -81,6 +91,8 @@ pub enum StopReason {
     Phases,
     TargetError,
     Interrupted,
+    /// Every worker of a distributed run was lost.
+    NoWorkers,
 }
 
 impl StopReason {
@@ -91,6 +103,7 @@ impl StopReason {
             StopReason::Phases => "phases",
             StopReason::TargetError => "target-error",
             StopReason::Interrupted => "interrupted",
+            StopReason::NoWorkers => "no-workers",
         }
     }
 }
@@ -129,6 +142,9 @@ pub fn run<R: Progressive + ?Sized>(
         };
         history.push(entry);
         on_phase(engine, history);
+        if !engine.active() {
+            return StopReason::NoWorkers;
+        }
         if let Some(target) = stop.target_error {
             let d = match stop.error_over {
                 ErrorOver::Unlit => e.delta_unlit,

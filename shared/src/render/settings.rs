@@ -66,3 +66,26 @@ impl RenderSettings {
         ((self.light_paths_per_pixel as f64 * pixels as f64).round() as u64).max(1)
     }
 }
+
+/// The parallel methods of DESIGN §2 that run inside one process.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ParallelMethod {
+    /// One group of n threads over the whole image.
+    Sync,
+    /// n groups of one thread, each over the whole image with a private map and image.
+    Async,
+    /// n/g groups of g threads over random tile masks, sharing their maps.
+    TwoLevel,
+}
+
+impl ParallelMethod {
+    /// The name used on the command line and in records.
+    pub fn name(self) -> &'static str {
+        match self {
+            ParallelMethod::Sync => "sync",
+            ParallelMethod::Async => "async",
+            ParallelMethod::TwoLevel => "two-level",
+        }
+    }
+}

@@ -57,6 +57,8 @@ pub struct Scene {
     pub render: SceneRenderSettings,
     /// SHA-256 over the scene file and every mesh it references, in order.
     pub hash: String,
+    /// Every mesh file the scene references: its path as written in the scene and its SHA-256 (hex).
+    pub mesh_files: Vec<(String, String)>,
     /// True when any object has a specular material (then caustics exist).
     pub has_delta_surfaces: bool,
 }
@@ -76,7 +78,18 @@ impl Scene {
 
     /// Parses scene text; `file` names it in errors and `base_dir` resolves mesh paths.
     pub fn from_toml(text: &str, file: &Path, base_dir: &Path) -> Result<Scene, SceneError> {
-        Loader { text, file, base_dir, hasher: Sha256::new() }.load()
+        Loader { text, file, source: MeshSource::Folder(base_dir), hasher: Sha256::new(), mesh_files: Vec::new() }
+            .load()
+    }
+
+    /// Parses scene text whose meshes are given in memory, keyed by the path the scene writes (a worker that
+    /// received them over the network).
+    pub fn from_toml_with_meshes(
+        text: &str,
+        file: &Path,
+        meshes: &BTreeMap<String, Vec<u8>>,
+    ) -> Result<Scene, SceneError> {
+        Loader { text, file, source: MeshSource::Memory(meshes), hasher: Sha256::new(), mesh_files: Vec::new() }.load()
     }
 
     /// The material of the surface hit.
@@ -86,11 +99,20 @@ impl Scene {
     }
 }
 
+/// Where mesh files come from.
+enum MeshSource<'a> {
+    /// Paths relative to the scene file's folder.
+    Folder(&'a Path),
+    /// Contents by the path the scene writes.
+    Memory(&'a BTreeMap<String, Vec<u8>>),
+}
+
 struct Loader<'a> {
     text: &'a str,
     file: &'a Path,
-    base_dir: &'a Path,
+    source: MeshSource<'a>,
     hasher: Sha256,
+    mesh_files: Vec<(String, String)>,
 }
 
 impl Loader<'_> {
@@ -301,6 +323,7 @@ impl Loader<'_> {
             lights,
             render,
             hash: format!("{:x}", self.hasher.finalize()),
+            mesh_files: self.mesh_files,
             has_delta_surfaces,
         })
     }
@@ -482,10 +505,23 @@ impl Loader<'_> {
     }
 
     fn mesh(&mut self, m: &Spanned<String>, field: &str) -> Result<Mesh, SceneError> {
-        let path = self.base_dir.join(m.get_ref());
-        let bytes = std::fs::read(&path)
-            .map_err(|e| self.error(Some(m.span()), field, format!("cannot read mesh {}: {e}", path.display())))?;
+        let (path, bytes) = match &self.source {
+            MeshSource::Folder(dir) => {
+                let path = dir.join(m.get_ref());
+                let bytes = std::fs::read(&path).map_err(|e| {
+                    self.error(Some(m.span()), field, format!("cannot read mesh {}: {e}", path.display()))
+                })?;
+                (path, std::borrow::Cow::Owned(bytes))
+            }
+            MeshSource::Memory(files) => {
+                let bytes = files.get(m.get_ref()).ok_or_else(|| {
+                    self.error(Some(m.span()), field, format!("mesh {} was not sent with the job", m.get_ref()))
+                })?;
+                (PathBuf::from(m.get_ref()), std::borrow::Cow::Borrowed(bytes.as_slice()))
+            }
+        };
         self.hasher.update(&bytes);
+        self.mesh_files.push((m.get_ref().clone(), format!("{:x}", Sha256::digest(&bytes))));
         let (models, _) = tobj::load_obj_buf(
             &mut std::io::BufReader::new(&bytes[..]),
             &tobj::LoadOptions { triangulate: true, single_index: true, ignore_points: true, ignore_lines: true },

@@ -1,0 +1,350 @@
+//! The distributed renderer (paper §5, DESIGN §2.4): worker processes, one per NUMA node and any remote ones,
+//! render independently; the coordinator merges their snapshots into one set of sums and computes δ over them.
+//! It is a `Progressive` like the in-process engines, so the same run loop, outputs and record serve it.
+
+pub mod launch;
+pub mod network;
+pub mod topology;
+
+use anyhow::{Context, Result};
+use network::{Control, Event, NetworkPlan, Planned};
+use photonfarm::accumulation::Accumulator;
+use photonfarm::protocol::snapshot::apply_delta;
+use photonfarm::render::record::WorkerRecord;
+use photonfarm::render::session::Progressive;
+use photonfarm::render::{RayTotals, RenderSettings};
+use std::process::Child;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{Receiver, RecvTimeoutError};
+use std::time::{Duration, Instant};
+use tokio::sync::mpsc::UnboundedSender;
+
+/// Where a worker is in its life.
+#[derive(Clone, Debug, PartialEq)]
+pub enum WorkerState {
+    Connecting,
+    Running,
+    Finished,
+    Lost(String),
+}
+
+impl WorkerState {
+    fn ended(&self) -> bool {
+        matches!(self, WorkerState::Finished | WorkerState::Lost(_))
+    }
+}
+
+/// The coordinator's view of one worker.
+#[derive(Clone, Debug)]
+pub struct WorkerView {
+    pub record: WorkerRecord,
+    pub state: WorkerState,
+    last_seq: u64,
+}
+
+/// A running distributed render.
+pub struct Cluster {
+    sums: Accumulator,
+    settings: RenderSettings,
+    workers: Vec<WorkerView>,
+    events: Receiver<Event>,
+    control: Option<UnboundedSender<Control>>,
+    network: Option<std::thread::JoinHandle<()>>,
+    children: Vec<Child>,
+    /// New workers may still join (`--listen`).
+    accepts_joins: bool,
+    /// Seconds spent merging snapshots, and how many.
+    pub merge_seconds: f64,
+    pub merges: u64,
+    /// Connections refused before they became workers.
+    pub refused: Vec<String>,
+}
+
+/// A worker the cluster starts with.
+pub struct Member {
+    pub planned: Planned,
+    pub name: String,
+    pub numa_node: Option<u32>,
+    pub cores: Vec<usize>,
+}
+
+impl Cluster {
+    /// Starts the network thread over `plan` and takes ownership of the local worker processes.
+    pub fn start(
+        members: Vec<Member>,
+        plan: NetworkPlan,
+        children: Vec<Child>,
+        width: u32,
+        height: u32,
+        settings: RenderSettings,
+    ) -> Result<Self> {
+        let accepts_joins = plan.public.is_some();
+        let (events_tx, events) = std::sync::mpsc::channel();
+        let (control_tx, control_rx) = tokio::sync::mpsc::unbounded_channel();
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .context("cannot start the network runtime")?;
+        let network = std::thread::Builder::new()
+            .name("network".into())
+            .spawn(move || runtime.block_on(network::run(plan, events_tx, control_rx)))
+            .context("cannot start the network thread")?;
+        let workers = members
+            .into_iter()
+            .map(|m| WorkerView {
+                record: WorkerRecord {
+                    name: m.name,
+                    address: match &m.planned {
+                        Planned::Local { .. } => "local".into(),
+                        Planned::Remote { address } => address.clone(),
+                    },
+                    numa_node: m.numa_node,
+                    cores: m.cores,
+                    state: "connecting".into(),
+                    ..WorkerRecord::default()
+                },
+                state: WorkerState::Connecting,
+                last_seq: 0,
+            })
+            .collect();
+        Ok(Cluster {
+            sums: Accumulator::new(width, height),
+            settings,
+            workers,
+            events,
+            control: Some(control_tx),
+            network: Some(network),
+            children,
+            accepts_joins,
+            merge_seconds: 0.0,
+            merges: 0,
+            refused: Vec::new(),
+        })
+    }
+
+    fn send(&self, c: Control) {
+        if let Some(tx) = &self.control {
+            let _ = tx.send(c);
+        }
+    }
+
+    fn set_state(&mut self, w: usize, state: WorkerState) {
+        let v = &mut self.workers[w];
+        if v.state.ended() {
+            return;
+        }
+        v.record.state = match &state {
+            WorkerState::Connecting => "connecting".into(),
+            WorkerState::Running => "running".into(),
+            WorkerState::Finished => "finished".into(),
+            WorkerState::Lost(r) => format!("lost: {r}"),
+        };
+        if let WorkerState::Lost(r) = &state {
+            eprintln!("coordinator: worker {} lost ({r}); the run goes on with the others", v.record.name);
+        }
+        v.state = state;
+    }
+
+    /// Handles one event; true when a snapshot was merged.
+    fn handle(&mut self, event: Event) -> bool {
+        match event {
+            Event::Joined { worker, name, address } => {
+                while self.workers.len() <= worker {
+                    self.workers.push(WorkerView {
+                        record: WorkerRecord { state: "connecting".into(), ..WorkerRecord::default() },
+                        state: WorkerState::Connecting,
+                        last_seq: 0,
+                    });
+                }
+                self.workers[worker].record.name = name;
+                self.workers[worker].record.address = address;
+            }
+            Event::Connected { worker, address } => {
+                if self.workers[worker].record.address == "local" {
+                    self.workers[worker].record.address = address;
+                }
+            }
+            Event::Started { worker, info } => {
+                let r = &mut self.workers[worker].record;
+                r.cores = info.cores;
+                r.binding = info.binding;
+                r.layout = format!("{} on {}", info.layout, info.hostname);
+                if info.numa_node.is_some() {
+                    r.numa_node = info.numa_node;
+                }
+                self.set_state(worker, WorkerState::Running);
+            }
+            Event::Snapshot { worker, snapshot, frame_bytes } => {
+                let v = &mut self.workers[worker];
+                if v.state.ended() {
+                    return false;
+                }
+                if snapshot.seq != v.last_seq + 1 {
+                    let reason = format!("snapshot {} arrived after {}", snapshot.seq, v.last_seq);
+                    self.set_state(worker, WorkerState::Lost(reason));
+                    return false;
+                }
+                let t = Instant::now();
+                match apply_delta(&snapshot.delta, &mut self.sums.pixels) {
+                    Ok(summary) => {
+                        self.merge_seconds += t.elapsed().as_secs_f64();
+                        self.merges += 1;
+                        let v = &mut self.workers[worker];
+                        v.last_seq = snapshot.seq;
+                        v.record.snapshots += 1;
+                        v.record.snapshot_bytes += frame_bytes;
+                        v.record.totals = snapshot.totals;
+                        v.record.pixel_phases += summary.pixel_phases;
+                        self.send(Control::Ack { worker, seq: snapshot.seq });
+                        return true;
+                    }
+                    Err(e) => self.set_state(worker, WorkerState::Lost(format!("refused its snapshot: {e}"))),
+                }
+            }
+            Event::Finished { worker } => self.set_state(worker, WorkerState::Finished),
+            Event::Lost { worker, reason } => self.set_state(worker, WorkerState::Lost(reason)),
+            Event::Refused { address, reason } => {
+                eprintln!("coordinator: refused a connection from {address}: {reason}");
+                self.refused.push(format!("{address}: {reason}"));
+            }
+        }
+        false
+    }
+
+    fn all_ended(&self) -> bool {
+        self.workers.iter().all(|w| w.state.ended())
+    }
+
+    /// Stops every worker, collects their last snapshots (up to `limit`), and ends the network and the local
+    /// processes.
+    pub fn shutdown(&mut self, limit: Duration) {
+        self.send(Control::StopAll);
+        let deadline = Instant::now() + limit;
+        while !self.all_ended() && Instant::now() < deadline {
+            match self.events.recv_timeout(Duration::from_millis(50)) {
+                Ok(e) => {
+                    self.handle(e);
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => break,
+            }
+        }
+        for w in 0..self.workers.len() {
+            if !self.workers[w].state.ended() {
+                self.set_state(w, WorkerState::Lost(format!("did not finish within {limit:?} of the stop")));
+            }
+        }
+        // Give the links a moment to deliver the last acknowledgements, then end the network thread.
+        let settle = Instant::now() + Duration::from_millis(300);
+        while Instant::now() < settle {
+            if let Ok(e) = self.events.recv_timeout(Duration::from_millis(50)) {
+                self.handle(e);
+            }
+        }
+        self.control = None;
+        if let Some(n) = self.network.take() {
+            let _ = n.join();
+        }
+        self.reap_children(Duration::from_secs(5));
+    }
+
+    fn reap_children(&mut self, limit: Duration) {
+        let deadline = Instant::now() + limit;
+        for c in &mut self.children {
+            loop {
+                match c.try_wait() {
+                    Ok(Some(_)) => break,
+                    Ok(None) if Instant::now() < deadline => std::thread::sleep(Duration::from_millis(20)),
+                    _ => {
+                        let _ = c.kill();
+                        let _ = c.wait();
+                        break;
+                    }
+                }
+            }
+        }
+        self.children.clear();
+    }
+}
+
+impl Drop for Cluster {
+    fn drop(&mut self) {
+        // Never leave worker processes behind, whatever ended the run.
+        for c in &mut self.children {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+impl Progressive for Cluster {
+    /// Waits for snapshots: returns once one was merged, or at the deadline, on interruption, or when every
+    /// worker has ended.
+    fn step(&mut self, interrupted: &AtomicBool, deadline: Option<Instant>) {
+        loop {
+            if interrupted.load(Ordering::Relaxed) || deadline.is_some_and(|d| Instant::now() >= d) {
+                return;
+            }
+            if !self.active() {
+                return;
+            }
+            match self.events.recv_timeout(Duration::from_millis(50)) {
+                Ok(e) => {
+                    if self.handle(e) {
+                        // Drain what else arrived, so one step merges everything that is waiting.
+                        while let Ok(e) = self.events.try_recv() {
+                            self.handle(e);
+                        }
+                        return;
+                    }
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => return,
+            }
+        }
+    }
+
+    fn sums(&self) -> &Accumulator {
+        &self.sums
+    }
+
+    fn totals(&self) -> RayTotals {
+        let mut t = RayTotals::default();
+        for w in &self.workers {
+            let s = w.record.totals;
+            t.phases += s.phases;
+            t.backward_rays += s.backward_rays;
+            t.forward_rays += s.forward_rays;
+            t.light_paths += s.light_paths;
+            t.backward_photons += s.backward_photons;
+            t.merges += s.merges;
+            t.capped_light_paths += s.capped_light_paths;
+        }
+        t
+    }
+
+    fn settings(&self) -> &RenderSettings {
+        &self.settings
+    }
+
+    fn bytes_per_pixel(&self) -> f64 {
+        // The coordinator's own sums; workers' memory is in their records.
+        Accumulator::bytes_per_pixel() as f64
+    }
+
+    fn threads(&self) -> usize {
+        self.workers.iter().map(|w| w.record.cores.len()).sum()
+    }
+
+    fn workers(&self) -> Option<Vec<WorkerRecord>> {
+        Some(self.workers.iter().map(|w| w.record.clone()).collect())
+    }
+
+    fn active(&self) -> bool {
+        self.accepts_joins || !self.all_ended()
+    }
+
+    fn finish(&mut self) {
+        self.shutdown(Duration::from_secs(60));
+    }
+}

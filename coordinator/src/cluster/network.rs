@@ -1,0 +1,356 @@
+//! The coordinator's network thread: it accepts the workers it started (and any that join), dials remote
+//! ones, hands each its job and files, forwards their messages to the main thread as events and sends the
+//! main thread's acknowledgements and stop requests back. One tokio task per worker link.
+
+use photonfarm::protocol::auth::{handshake, Peer};
+use photonfarm::protocol::{Connection, Job, Message, ProtocolError, Role, Secret, Snapshot, WorkerInfo};
+use std::collections::BTreeMap;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::mpsc as std_mpsc;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use tokio::net::{TcpListener, TcpStream};
+use tokio::sync::mpsc;
+
+/// What the network thread tells the main thread. `worker` indexes the cluster's worker list.
+#[derive(Debug)]
+pub enum Event {
+    /// A worker joined through `--listen` and was given index `worker`.
+    Joined {
+        worker: usize,
+        name: String,
+        address: String,
+    },
+    Connected {
+        worker: usize,
+        address: String,
+    },
+    Started {
+        worker: usize,
+        info: WorkerInfo,
+    },
+    Snapshot {
+        worker: usize,
+        snapshot: Snapshot,
+        frame_bytes: u64,
+    },
+    Finished {
+        worker: usize,
+    },
+    /// The link ended before the worker finished.
+    Lost {
+        worker: usize,
+        reason: String,
+    },
+    /// A connection was refused before it became a worker (bad secret, version, …).
+    Refused {
+        address: String,
+        reason: String,
+    },
+}
+
+/// What the main thread asks of the network thread.
+#[derive(Debug)]
+pub enum Control {
+    Ack { worker: usize, seq: u64 },
+    StopAll,
+}
+
+/// Files the job references, by hash, read from disk when a worker asks.
+pub type FileStore = BTreeMap<String, PathBuf>;
+
+/// Timing of a link.
+#[derive(Clone, Copy, Debug)]
+pub struct Timing {
+    pub heartbeat: Duration,
+    /// A worker is presumed hung when nothing arrived for this long.
+    pub peer_timeout: Duration,
+}
+
+/// One planned worker the coordinator waits for or dials.
+#[derive(Clone, Debug)]
+pub enum Planned {
+    /// A local worker that will dial the local listener and give this name.
+    Local { name: String },
+    /// A `worker serve` daemon to dial.
+    Remote { address: String },
+}
+
+/// Everything the network thread needs.
+pub struct NetworkPlan {
+    pub planned: Vec<Planned>,
+    /// The job of worker i (streams differ).
+    pub jobs: Vec<Job>,
+    /// A job template for workers that join through `--listen` (its stream is set per joiner).
+    pub join_template: Job,
+    pub files: Arc<FileStore>,
+    /// Listener the local workers dial, with their secret (a non-blocking std listener: the network thread
+    /// adopts it).
+    pub local: Option<(std::net::TcpListener, Secret)>,
+    /// `--listen`, with the user's secret.
+    pub public: Option<(std::net::TcpListener, Secret)>,
+    /// Secret for `--worker` dials.
+    pub remote_secret: Secret,
+    pub timing: Timing,
+}
+
+type Links = BTreeMap<usize, mpsc::UnboundedSender<Control>>;
+
+/// Runs the network until the main thread drops its control sender.
+pub async fn run(
+    mut plan: NetworkPlan,
+    events: std_mpsc::Sender<Event>,
+    mut control: mpsc::UnboundedReceiver<Control>,
+) {
+    let adopt = |l: Option<(std::net::TcpListener, Secret)>| {
+        l.and_then(|(l, s)| match TcpListener::from_std(l) {
+            Ok(l) => Some((l, s)),
+            Err(e) => {
+                eprintln!("coordinator: cannot use a listener: {e}");
+                None
+            }
+        })
+    };
+    let local = adopt(plan.local.take());
+    let public = adopt(plan.public.take());
+    let plan = Arc::new(plan);
+    let (link_tx, mut link_rx) = mpsc::unbounded_channel::<(usize, mpsc::UnboundedSender<Control>)>();
+    let mut links: Links = BTreeMap::new();
+    let mut stopping = false;
+    // Remote daemons: dial them.
+    for (i, p) in plan.planned.iter().enumerate() {
+        if let Planned::Remote { address } = p {
+            let (plan, events, link_tx, address) = (plan.clone(), events.clone(), link_tx.clone(), address.clone());
+            tokio::spawn(async move {
+                match dial(&address, &plan.remote_secret).await {
+                    Ok((conn, _peer)) => {
+                        let job = plan.jobs[i].clone();
+                        drive(i, conn, job, plan, events, link_tx).await
+                    }
+                    Err(e) => {
+                        let _ = events.send(Event::Lost { worker: i, reason: format!("cannot reach {address}: {e}") });
+                    }
+                }
+            });
+        }
+    }
+    if let Some((listener, secret)) = local {
+        let (plan2, events, link_tx) = (plan.clone(), events.clone(), link_tx.clone());
+        tokio::spawn(async move {
+            loop {
+                let Ok((stream, addr)) = listener.accept().await else { continue };
+                let (plan, events, link_tx, secret) = (plan2.clone(), events.clone(), link_tx.clone(), secret.clone());
+                tokio::spawn(async move {
+                    let Some((conn, peer)) = accept(stream, addr, &secret, &events).await else { return };
+                    let index =
+                        plan.planned.iter().position(|p| matches!(p, Planned::Local { name } if *name == peer.name));
+                    match index {
+                        Some(i) => {
+                            let job = plan.jobs[i].clone();
+                            drive(i, conn, job, plan, events, link_tx).await
+                        }
+                        None => {
+                            let _ = events.send(Event::Refused {
+                                address: addr.to_string(),
+                                reason: format!("no local worker is named '{}'", peer.name),
+                            });
+                        }
+                    }
+                });
+            }
+        });
+    }
+    if let Some((listener, secret)) = public {
+        let (plan2, events, link_tx) = (plan.clone(), events.clone(), link_tx.clone());
+        tokio::spawn(async move {
+            let mut next = plan2.planned.len();
+            loop {
+                let Ok((stream, addr)) = listener.accept().await else { continue };
+                if secret.is_insecure() && !addr.ip().is_loopback() {
+                    // `--insecure` was given explicitly for this listener; say so once per link.
+                    eprintln!("coordinator: accepting {addr} without authentication (--insecure)");
+                }
+                let Some((conn, peer)) = accept(stream, addr, &secret, &events).await else { continue };
+                let worker = next;
+                next += 1;
+                let _ = events.send(Event::Joined { worker, name: peer.name.clone(), address: addr.to_string() });
+                let mut job = plan2.join_template.clone();
+                job.stream = worker as u64;
+                let (plan, events, link_tx) = (plan2.clone(), events.clone(), link_tx.clone());
+                tokio::spawn(async move { drive(worker, conn, job, plan, events, link_tx).await });
+            }
+        });
+    }
+    drop(link_tx);
+    loop {
+        tokio::select! {
+            c = control.recv() => match c {
+                Some(Control::Ack { worker, seq }) => {
+                    if let Some(l) = links.get(&worker) {
+                        let _ = l.send(Control::Ack { worker, seq });
+                    }
+                }
+                Some(Control::StopAll) => {
+                    stopping = true;
+                    for l in links.values() {
+                        let _ = l.send(Control::StopAll);
+                    }
+                }
+                None => return,
+            },
+            Some((worker, tx)) = link_rx.recv() => {
+                if stopping {
+                    let _ = tx.send(Control::StopAll);
+                }
+                links.insert(worker, tx);
+            }
+        }
+    }
+}
+
+async fn dial(address: &str, secret: &Secret) -> Result<(Connection, Peer), ProtocolError> {
+    let stream = tokio::time::timeout(Duration::from_secs(10), TcpStream::connect(address))
+        .await
+        .map_err(|_| ProtocolError::Timeout(Duration::from_secs(10), "the connection"))??;
+    let mut conn = Connection::new(stream)?;
+    let peer = handshake(&mut conn, Role::Coordinator, "coordinator", secret).await?;
+    Ok((conn, peer))
+}
+
+async fn accept(
+    stream: TcpStream,
+    addr: SocketAddr,
+    secret: &Secret,
+    events: &std_mpsc::Sender<Event>,
+) -> Option<(Connection, Peer)> {
+    let result = async {
+        let mut conn = Connection::new(stream)?;
+        let peer = handshake(&mut conn, Role::Coordinator, "coordinator", secret).await?;
+        Ok::<_, ProtocolError>((conn, peer))
+    }
+    .await;
+    match result {
+        Ok(x) => Some(x),
+        Err(e) => {
+            let _ = events.send(Event::Refused { address: addr.to_string(), reason: e.to_string() });
+            None
+        }
+    }
+}
+
+/// Sends the files a worker asked for; a hash that is not the job's ends the link.
+async fn send_files(
+    writer: &mut photonfarm::protocol::MessageWriter,
+    hashes: Vec<String>,
+    files: &FileStore,
+) -> Result<(), String> {
+    for h in hashes {
+        let Some(path) = files.get(&h) else {
+            let _ = writer.write(&Message::Refused { reason: format!("no file with hash {h} in this job") }).await;
+            return Err(format!("the worker asked for a file that is not the job's ({h})"));
+        };
+        let bytes = tokio::fs::read(path).await.map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        writer.write(&Message::File { sha256: h, bytes }).await.map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}
+
+/// Serves one worker link: job, files, then its messages until it finishes, fails or goes silent.
+async fn drive(
+    worker: usize,
+    conn: Connection,
+    job: Job,
+    plan: Arc<NetworkPlan>,
+    events: std_mpsc::Sender<Event>,
+    link_tx: mpsc::UnboundedSender<(usize, mpsc::UnboundedSender<Control>)>,
+) {
+    let address = conn.peer.to_string();
+    let _ = events.send(Event::Connected { worker, address });
+    let (control_tx, mut control) = mpsc::unbounded_channel();
+    if link_tx.send((worker, control_tx)).is_err() {
+        return;
+    }
+    let timing = plan.timing;
+    let (mut reader, mut writer) = conn.split();
+    let result: Result<(), String> = async {
+        writer.write(&Message::Job(Box::new(job))).await.map_err(|e| e.to_string())?;
+        let (in_tx, mut incoming) = mpsc::unbounded_channel();
+        let reader_task = tokio::spawn(async move {
+            loop {
+                let before = reader.bytes;
+                let m = reader.read().await;
+                let end = m.is_err();
+                if in_tx.send((m, reader.bytes - before)).is_err() || end {
+                    break;
+                }
+            }
+        });
+        let mut last_heard = Instant::now();
+        let mut last_sent = Instant::now();
+        let mut tick = tokio::time::interval(Duration::from_millis(250));
+        let outcome = loop {
+            tokio::select! {
+                m = incoming.recv() => {
+                    last_heard = Instant::now();
+                    let Some((m, frame_bytes)) = m else { break Err("the link ended".to_string()) };
+                    match m {
+                        Ok(Message::NeedFiles { hashes }) => {
+                            send_files(&mut writer, hashes, &plan.files).await?;
+                            last_sent = Instant::now();
+                        }
+                        Ok(Message::Started(info)) => { let _ = events.send(Event::Started { worker, info }); }
+                        Ok(Message::Snapshot(snapshot)) => { let _ = events.send(Event::Snapshot { worker, snapshot, frame_bytes }); }
+                        Ok(Message::Finished) => break Ok(()),
+                        Ok(Message::Failed { reason }) => break Err(format!("the worker failed: {reason}")),
+                        Ok(Message::Heartbeat) => {}
+                        Ok(other) => break Err(format!("unexpected {} from the worker", other.kind())),
+                        Err(ProtocolError::Closed) => break Err("the worker closed the connection".into()),
+                        Err(e) => break Err(e.to_string()),
+                    }
+                }
+                c = control.recv() => {
+                    let message = match c {
+                        Some(Control::Ack { seq, .. }) => Message::Ack { seq },
+                        Some(Control::StopAll) => Message::Stop,
+                        None => break Err("the coordinator is shutting down".into()),
+                    };
+                    writer.write(&message).await.map_err(|e| e.to_string())?;
+                    last_sent = Instant::now();
+                }
+                _ = tick.tick() => {
+                    if last_heard.elapsed() > timing.peer_timeout {
+                        break Err(format!("no message for {:?}: the worker is presumed hung", timing.peer_timeout));
+                    }
+                    if last_sent.elapsed() >= timing.heartbeat {
+                        writer.write(&Message::Heartbeat).await.map_err(|e| e.to_string())?;
+                        last_sent = Instant::now();
+                    }
+                }
+            }
+        };
+        reader_task.abort();
+        outcome
+    }
+    .await;
+    match result {
+        Ok(()) => {
+            // Acknowledge the last snapshots the main thread merges after `Finished`: they were sent before it.
+            let deadline = Instant::now() + Duration::from_secs(5);
+            let _ = events.send(Event::Finished { worker });
+            while let Ok(Some(c)) =
+                tokio::time::timeout(deadline.saturating_duration_since(Instant::now()), control.recv()).await
+            {
+                if let Control::Ack { seq, .. } = c {
+                    if writer.write(&Message::Ack { seq }).await.is_err() {
+                        break;
+                    }
+                }
+            }
+            let _ = writer.shutdown().await;
+        }
+        Err(reason) => {
+            let _ = events.send(Event::Lost { worker, reason });
+        }
+    }
+}

@@ -1,0 +1,148 @@
+//! Mutual authentication by a shared secret: each side sends a fresh nonce, then an HMAC-SHA256 over both
+//! nonces and its own role, and checks the peer's in constant time. The secret never crosses the wire and is
+//! never printed; a proof cannot be replayed (fresh nonces) or reflected (the role is inside the MAC).
+
+use super::connection::Connection;
+use super::message::{Message, Role};
+use super::{ProtocolError, PROTOCOL_VERSION};
+use hmac::{Hmac, Mac};
+use sha2::Sha256;
+use std::path::Path;
+use std::time::Duration;
+
+/// The environment variable a secret may come from.
+pub const SECRET_ENV: &str = "PHOTONFARM_SECRET";
+
+/// A shared secret. `Debug` does not show it.
+#[derive(Clone)]
+pub struct Secret {
+    key: Vec<u8>,
+    insecure: bool,
+}
+
+impl std::fmt::Debug for Secret {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.insecure {
+            f.write_str("Secret(insecure)")
+        } else {
+            write!(f, "Secret({} bytes)", self.key.len())
+        }
+    }
+}
+
+/// Why no secret could be had.
+#[derive(Debug, thiserror::Error)]
+pub enum SecretError {
+    #[error("cannot read the secret file {path}: {source}")]
+    Read { path: String, source: std::io::Error },
+    #[error("the secret in {0} is shorter than 16 bytes")]
+    TooShort(String),
+}
+
+impl Secret {
+    /// A secret from bytes (at least 16 of them, after trimming surrounding white space).
+    pub fn from_bytes(bytes: &[u8], origin: &str) -> Result<Self, SecretError> {
+        let text = bytes.trim_ascii();
+        if text.len() < 16 {
+            return Err(SecretError::TooShort(origin.into()));
+        }
+        Ok(Secret { key: text.to_vec(), insecure: false })
+    }
+
+    /// The secret stored in a file.
+    pub fn from_file(path: &Path) -> Result<Self, SecretError> {
+        let bytes =
+            std::fs::read(path).map_err(|source| SecretError::Read { path: path.display().to_string(), source })?;
+        Self::from_bytes(&bytes, &path.display().to_string())
+    }
+
+    /// The secret in `PHOTONFARM_SECRET`, if set.
+    pub fn from_env() -> Result<Option<Self>, SecretError> {
+        match std::env::var_os(SECRET_ENV) {
+            Some(v) => Ok(Some(Self::from_bytes(v.as_encoded_bytes(), SECRET_ENV)?)),
+            None => Ok(None),
+        }
+    }
+
+    /// A fresh random secret (32 bytes, hex) for the workers a coordinator starts itself.
+    pub fn random() -> Self {
+        let mut raw = [0u8; 32];
+        getrandom::fill(&mut raw).expect("the operating system's random source failed");
+        let hex: String = raw.iter().map(|b| format!("{b:02x}")).collect();
+        Secret { key: hex.into_bytes(), insecure: false }
+    }
+
+    /// The empty secret of `--insecure` links: both sides must say so.
+    pub fn insecure() -> Self {
+        Secret { key: Vec::new(), insecure: true }
+    }
+
+    /// True for the secret of `--insecure`.
+    pub fn is_insecure(&self) -> bool {
+        self.insecure
+    }
+
+    /// The secret's text, to hand to a child process through its environment.
+    pub fn expose_for_child(&self) -> &[u8] {
+        &self.key
+    }
+
+    fn proof(&self, role: Role, sender_nonce: &[u8; 32], receiver_nonce: &[u8; 32]) -> Hmac<Sha256> {
+        let mut mac = Hmac::<Sha256>::new_from_slice(&self.key).expect("HMAC takes keys of any length");
+        mac.update(b"photonfarm proof v1");
+        mac.update(&PROTOCOL_VERSION.to_le_bytes());
+        mac.update(&[role as u8]);
+        mac.update(sender_nonce);
+        mac.update(receiver_nonce);
+        mac
+    }
+}
+
+/// Who the peer said it is.
+#[derive(Clone, Debug)]
+pub struct Peer {
+    pub name: String,
+    pub role: Role,
+}
+
+/// How long each handshake step may take.
+pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// Runs the handshake as `role`; on failure the peer is told why (when it can be) and the error returned.
+pub async fn handshake(conn: &mut Connection, role: Role, name: &str, secret: &Secret) -> Result<Peer, ProtocolError> {
+    let mut nonce = [0u8; 32];
+    getrandom::fill(&mut nonce).map_err(|e| ProtocolError::Io(std::io::Error::other(e.to_string())))?;
+    conn.write(&Message::Hello { version: PROTOCOL_VERSION, role, nonce, name: name.into() }).await?;
+    let (peer_nonce, peer) = match conn.read_within(HANDSHAKE_TIMEOUT, "Hello").await? {
+        Message::Hello { version, role: peer_role, nonce, name } => {
+            if version != PROTOCOL_VERSION {
+                let err = ProtocolError::Version { ours: PROTOCOL_VERSION, theirs: version };
+                let _ = conn.write(&Message::Refused { reason: err.to_string() }).await;
+                return Err(err);
+            }
+            if peer_role == role {
+                let reason = format!("both ends are a {role:?}");
+                let _ = conn.write(&Message::Refused { reason: reason.clone() }).await;
+                return Err(ProtocolError::Refused(reason));
+            }
+            (nonce, Peer { name, role: peer_role })
+        }
+        Message::Refused { reason } => return Err(ProtocolError::Refused(reason)),
+        other => return Err(ProtocolError::Unexpected { expected: "Hello", got: other.kind().into() }),
+    };
+    let mac: [u8; 32] = secret.proof(role, &nonce, &peer_nonce).finalize().into_bytes().into();
+    conn.write(&Message::Proof { mac }).await?;
+    match conn.read_within(HANDSHAKE_TIMEOUT, "Proof").await? {
+        Message::Proof { mac } => {
+            // `verify_slice` compares in constant time.
+            if secret.proof(peer.role, &peer_nonce, &nonce).verify_slice(&mac).is_err() {
+                let _ = conn.write(&Message::Refused { reason: "authentication failed".into() }).await;
+                return Err(ProtocolError::Authentication);
+            }
+            Ok(peer)
+        }
+        Message::Refused { reason } if reason == "authentication failed" => Err(ProtocolError::Authentication),
+        Message::Refused { reason } => Err(ProtocolError::Refused(reason)),
+        other => Err(ProtocolError::Unexpected { expected: "Proof", got: other.kind().into() }),
+    }
+}

@@ -1,0 +1,184 @@
+//! Every message of the protocol, as one enum, and its binary encoding (bincode 2 behind this one module, so a
+//! change of codec touches one file).
+
+use super::ProtocolError;
+use crate::render::{ParallelMethod, RayTotals, RenderSettings};
+use serde::{Deserialize, Serialize};
+
+/// Which end of a link a peer is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Role {
+    Coordinator,
+    Worker,
+}
+
+/// A file the scene references, by its path relative to the scene file and its content hash.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FileRef {
+    pub path: String,
+    /// SHA-256, lower-case hex.
+    pub sha256: String,
+}
+
+/// How a worker lays out its threads.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EngineSpec {
+    pub method: ParallelMethod,
+    /// Threads per group for two-level.
+    pub group_size: usize,
+    /// Tile edge in pixels (None: the engine's default for its group count).
+    pub tile_size: Option<u32>,
+    pub phases_per_deal: Option<u32>,
+    /// Cores to run on (None: every core the worker's machine has).
+    pub cores: Option<Vec<usize>>,
+    /// The NUMA node these cores belong to, when the coordinator chose them.
+    pub numa_node: Option<u32>,
+    /// The node's cores are a synthetic topology's, mapped onto real cores modulo their count.
+    pub synthetic_topology: bool,
+}
+
+/// What a worker renders.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Job {
+    /// The scene file's name, for messages.
+    pub scene_name: String,
+    pub scene_text: String,
+    /// Meshes the scene references; the worker asks for the ones it does not hold.
+    pub files: Vec<FileRef>,
+    /// The scene's hash as the coordinator computed it; the worker checks its own against it.
+    pub scene_hash: String,
+    pub settings: RenderSettings,
+    /// This worker's random stream: distinct for every worker of a job.
+    pub stream: u64,
+    pub engine: EngineSpec,
+    /// Time between snapshots, in milliseconds.
+    pub snapshot_interval_ms: u64,
+}
+
+/// What a worker reports once its engine runs.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WorkerInfo {
+    pub hostname: String,
+    pub threads: usize,
+    pub cores: Vec<usize>,
+    pub numa_node: Option<u32>,
+    /// What pinning the OS granted, in words (e.g. "2 of 2 threads pinned to cores 0,1").
+    pub binding: String,
+    /// e.g. "2 groups × 1 thread, tile masks, shared maps".
+    pub layout: String,
+}
+
+/// Phases a worker completed since its previous snapshot.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Snapshot {
+    /// 1, 2, 3, … per worker and job: the coordinator applies each exactly once, in order.
+    pub seq: u64,
+    /// The worker's counters since its start (cumulative, so a lost snapshot cannot skew them).
+    pub totals: RayTotals,
+    /// Per-pixel sums added since the previous snapshot (see `snapshot::encode_delta`).
+    pub delta: Vec<u8>,
+}
+
+/// The protocol's messages.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Message {
+    /// Each side's first message.
+    Hello { version: u32, role: Role, nonce: [u8; 32], name: String },
+    /// Proof of the shared secret over the handshake (see `auth`).
+    Proof { mac: [u8; 32] },
+    /// The handshake or the job was refused, with the reason.
+    Refused { reason: String },
+    /// Coordinator → worker: the job.
+    Job(Box<Job>),
+    /// Worker → coordinator: hashes of the files it needs.
+    NeedFiles { hashes: Vec<String> },
+    /// Coordinator → worker: one file.
+    File { sha256: String, bytes: Vec<u8> },
+    /// Worker → coordinator: the engine runs.
+    Started(WorkerInfo),
+    /// Worker → coordinator: completed phases.
+    Snapshot(Snapshot),
+    /// Coordinator → worker: snapshot `seq` is merged.
+    Ack { seq: u64 },
+    /// Either way, when nothing else was sent for a while.
+    Heartbeat,
+    /// Coordinator → worker: finish the current round, send a last snapshot, then `Finished`.
+    Stop,
+    /// Worker → coordinator: the last snapshot was sent.
+    Finished,
+    /// Worker → coordinator: the job cannot run (bad scene, missing file, …).
+    Failed { reason: String },
+}
+
+impl Message {
+    /// The variant's name, for logs and errors (never the content: it may be large or secret).
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Message::Hello { .. } => "Hello",
+            Message::Proof { .. } => "Proof",
+            Message::Refused { .. } => "Refused",
+            Message::Job(_) => "Job",
+            Message::NeedFiles { .. } => "NeedFiles",
+            Message::File { .. } => "File",
+            Message::Started(_) => "Started",
+            Message::Snapshot(_) => "Snapshot",
+            Message::Ack { .. } => "Ack",
+            Message::Heartbeat => "Heartbeat",
+            Message::Stop => "Stop",
+            Message::Finished => "Finished",
+            Message::Failed { .. } => "Failed",
+        }
+    }
+}
+
+/// bincode's limit on what one message may claim to hold, so a forged length inside a frame cannot make the
+/// decoder allocate more than a frame can carry.
+const DECODE_LIMIT: usize = super::frame::DEFAULT_MAX_FRAME as usize;
+
+fn config() -> impl bincode::config::Config {
+    bincode::config::standard().with_limit::<DECODE_LIMIT>()
+}
+
+/// Encodes a message as a frame body.
+pub fn encode(message: &Message) -> Result<Vec<u8>, ProtocolError> {
+    bincode::serde::encode_to_vec(message, config()).map_err(|e| ProtocolError::Malformed(e.to_string()))
+}
+
+/// Decodes a frame body; the whole body must be one message.
+pub fn decode(body: &[u8]) -> Result<Message, ProtocolError> {
+    let (message, used) = bincode::serde::decode_from_slice::<Message, _>(body, config())
+        .map_err(|e| ProtocolError::Malformed(e.to_string()))?;
+    if used != body.len() {
+        return Err(ProtocolError::Malformed(format!("{} bytes after the message", body.len() - used)));
+    }
+    Ok(message)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn messages_round_trip() {
+        let m = Message::Hello { version: 1, role: Role::Worker, nonce: [7; 32], name: "w".into() };
+        assert_eq!(decode(&encode(&m).unwrap()).unwrap(), m);
+        let m = Message::Ack { seq: 42 };
+        assert_eq!(decode(&encode(&m).unwrap()).unwrap(), m);
+    }
+
+    #[test]
+    fn trailing_bytes_and_unknown_variants_are_refused() {
+        let mut body = encode(&Message::Heartbeat).unwrap();
+        body.push(0);
+        assert!(matches!(decode(&body), Err(ProtocolError::Malformed(_))));
+        assert!(matches!(decode(&[200]), Err(ProtocolError::Malformed(_))));
+    }
+
+    #[test]
+    fn a_forged_length_inside_a_message_does_not_allocate_it() {
+        // NeedFiles (variant 4) claiming 2^60 strings: refused by the decode limit, not attempted.
+        let mut body = vec![4u8, 0xff];
+        body.extend_from_slice(&(1u64 << 60).to_le_bytes());
+        assert!(matches!(decode(&body), Err(ProtocolError::Malformed(_))));
+    }
+}

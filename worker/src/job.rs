@@ -1,0 +1,133 @@
+//! Running a job inside a worker process: the engine renders rounds on a plain thread and, after a round,
+//! hands over a snapshot of the phases completed since the previous one. Only whole rounds are sent, so
+//! every snapshot is a consistent estimate.
+
+use crate::engine::{EngineConfig, ParallelEngine};
+use crate::topology;
+use photonfarm::accumulation::PixelSums;
+use photonfarm::protocol::snapshot::encode_delta;
+use photonfarm::protocol::{Job, Snapshot, WorkerInfo};
+use photonfarm::render::session::Progressive;
+use photonfarm::scene::Scene;
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+/// What the engine thread reports to the link.
+#[derive(Debug)]
+pub enum JobEvent {
+    Started(WorkerInfo),
+    Snapshot(Snapshot),
+    /// The last snapshot has been handed over.
+    Finished,
+    Failed(String),
+}
+
+/// Builds the job's scene from its text and the meshes received, and checks it is the coordinator's scene.
+pub fn load_scene(job: &Job, meshes: &BTreeMap<String, Vec<u8>>) -> Result<Scene, String> {
+    let scene =
+        Scene::from_toml_with_meshes(&job.scene_text, Path::new(&job.scene_name), meshes).map_err(|e| e.to_string())?;
+    if scene.hash != job.scene_hash {
+        return Err(format!(
+            "the scene built here hashes to {} but the coordinator's is {}",
+            &scene.hash[..12],
+            &job.scene_hash[..job.scene_hash.len().min(12)]
+        ));
+    }
+    Ok(scene)
+}
+
+/// Mixes the job seed with the worker's stream so that every worker draws different samples.
+pub fn stream_seed(seed: u64, stream: u64) -> u64 {
+    // SplitMix64 finaliser over the pair.
+    let mut z = seed ^ stream.wrapping_add(1).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+/// The engine configuration a job asks for, on this machine's cores.
+pub fn engine_config(job: &Job) -> Result<EngineConfig, String> {
+    let spec = &job.engine;
+    let cores = match &spec.cores {
+        Some(c) if !c.is_empty() => c.clone(),
+        Some(_) => return Err("the job gives an empty core list".into()),
+        None => topology::all_cores(),
+    };
+    let mut config =
+        EngineConfig::for_method(spec.method, cores.len(), spec.group_size, cores).map_err(|e| e.to_string())?;
+    if let Some(t) = spec.tile_size {
+        config.tile_size = t;
+    }
+    if let Some(k) = spec.phases_per_deal {
+        config.phases_per_deal = k;
+    }
+    Ok(config)
+}
+
+/// Renders `job` until `stop` is set, calling `emit` with its events (it returns false when nobody listens any
+/// more). Snapshots are deltas since the previous one, so a snapshot that never arrives is lost, never counted
+/// twice.
+pub fn run(scene: &Scene, job: &Job, stop: &AtomicBool, mut emit: impl FnMut(JobEvent) -> bool) {
+    let config = match engine_config(job) {
+        Ok(c) => c,
+        Err(e) => {
+            emit(JobEvent::Failed(e));
+            return;
+        }
+    };
+    let mut settings = job.settings;
+    settings.seed = stream_seed(job.settings.seed, job.stream);
+    let layout = config.layout();
+    let cores = config.cores.clone();
+    let threads = config.threads();
+    let mut engine = match ParallelEngine::new(scene, settings, config) {
+        Ok(e) => e,
+        Err(e) => {
+            emit(JobEvent::Failed(e.to_string()));
+            return;
+        }
+    };
+    let pinned = engine.pinned_threads();
+    let info = WorkerInfo {
+        hostname: topology::hostname(),
+        threads,
+        cores: cores.clone(),
+        numa_node: job.engine.numa_node,
+        binding: format!(
+            "{pinned} of {threads} threads pinned to cores {}{}",
+            cores.iter().map(|c| c.to_string()).collect::<Vec<_>>().join(","),
+            if job.engine.synthetic_topology { " (synthetic topology: nodes mapped onto real cores)" } else { "" }
+        ),
+        layout,
+    };
+    if !emit(JobEvent::Started(info)) {
+        return;
+    }
+    let interval = Duration::from_millis(job.snapshot_interval_ms.max(1));
+    let mut base = vec![PixelSums::default(); engine.sums().pixels.len()];
+    let mut seq = 0;
+    let mut last = Instant::now();
+    loop {
+        let stopping = stop.load(Ordering::Acquire);
+        if !stopping {
+            engine.run_round(stop, None);
+        }
+        let stopping = stop.load(Ordering::Acquire);
+        if stopping || last.elapsed() >= interval {
+            seq += 1;
+            let current = &engine.sums().pixels;
+            let snapshot = Snapshot { seq, totals: engine.totals(), delta: encode_delta(current, &base) };
+            base.copy_from_slice(current);
+            last = Instant::now();
+            if !emit(JobEvent::Snapshot(snapshot)) {
+                return;
+            }
+        }
+        if stopping {
+            emit(JobEvent::Finished);
+            return;
+        }
+    }
+}

@@ -1,0 +1,208 @@
+//! The worker's end of a coordinator link: handshake, job, the files it lacks, then snapshots out and
+//! acknowledgements, heartbeats and the stop request in, until the job ends or the link fails.
+
+use crate::job::{self, JobEvent};
+use photonfarm::protocol::auth::{handshake, Peer};
+use photonfarm::protocol::{Connection, Job, Message, ProtocolError, Role, Secret};
+use sha2::{Digest, Sha256};
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use tokio::sync::mpsc;
+
+/// How a worker behaves on its links.
+#[derive(Clone, Debug)]
+pub struct LinkOptions {
+    /// The name the worker gives in its handshake.
+    pub name: String,
+    pub secret: Secret,
+    /// A heartbeat is sent when nothing else was sent for this long.
+    pub heartbeat: Duration,
+    /// The coordinator is presumed gone when nothing arrived for this long.
+    pub peer_timeout: Duration,
+}
+
+impl LinkOptions {
+    /// Defaults: heartbeats every second, the coordinator presumed gone after 15 s of silence.
+    pub fn new(name: String, secret: Secret) -> Self {
+        LinkOptions { name, secret, heartbeat: Duration::from_secs(1), peer_timeout: Duration::from_secs(15) }
+    }
+}
+
+/// Mesh files received, by SHA-256: a daemon keeps them from job to job.
+pub type FileCache = BTreeMap<String, Vec<u8>>;
+
+/// How a job ended.
+#[derive(Debug)]
+pub struct JobOutcome {
+    pub coordinator: String,
+    pub snapshots_sent: u64,
+    pub snapshots_acked: u64,
+}
+
+/// Why a link ended without finishing its job.
+#[derive(Debug, thiserror::Error)]
+pub enum LinkError {
+    #[error(transparent)]
+    Protocol(#[from] ProtocolError),
+    #[error("the job failed: {0}")]
+    Job(String),
+}
+
+/// Serves one job over `conn` (whichever side dialled).
+pub async fn serve_job(
+    mut conn: Connection,
+    opts: &LinkOptions,
+    cache: &mut FileCache,
+) -> Result<JobOutcome, LinkError> {
+    let peer: Peer = handshake(&mut conn, Role::Worker, &opts.name, &opts.secret).await?;
+    let job = match conn.read_within(Duration::from_secs(60), "Job").await? {
+        Message::Job(job) => job,
+        Message::Refused { reason } => return Err(ProtocolError::Refused(reason).into()),
+        other => return Err(ProtocolError::Unexpected { expected: "Job", got: other.kind().into() }.into()),
+    };
+    fetch_files(&mut conn, &job, cache).await?;
+    let meshes: BTreeMap<String, Vec<u8>> =
+        job.files.iter().map(|f| (f.path.clone(), cache[&f.sha256].clone())).collect();
+    let job = Arc::new(*job);
+    let scene = {
+        let job = job.clone();
+        tokio::task::spawn_blocking(move || job::load_scene(&job, &meshes))
+            .await
+            .map_err(|e| LinkError::Job(format!("the scene loader panicked: {e}")))?
+    };
+    let scene = match scene {
+        Ok(s) => s,
+        Err(reason) => {
+            conn.write(&Message::Failed { reason: reason.clone() }).await?;
+            return Err(LinkError::Job(reason));
+        }
+    };
+
+    let stop = Arc::new(AtomicBool::new(false));
+    let (events_tx, mut events) = mpsc::unbounded_channel();
+    let engine = {
+        let (job, stop) = (job.clone(), stop.clone());
+        std::thread::Builder::new()
+            .name("job".into())
+            .spawn(move || job::run(&scene, &job, &stop, |e| events_tx.send(e).is_ok()))
+            .map_err(|e| LinkError::Job(format!("cannot start the engine thread: {e}")))?
+    };
+    // Whatever ends the link, the engine stops.
+    struct StopOnDrop(Arc<AtomicBool>);
+    impl Drop for StopOnDrop {
+        fn drop(&mut self) {
+            self.0.store(true, Ordering::Release);
+        }
+    }
+    let _stop_guard = StopOnDrop(stop.clone());
+
+    let (mut reader, mut writer) = conn.split();
+    let (incoming_tx, mut incoming) = mpsc::unbounded_channel();
+    let reader_task = tokio::spawn(async move {
+        loop {
+            let m = reader.read().await;
+            let end = m.is_err();
+            if incoming_tx.send(m).is_err() || end {
+                break;
+            }
+        }
+    });
+    let (mut sent, mut acked, mut last_seq) = (0u64, 0u64, 0u64);
+    let mut finished = false;
+    let mut last_sent = Instant::now();
+    let mut last_heard = Instant::now();
+    let mut tick = tokio::time::interval(Duration::from_millis(200));
+    let result = loop {
+        if finished && acked >= last_seq {
+            break Ok(());
+        }
+        tokio::select! {
+            event = events.recv(), if !finished => {
+                let message = match event {
+                    Some(JobEvent::Started(info)) => Message::Started(info),
+                    Some(JobEvent::Snapshot(s)) => {
+                        sent += 1;
+                        last_seq = s.seq;
+                        Message::Snapshot(s)
+                    }
+                    Some(JobEvent::Finished) => {
+                        finished = true;
+                        Message::Finished
+                    }
+                    Some(JobEvent::Failed(reason)) => {
+                        let _ = writer.write(&Message::Failed { reason: reason.clone() }).await;
+                        break Err(LinkError::Job(reason));
+                    }
+                    None => break Err(LinkError::Job("the engine thread ended without finishing".into())),
+                };
+                writer.write(&message).await?;
+                last_sent = Instant::now();
+            }
+            message = incoming.recv() => {
+                last_heard = Instant::now();
+                match message {
+                    Some(Ok(Message::Ack { seq })) => acked = acked.max(seq),
+                    Some(Ok(Message::Stop)) => stop.store(true, Ordering::Release),
+                    Some(Ok(Message::Heartbeat)) => {}
+                    Some(Ok(other)) => {
+                        break Err(ProtocolError::Unexpected { expected: "Ack, Stop or Heartbeat", got: other.kind().into() }.into())
+                    }
+                    // After `Finished` the coordinator may close once it has what it needs.
+                    Some(Err(ProtocolError::Closed)) | None if finished => break Ok(()),
+                    Some(Err(e)) => break Err(e.into()),
+                    None => break Err(ProtocolError::Closed.into()),
+                }
+            }
+            _ = tick.tick() => {
+                if last_heard.elapsed() > opts.peer_timeout {
+                    break Err(ProtocolError::Timeout(opts.peer_timeout, "the coordinator").into());
+                }
+                if last_sent.elapsed() >= opts.heartbeat {
+                    writer.write(&Message::Heartbeat).await?;
+                    last_sent = Instant::now();
+                }
+            }
+        }
+    };
+    stop.store(true, Ordering::Release);
+    reader_task.abort();
+    if result.is_ok() {
+        let _ = writer.shutdown().await;
+    }
+    drop(events);
+    // The engine notices the stop flag within a round; its thread holds no lock the link needs.
+    let _ = tokio::task::spawn_blocking(move || engine.join()).await;
+    result.map(|()| JobOutcome { coordinator: peer.name, snapshots_sent: sent, snapshots_acked: acked })
+}
+
+/// Asks for the job's files that are not in `cache` and checks every one against its hash.
+async fn fetch_files(conn: &mut Connection, job: &Job, cache: &mut FileCache) -> Result<(), ProtocolError> {
+    let mut missing: Vec<String> =
+        job.files.iter().map(|f| f.sha256.clone()).filter(|h| !cache.contains_key(h)).collect();
+    missing.sort();
+    missing.dedup();
+    if missing.is_empty() {
+        return Ok(());
+    }
+    conn.write(&Message::NeedFiles { hashes: missing.clone() }).await?;
+    while !missing.is_empty() {
+        match conn.read_within(Duration::from_secs(120), "File").await? {
+            Message::File { sha256, bytes } => {
+                let Some(pos) = missing.iter().position(|h| *h == sha256) else {
+                    return Err(ProtocolError::Malformed(format!("a file that was not asked for ({sha256})")));
+                };
+                let actual = format!("{:x}", Sha256::digest(&bytes));
+                if actual != sha256 {
+                    return Err(ProtocolError::Malformed(format!("file {sha256} arrived with hash {actual}")));
+                }
+                missing.swap_remove(pos);
+                cache.insert(sha256, bytes);
+            }
+            Message::Refused { reason } => return Err(ProtocolError::Refused(reason)),
+            other => return Err(ProtocolError::Unexpected { expected: "File", got: other.kind().into() }),
+        }
+    }
+    Ok(())
+}
