@@ -129,6 +129,9 @@ pub struct RenderArgs {
     /// Allow remote links without a secret (anyone who can reach the port can join or be driven).
     #[arg(long)]
     pub insecure: bool,
+    /// A worker that sends nothing (not even a heartbeat) for this many seconds is presumed hung and dropped.
+    #[arg(long, default_value_t = 15.0, value_name = "SECONDS")]
+    pub worker_timeout: f64,
     /// Seconds between a local worker's snapshots.
     #[arg(long, default_value_t = 1.0, value_name = "SECONDS")]
     pub snapshot_interval: f64,

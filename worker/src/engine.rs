@@ -33,6 +33,9 @@ pub struct EngineConfig {
     pub phases_per_deal: u32,
     /// Cores to pin to; thread t of group k runs on `cores[(k · g + t) mod len]`.
     pub cores: Vec<usize>,
+    /// Worker processes rendering the same image, and this one's index (for the radius schedule).
+    pub process_sharers: u32,
+    pub process_index: u32,
 }
 
 /// Why an engine configuration cannot run.
@@ -84,6 +87,8 @@ impl EngineConfig {
             tile_size: if groups > 16 { 64 } else { 32 },
             phases_per_deal: 6,
             cores,
+            process_sharers: 1,
+            process_index: 0,
         })
     }
 
@@ -205,6 +210,8 @@ impl<'s> ParallelEngine<'s> {
             shared_maps: self.config.shared_maps,
             stop: &stop,
             deal: self.deals,
+            process_sharers: self.config.process_sharers.max(1) as u64,
+            process_index: self.config.process_index as u64,
         };
         let k = self.config.phases_per_deal as u64;
         let (tx, rx) = mpsc::channel();

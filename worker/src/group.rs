@@ -69,6 +69,10 @@ pub struct RoundContext<'a> {
     pub shared_maps: bool,
     pub stop: &'a AtomicBool,
     pub deal: u64,
+    /// Processes rendering the same pixels (three-level, combination) and this one's index among them: the
+    /// radius schedule counts their phases too, assuming they progress alike.
+    pub process_sharers: u64,
+    pub process_index: u64,
 }
 
 /// One synchronous group and its buffers over its current mask.
@@ -209,7 +213,9 @@ impl Group {
                         backward_diffuse_depth: bdd,
                         radius,
                         // Phases of this pixel by every group so far, assuming sharers progress alike.
-                        phase: before as u64 + sums.phases as u64 * sharers + index + 1,
+                        phase: (before as u64 + sums.phases as u64 * sharers + index) * ctx.process_sharers
+                            + ctx.process_index
+                            + 1,
                     };
                     let (x, y) = (pixel % cam.width, pixel / cam.width);
                     let mut s = Sampler::new(settings.seed, Pass::Camera, key, pixel as u64);

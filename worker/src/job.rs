@@ -63,6 +63,8 @@ pub fn engine_config(job: &Job) -> Result<EngineConfig, String> {
     if let Some(k) = spec.phases_per_deal {
         config.phases_per_deal = k;
     }
+    config.process_sharers = spec.radius_sharers.max(1);
+    config.process_index = spec.radius_index.min(config.process_sharers - 1);
     Ok(config)
 }
 

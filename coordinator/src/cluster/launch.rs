@@ -67,6 +67,9 @@ pub fn launch(
     if !(args.snapshot_interval.is_finite() && args.snapshot_interval > 0.0) {
         bail!("--snapshot-interval must be a positive number of seconds");
     }
+    if !(args.worker_timeout.is_finite() && args.worker_timeout >= 2.0) {
+        bail!("--worker-timeout must be at least 2 seconds (workers send a heartbeat every second)");
+    }
     let job = |stream: usize, cores: Option<Vec<usize>>, node: Option<u32>, interval: Duration| Job {
         scene_name: args.scene.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
         scene_text: scene_text.clone(),
@@ -82,6 +85,8 @@ pub fn launch(
             cores,
             numa_node: node,
             synthetic_topology: machine.synthetic && node.is_some(),
+            radius_sharers: 1,
+            radius_index: 0,
         },
         snapshot_interval_ms: interval.as_millis() as u64,
     };
@@ -113,6 +118,12 @@ pub fn launch(
     }
     if members.is_empty() && args.listen.is_none() {
         bail!("--remote-only needs --worker HOST:PORT or --listen ADDR");
+    }
+    // Every planned worker renders the whole image: the radius schedule counts all their phases.
+    let sharers = jobs.len().max(1) as u32;
+    for (i, j) in jobs.iter_mut().enumerate() {
+        j.engine.radius_sharers = sharers;
+        j.engine.radius_index = i as u32;
     }
     let local_secret = Secret::random();
     let local = if members.iter().any(|m| matches!(m.planned, Planned::Local { .. })) {
@@ -183,7 +194,10 @@ pub fn launch(
         local,
         public,
         remote_secret: secret,
-        timing: Timing { heartbeat: Duration::from_secs(1), peer_timeout: Duration::from_secs(15) },
+        timing: Timing {
+            heartbeat: Duration::from_secs(1),
+            peer_timeout: Duration::from_secs_f64(args.worker_timeout),
+        },
     };
     let cluster = Cluster::start(members, plan, children, scene.camera.width, scene.camera.height, settings)?;
     Ok((cluster, layout, machine))

@@ -35,6 +35,10 @@ pub struct EngineSpec {
     pub numa_node: Option<u32>,
     /// The node's cores are a synthetic topology's, mapped onto real cores modulo their count.
     pub synthetic_topology: bool,
+    /// Worker processes rendering the image, and this one's index: the radius schedule of a pixel counts
+    /// every process's phases (DESIGN §1), assuming they progress alike.
+    pub radius_sharers: u32,
+    pub radius_index: u32,
 }
 
 /// What a worker renders.

