@@ -14,7 +14,7 @@ pub struct Cli {
 #[derive(Subcommand, Debug)]
 pub enum Command {
     /// Render a scene file and write image.exr, preview.png and run.json into an output folder.
-    Render(RenderArgs),
+    Render(Box<RenderArgs>),
     /// Run every parallel method at several thread counts for a fixed time and print the paper's Table-1 rows.
     Bench(BenchArgs),
 }

@@ -12,7 +12,7 @@ use clap::Parser;
 fn main() -> std::process::ExitCode {
     let cli = cli::Cli::parse();
     let result = match cli.command {
-        cli::Command::Render(args) => render_command::run(args),
+        cli::Command::Render(args) => render_command::run(*args),
         cli::Command::Bench(args) => bench_command::run(args),
     };
     match result {
