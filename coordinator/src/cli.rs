@@ -129,6 +129,10 @@ pub struct RenderArgs {
     /// Allow remote links without a secret (anyone who can reach the port can join or be driven).
     #[arg(long)]
     pub insecure: bool,
+    /// Continue the run whose output folder is DIR from its checkpoint (combination and three-level): its
+    /// sums, phases, rays and time carry on, and results go to DIR unless --out is given.
+    #[arg(long, value_name = "DIR")]
+    pub resume: Option<PathBuf>,
     /// A worker that sends nothing (not even a heartbeat) for this many seconds is presumed hung and dropped.
     #[arg(long, default_value_t = 15.0, value_name = "SECONDS")]
     pub worker_timeout: f64,

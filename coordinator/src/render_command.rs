@@ -6,6 +6,7 @@ use crate::output_folder::{self, Reference};
 use anyhow::{bail, Context, Result};
 use clap::ValueEnum;
 use indicatif::{ProgressBar, ProgressStyle};
+use photonfarm::render::checkpoint::Checkpoint;
 use photonfarm::render::record::{HistoryEntry, RunRecord};
 use photonfarm::render::session::{self, ErrorOver, Progressive, StopReason, StopRule};
 use photonfarm::render::{memory, Engine, Method, RenderSettings};
@@ -16,6 +17,8 @@ use std::time::{Duration, Instant};
 use worker::{topology, EngineConfig, ParallelEngine, ParallelMethod};
 
 const DEFAULT_TIME_S: f64 = 30.0;
+/// The checkpoint's file name in the output folder.
+const CHECKPOINT: &str = "checkpoint.bin";
 
 pub fn run(args: RenderArgs) -> Result<()> {
     let stop = stop_rule(&args)?;
@@ -61,7 +64,36 @@ pub fn run(args: RenderArgs) -> Result<()> {
         Some(p) => Some(Reference::load(p, scene.camera.width, scene.camera.height)?),
         None => None,
     };
-    let dir = args.out.clone().unwrap_or_else(|| output_folder::default_dir(&args.scene));
+    let checkpoint = match &args.resume {
+        Some(from) => {
+            if !args.method.is_distributed() {
+                bail!(
+                    "--resume continues combination and three-level runs; --method {method_name_arg} has no checkpoint",
+                    method_name_arg =
+                        args.method.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default()
+                );
+            }
+            if args.max_depth.is_some()
+                || args.backward_diffuse_depth.is_some()
+                || args.radius_scale.is_some()
+                || args.light_paths_per_pixel.is_some()
+            {
+                bail!("a resumed run keeps the settings of its checkpoint: drop --max-depth, --backward-diffuse-depth, --radius-scale and --light-paths-per-pixel");
+            }
+            let c = Checkpoint::load(&from.join(CHECKPOINT))?;
+            if c.scene_hash != scene.hash {
+                bail!(
+                    "{} was made from another scene, or the scene or its meshes changed since",
+                    from.join(CHECKPOINT).display()
+                );
+            }
+            settings = c.settings;
+            Some(c)
+        }
+        None => None,
+    };
+    let dir =
+        args.out.clone().or_else(|| args.resume.clone()).unwrap_or_else(|| output_folder::default_dir(&args.scene));
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create the output folder {}", dir.display()))?;
 
     let interrupted = Arc::new(AtomicBool::new(false));
@@ -82,7 +114,15 @@ pub fn run(args: RenderArgs) -> Result<()> {
 
     let (mut engine, layout): (Box<dyn Progressive + '_>, String) = match parallel_method(args.method) {
         None if args.method.is_distributed() => {
-            let (cluster, layout, _) = cluster::launch::launch(&args, &scene, settings, &dir)?;
+            let resume = match &checkpoint {
+                Some(c) => Some(cluster::launch::Resume {
+                    session: c.session + 1,
+                    sums: c.sums().map_err(|e| anyhow::anyhow!("the checkpoint's sums: {e}"))?,
+                    totals: c.totals,
+                }),
+                None => None,
+            };
+            let (cluster, layout, _) = cluster::launch::launch(&args, &scene, settings, &dir, resume)?;
             (Box::new(cluster), layout)
         }
         None => (Box::new(Engine::new(&scene, settings)), "1 thread".to_string()),
@@ -101,7 +141,10 @@ pub fn run(args: RenderArgs) -> Result<()> {
             (Box::new(ParallelEngine::new(&scene, settings, config)?), layout)
         }
     };
-    let mut history: Vec<HistoryEntry> = Vec::new();
+    let session_number = checkpoint.as_ref().map_or(1, |c| c.session + 1);
+    let elapsed_before = Duration::from_secs_f64(checkpoint.as_ref().map_or(0.0, |c| c.elapsed_s));
+    let mut history: Vec<HistoryEntry> = checkpoint.as_ref().map(|c| c.history.clone()).unwrap_or_default();
+    let distributed = args.method.is_distributed();
     let start = Instant::now();
     let mut last_save = Instant::now();
     let mut save_error: Option<anyhow::Error> = None;
@@ -122,16 +165,36 @@ pub fn run(args: RenderArgs) -> Result<()> {
         stop_reason: reason.to_string(),
         totals: engine.totals(),
         stage_seconds: engine.stage_seconds(),
-        wall_time_s: start.elapsed().as_secs_f64(),
+        wall_time_s: elapsed_before.as_secs_f64() + start.elapsed().as_secs_f64(),
         peak_memory_bytes: memory::peak_rss_bytes(),
         bytes_per_pixel: engine.bytes_per_pixel(),
         error: engine.sums().error(),
+        pixel_phases: engine.sums().pixels.iter().map(|p| p.phases as u64).sum(),
+        session: session_number,
         true_error: reference.as_ref().map(|r| r.compare(engine.sums())),
         history: history.to_vec(),
         workers: engine.workers(),
     };
 
-    let reason = session::run(engine.as_mut(), &stop, &interrupted, &mut history, Duration::ZERO, |engine, history| {
+    let save_all = |engine: &dyn Progressive, history: &[HistoryEntry], reason: &str| -> Result<()> {
+        if distributed {
+            // The checkpoint first: it is what a resumed run needs.
+            let elapsed = elapsed_before.as_secs_f64() + start.elapsed().as_secs_f64();
+            Checkpoint::new(
+                engine.sums(),
+                &scene.hash,
+                &method_name,
+                *engine.settings(),
+                session_number,
+                elapsed,
+                engine.totals(),
+                history,
+            )
+            .save(&dir.join(CHECKPOINT))?;
+        }
+        output_folder::save(&dir, engine.sums(), &record_of(engine, history, reason))
+    };
+    let reason = session::run(engine.as_mut(), &stop, &interrupted, &mut history, elapsed_before, |engine, history| {
         let Some(entry) = history.last() else { return };
         let secs = entry.time_s.max(1e-9);
         let rays = (entry.backward_rays + entry.forward_rays) as f64;
@@ -139,28 +202,51 @@ pub fn run(args: RenderArgs) -> Result<()> {
             ErrorOver::Unlit => entry.delta_unlit,
             ErrorOver::All => entry.delta_all,
         };
+        let workers = engine.workers().map(|w| {
+            let count = |p: &dyn Fn(&str) -> bool| w.iter().filter(|w| p(&w.state)).count();
+            format!(
+                "  workers: {} running, {} connecting, {} finished, {} lost",
+                count(&|s| s == "running"),
+                count(&|s| s == "connecting"),
+                count(&|s| s == "finished"),
+                count(&|s| s.starts_with("lost")),
+            )
+        });
         bar.set_message(format!(
-            "phase {}  {:.2} Mrays/s  δ {} {}",
+            "phase {}  {:.2} Mrays/s  δ {} {}{}",
             entry.phase,
             rays / secs / 1e6,
             if delta.is_finite() { format!("{:.2}%", 100.0 * delta) } else { "–".to_string() },
             if stop.error_over == ErrorOver::Unlit { "(unlit pixels)" } else { "(all pixels)" },
+            workers.unwrap_or_default(),
         ));
         if last_save.elapsed() >= save_interval && save_error.is_none() {
             last_save = Instant::now();
-            if let Err(e) = output_folder::save(&dir, engine.sums(), &record_of(engine, history, "running")) {
+            if let Err(e) = save_all(engine, history, "running") {
                 save_error = Some(e);
             }
         }
     });
     bar.set_message("stopping: collecting the last completed phases");
     engine.finish();
+    if distributed {
+        // The last snapshots arrived after the run loop ended: one more history entry for them.
+        let (e, t) = (engine.sums().error(), engine.totals());
+        history.push(HistoryEntry {
+            phase: t.phases,
+            time_s: elapsed_before.as_secs_f64() + start.elapsed().as_secs_f64(),
+            delta_all: e.delta_all,
+            delta_unlit: e.delta_unlit,
+            backward_rays: t.backward_rays,
+            forward_rays: t.forward_rays,
+        });
+    }
     bar.finish_and_clear();
     if let Some(e) = save_error {
         return Err(e.context("writing the periodic results failed; the run was stopped"));
     }
+    save_all(engine.as_ref(), &history, reason.name())?;
     let record = record_of(engine.as_ref(), &history, reason.name());
-    output_folder::save(&dir, engine.sums(), &record)?;
     let e = record.error;
     println!(
         "{} phases in {:.1} s ({}), {:.2} M backward + {:.2} M forward rays, δ {:.2}% (unlit pixels) / {:.2}% (all pixels)",

@@ -189,3 +189,46 @@ fn a_frozen_worker_is_dropped_after_the_heartbeat_timeout() {
     assert!(states.iter().any(|s| s.contains("presumed hung")), "{states:?}");
     assert!(states.iter().any(|s| s == "finished"), "{states:?}");
 }
+
+#[test]
+fn a_coordinator_killed_mid_run_resumes_without_losing_or_recounting_a_checkpointed_phase() {
+    let dir = scratch_dir("resume");
+    let scene = small_cornell(&dir, 40);
+    let (single, out) = (dir.join("single"), dir.join("resumed"));
+    let three = ["--method", "three-level", "--topology", TWO_NODES, "--group-size", "1", "--phases", "1200"];
+    let mut c = coordinator(&scene, &out, &three);
+    c.args(["--save-interval", "0.5", "--seed", "31"]);
+    let mut child = c.stdout(Stdio::null()).stderr(Stdio::null()).spawn().unwrap();
+    let workers = wait_for_workers(child.id(), 2);
+    // Kill the coordinator once a checkpoint with some phases exists, well before the run could end.
+    let start = Instant::now();
+    while !out.join("checkpoint.bin").exists() && start.elapsed() < Duration::from_secs(20) {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    std::thread::sleep(Duration::from_millis(700));
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let checkpoint = photonfarm::render::checkpoint::Checkpoint::load(&out.join("checkpoint.bin")).unwrap();
+    let before: u64 = checkpoint.sums().unwrap().pixels.iter().map(|p| p.phases as u64).sum();
+    assert!(before > 0, "the checkpoint holds no phase");
+    assert!(before < 1200 * 1600, "the first session finished before it was killed");
+    // Its workers notice the coordinator is gone and exit.
+    let start = Instant::now();
+    while workers.iter().any(|w| Path::new(&format!("/proc/{w}")).exists()) {
+        assert!(start.elapsed() < Duration::from_secs(30), "workers outlived their coordinator");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let mut c = coordinator(&scene, &out, &three);
+    c.arg("--resume").arg(&out);
+    run_ok(c);
+    let r = record(&out);
+    assert_eq!(r["session"], 2);
+    assert!(r["error"]["min_phases"].as_u64().unwrap() >= 1200);
+    let added: u64 = r["workers"].as_array().unwrap().iter().map(|w| w["pixel_phases"].as_u64().unwrap()).sum();
+    // Every checkpointed phase is in the final image once, with every phase merged after the resume.
+    assert_eq!(r["pixel_phases"].as_u64().unwrap(), before + added);
+    run_ok(coordinator(&scene, &single, &["--method", "pbpm", "--phases", "1200", "--seed", "32"]));
+    let z2 = mean_z2(&single, &out);
+    eprintln!("resumed run against one process: mean z² {z2:.3}");
+    assert!(z2 < 1.5, "mean z² {z2:.3}");
+}

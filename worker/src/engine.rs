@@ -36,6 +36,8 @@ pub struct EngineConfig {
     /// Worker processes rendering the same image, and this one's index (for the radius schedule).
     pub process_sharers: u32,
     pub process_index: u32,
+    /// Phases every pixel had before this run (a resumed run), for the radius schedule.
+    pub phase_offset: u32,
 }
 
 /// Why an engine configuration cannot run.
@@ -89,6 +91,7 @@ impl EngineConfig {
             cores,
             process_sharers: 1,
             process_index: 0,
+            phase_offset: 0,
         })
     }
 
@@ -212,6 +215,7 @@ impl<'s> ParallelEngine<'s> {
             deal: self.deals,
             process_sharers: self.config.process_sharers.max(1) as u64,
             process_index: self.config.process_index as u64,
+            phase_offset: self.config.phase_offset as u64,
         };
         let k = self.config.phases_per_deal as u64;
         let (tx, rx) = mpsc::channel();

@@ -73,6 +73,8 @@ pub struct RoundContext<'a> {
     /// radius schedule counts their phases too, assuming they progress alike.
     pub process_sharers: u64,
     pub process_index: u64,
+    /// Phases every pixel had before this run (a resumed run).
+    pub phase_offset: u64,
 }
 
 /// One synchronous group and its buffers over its current mask.
@@ -215,6 +217,7 @@ impl Group {
                         // Phases of this pixel by every group so far, assuming sharers progress alike.
                         phase: (before as u64 + sums.phases as u64 * sharers + index) * ctx.process_sharers
                             + ctx.process_index
+                            + ctx.phase_offset
                             + 1,
                     };
                     let (x, y) = (pixel % cam.width, pixel / cam.width);

@@ -65,6 +65,7 @@ pub fn engine_config(job: &Job) -> Result<EngineConfig, String> {
     }
     config.process_sharers = spec.radius_sharers.max(1);
     config.process_index = spec.radius_index.min(config.process_sharers - 1);
+    config.phase_offset = spec.phase_offset;
     Ok(config)
 }
 

@@ -47,13 +47,28 @@ fn remote_secret(args: &RenderArgs) -> Result<Secret> {
     )
 }
 
+/// What a resumed run continues from.
+pub struct Resume {
+    pub session: u32,
+    pub sums: photonfarm::accumulation::Accumulator,
+    pub totals: photonfarm::render::RayTotals,
+}
+
 /// Launches the local workers and the network, and returns the cluster with a description of its layout.
 pub fn launch(
     args: &RenderArgs,
     scene: &Scene,
     settings: RenderSettings,
     dir: &Path,
+    resume: Option<Resume>,
 ) -> Result<(Cluster, String, MachineTopology)> {
+    // Streams of a resumed run never repeat an earlier session's.
+    let session = resume.as_ref().map_or(1, |r| r.session);
+    let stream_base = (session as usize - 1) << 16;
+    let phase_offset = resume.as_ref().map_or(0, |r| {
+        let n = r.sums.pixels.len().max(1) as u64;
+        (r.sums.pixels.iter().map(|p| p.phases as u64).sum::<u64>() / n) as u32
+    });
     let real_cores = worker::topology::all_cores();
     let machine = topology::detect(args.topology.as_deref(), &real_cores)?;
     let secret = remote_secret(args)?;
@@ -76,7 +91,7 @@ pub fn launch(
         files: files.clone(),
         scene_hash: scene.hash.clone(),
         settings,
-        stream: stream as u64,
+        stream: (stream_base + stream) as u64,
         engine: EngineSpec {
             method: inner,
             group_size: args.group_size,
@@ -87,6 +102,7 @@ pub fn launch(
             synthetic_topology: machine.synthetic && node.is_some(),
             radius_sharers: 1,
             radius_index: 0,
+            phase_offset,
         },
         snapshot_interval_ms: interval.as_millis() as u64,
     };
@@ -199,6 +215,7 @@ pub fn launch(
             peer_timeout: Duration::from_secs_f64(args.worker_timeout),
         },
     };
-    let cluster = Cluster::start(members, plan, children, scene.camera.width, scene.camera.height, settings)?;
+    let initial = resume.map(|r| (r.sums, r.totals));
+    let cluster = Cluster::start(members, plan, children, scene.camera.width, scene.camera.height, settings, initial)?;
     Ok((cluster, layout, machine))
 }

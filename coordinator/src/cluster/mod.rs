@@ -45,6 +45,8 @@ pub struct WorkerView {
 /// A running distributed render.
 pub struct Cluster {
     sums: Accumulator,
+    /// Totals of earlier sessions (a resumed run).
+    base_totals: RayTotals,
     settings: RenderSettings,
     workers: Vec<WorkerView>,
     events: Receiver<Event>,
@@ -77,7 +79,15 @@ impl Cluster {
         width: u32,
         height: u32,
         settings: RenderSettings,
+        initial: Option<(Accumulator, RayTotals)>,
     ) -> Result<Self> {
+        let (sums, base_totals) = match initial {
+            Some((s, t)) => {
+                anyhow::ensure!((s.width, s.height) == (width, height), "the checkpoint is for another image size");
+                (s, t)
+            }
+            None => (Accumulator::new(width, height), RayTotals::default()),
+        };
         let accepts_joins = plan.public.is_some();
         let (events_tx, events) = std::sync::mpsc::channel();
         let (control_tx, control_rx) = tokio::sync::mpsc::unbounded_channel();
@@ -108,7 +118,8 @@ impl Cluster {
             })
             .collect();
         Ok(Cluster {
-            sums: Accumulator::new(width, height),
+            sums,
+            base_totals,
             settings,
             workers,
             events,
@@ -309,7 +320,7 @@ impl Progressive for Cluster {
     }
 
     fn totals(&self) -> RayTotals {
-        let mut t = RayTotals::default();
+        let mut t = self.base_totals;
         for w in &self.workers {
             let s = w.record.totals;
             t.phases += s.phases;

@@ -176,7 +176,7 @@ pub async fn run(
                 next += 1;
                 let _ = events.send(Event::Joined { worker, name: peer.name.clone(), address: addr.to_string() });
                 let mut job = plan2.join_template.clone();
-                job.stream = worker as u64;
+                job.stream = (job.stream & !0xffff) | worker as u64;
                 let (plan, events, link_tx) = (plan2.clone(), events.clone(), link_tx.clone());
                 tokio::spawn(async move { drive(worker, conn, job, plan, events, link_tx).await });
             }

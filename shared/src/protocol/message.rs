@@ -39,6 +39,8 @@ pub struct EngineSpec {
     /// every process's phases (DESIGN §1), assuming they progress alike.
     pub radius_sharers: u32,
     pub radius_index: u32,
+    /// Phases the image already has from earlier sessions (a resumed run), added to the radius schedule's j.
+    pub phase_offset: u32,
 }
 
 /// What a worker renders.

@@ -1,6 +1,7 @@
 //! Rendering runs: settings, the single-threaded progressive engine, images from the sums, memory and the run
 //! record.
 
+pub mod checkpoint;
 pub mod engine;
 pub mod images;
 pub mod memory;

@@ -67,6 +67,10 @@ pub struct WorkerRecord {
     pub pixel_phases: u64,
 }
 
+fn first_session() -> u32 {
+    1
+}
+
 /// The record written as `run.json`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RunRecord {
@@ -95,6 +99,12 @@ pub struct RunRecord {
     pub peak_memory_bytes: Option<u64>,
     pub bytes_per_pixel: f64,
     pub error: ErrorEstimate,
+    /// Phases summed over pixels: what the image holds, whichever process rendered them.
+    #[serde(default)]
+    pub pixel_phases: u64,
+    /// The session of a resumed run (1 for a run that was never resumed).
+    #[serde(default = "first_session")]
+    pub session: u32,
     pub true_error: Option<TrueError>,
     pub history: Vec<HistoryEntry>,
     /// The worker processes of a distributed run.
