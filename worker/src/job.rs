@@ -11,7 +11,7 @@ use photonfarm::render::session::Progressive;
 use photonfarm::scene::Scene;
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 /// What the engine thread reports to the link.
@@ -72,7 +72,14 @@ pub fn engine_config(job: &Job) -> Result<EngineConfig, String> {
 /// Renders `job` until `stop` is set, calling `emit` with its events (it returns false when nobody listens any
 /// more). Snapshots are deltas since the previous one, so a snapshot that never arrives is lost, never counted
 /// twice.
-pub fn run(scene: &Scene, job: &Job, stop: &AtomicBool, mut emit: impl FnMut(JobEvent) -> bool) {
+/// `interval_ms` is the time between snapshots; the link lengthens it on slow links.
+pub fn run(
+    scene: &Scene,
+    job: &Job,
+    stop: &AtomicBool,
+    interval_ms: &AtomicU64,
+    mut emit: impl FnMut(JobEvent) -> bool,
+) {
     let config = match engine_config(job) {
         Ok(c) => c,
         Err(e) => {
@@ -108,7 +115,6 @@ pub fn run(scene: &Scene, job: &Job, stop: &AtomicBool, mut emit: impl FnMut(Job
     if !emit(JobEvent::Started(info)) {
         return;
     }
-    let interval = Duration::from_millis(job.snapshot_interval_ms.max(1));
     let mut base = vec![PixelSums::default(); engine.sums().pixels.len()];
     let mut seq = 0;
     let mut last = Instant::now();
@@ -118,10 +124,17 @@ pub fn run(scene: &Scene, job: &Job, stop: &AtomicBool, mut emit: impl FnMut(Job
             engine.run_round(stop, None);
         }
         let stopping = stop.load(Ordering::Acquire);
+        let interval = Duration::from_millis(interval_ms.load(Ordering::Relaxed).max(1));
         if stopping || last.elapsed() >= interval {
             seq += 1;
             let current = &engine.sums().pixels;
-            let snapshot = Snapshot { seq, totals: engine.totals(), delta: encode_delta(current, &base) };
+            let snapshot = Snapshot {
+                seq,
+                totals: engine.totals(),
+                delta: encode_delta(current, &base),
+                interval_ms: interval.as_millis() as u64,
+                previous_send_ms: 0,
+            };
             base.copy_from_slice(current);
             last = Instant::now();
             if !emit(JobEvent::Snapshot(snapshot)) {

@@ -6,7 +6,7 @@ use photonfarm::protocol::auth::{handshake, Peer};
 use photonfarm::protocol::{Connection, Job, Message, ProtocolError, Role, Secret};
 use sha2::{Digest, Sha256};
 use std::collections::BTreeMap;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::sync::mpsc;
@@ -81,12 +81,16 @@ pub async fn serve_job(
     };
 
     let stop = Arc::new(AtomicBool::new(false));
+    // Snapshot interval: the job's, lengthened so that sending a snapshot takes at most 5% of it.
+    let floor_ms = job.snapshot_interval_ms.max(1);
+    let interval_ms = Arc::new(AtomicU64::new(floor_ms));
+    let mut previous_send_ms = 0u64;
     let (events_tx, mut events) = mpsc::unbounded_channel();
     let engine = {
-        let (job, stop) = (job.clone(), stop.clone());
+        let (job, stop, interval_ms) = (job.clone(), stop.clone(), interval_ms.clone());
         std::thread::Builder::new()
             .name("job".into())
-            .spawn(move || job::run(&scene, &job, &stop, |e| events_tx.send(e).is_ok()))
+            .spawn(move || job::run(&scene, &job, &stop, &interval_ms, |e| events_tx.send(e).is_ok()))
             .map_err(|e| LinkError::Job(format!("cannot start the engine thread: {e}")))?
     };
     // Whatever ends the link, the engine stops.
@@ -122,10 +126,18 @@ pub async fn serve_job(
             event = events.recv(), if !finished => {
                 let message = match event {
                     Some(JobEvent::Started(info)) => Message::Started(info),
-                    Some(JobEvent::Snapshot(s)) => {
+                    Some(JobEvent::Snapshot(mut s)) => {
                         sent += 1;
                         last_seq = s.seq;
-                        Message::Snapshot(s)
+                        s.previous_send_ms = previous_send_ms;
+                        let t = Instant::now();
+                        writer.write(&Message::Snapshot(s)).await?;
+                        // The write returns once the kernel holds the tail of the frame: on a slow link that is
+                        // close to the transfer time.
+                        previous_send_ms = t.elapsed().as_millis() as u64;
+                        interval_ms.store(floor_ms.max(20 * previous_send_ms), Ordering::Relaxed);
+                        last_sent = Instant::now();
+                        continue;
                     }
                     Some(JobEvent::Finished) => {
                         finished = true;

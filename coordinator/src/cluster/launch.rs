@@ -107,8 +107,8 @@ pub fn launch(
         snapshot_interval_ms: interval.as_millis() as u64,
     };
     let local_interval = Duration::from_secs_f64(args.snapshot_interval);
-    // Remote links start at a longer interval so that transfers stay a small part of it.
-    let remote_interval = local_interval.max(Duration::from_secs(5));
+    // Remote workers start at the same interval and lengthen it on slow links (see worker::link).
+    let remote_interval = local_interval;
     let mut members = Vec::new();
     let mut jobs = Vec::new();
     if !args.remote_only {

@@ -206,6 +206,8 @@ impl Cluster {
                         v.record.snapshot_bytes += frame_bytes;
                         v.record.totals = snapshot.totals;
                         v.record.pixel_phases += summary.pixel_phases;
+                        v.record.snapshot_interval_s = snapshot.interval_ms as f64 / 1000.0;
+                        v.record.last_send_s = snapshot.previous_send_ms as f64 / 1000.0;
                         self.send(Control::Ack { worker, seq: snapshot.seq });
                         return true;
                     }

@@ -83,6 +83,9 @@ pub struct Snapshot {
     pub totals: RayTotals,
     /// Per-pixel sums added since the previous snapshot (see `snapshot::encode_delta`).
     pub delta: Vec<u8>,
+    /// The snapshot interval the worker uses now, and how long sending its previous snapshot took (ms).
+    pub interval_ms: u64,
+    pub previous_send_ms: u64,
 }
 
 /// The protocol's messages.

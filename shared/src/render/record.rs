@@ -65,6 +65,10 @@ pub struct WorkerRecord {
     pub totals: RayTotals,
     /// Pixel-phases merged (Σ over pixels of the phases it added).
     pub pixel_phases: u64,
+    /// The worker's snapshot interval at its last snapshot, and how long it took to send the one before (s):
+    /// the interval grows on slow links so that sending stays under 5% of it.
+    pub snapshot_interval_s: f64,
+    pub last_send_s: f64,
 }
 
 fn first_session() -> u32 {
