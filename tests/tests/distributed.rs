@@ -232,3 +232,59 @@ fn a_coordinator_killed_mid_run_resumes_without_losing_or_recounting_a_checkpoin
     eprintln!("resumed run against one process: mean z² {z2:.3}");
     assert!(z2 < 1.5, "mean z² {z2:.3}");
 }
+
+#[test]
+fn hostile_connections_are_refused_and_a_late_worker_joins_without_disturbing_the_job() {
+    use std::io::Write;
+    let dir = scratch_dir("hostile");
+    let scene = small_cornell(&dir, 40);
+    let out = dir.join("out");
+    let (secret, wrong) = (dir.join("secret"), dir.join("wrong"));
+    std::fs::write(&secret, "the right secret, long enough").unwrap();
+    std::fs::write(&wrong, "a wrong secret, also long enough").unwrap();
+    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let addr = format!("127.0.0.1:{port}");
+    let mut c = coordinator(&scene, &out, &["--method", "three-level", "--time", "9", "--listen", &addr]);
+    c.arg("--secret-file").arg(&secret);
+    let child = c.stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
+    let start = Instant::now();
+    let connect = || loop {
+        match std::net::TcpStream::connect(&addr) {
+            Ok(s) => break s,
+            Err(_) if start.elapsed() < Duration::from_secs(15) => std::thread::sleep(Duration::from_millis(50)),
+            Err(e) => panic!("the coordinator does not listen on {addr}: {e}"),
+        }
+    };
+    // Random bytes, a 4 GB length prefix, a truncated frame, a Hello of another protocol version.
+    connect().write_all(&[0x13, 0x37, 0xde, 0xad, 0xbe, 0xef, 0x00, 0x42, 0x99]).unwrap();
+    connect().write_all(&u32::MAX.to_be_bytes()).unwrap();
+    connect().write_all(&[0, 0, 0, 200, 1, 2, 3]).unwrap();
+    let hello = photonfarm::protocol::message::encode(&photonfarm::protocol::Message::Hello {
+        version: photonfarm::protocol::PROTOCOL_VERSION + 7,
+        role: photonfarm::protocol::Role::Worker,
+        nonce: [1; 32],
+        name: "from the future".into(),
+    })
+    .unwrap();
+    let mut s = connect();
+    s.write_all(&(hello.len() as u32).to_be_bytes()).unwrap();
+    s.write_all(&hello).unwrap();
+    // A worker with the wrong secret is refused and says why.
+    let refused = Command::new(binary("worker")).args(["join", &addr, "--name", "intruder", "--secret-file"]).arg(&wrong).output().unwrap();
+    assert!(!refused.status.success());
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("authentication failed"), "{}", String::from_utf8_lossy(&refused.stderr));
+    // A worker with the right secret joins the running job.
+    let joined = Command::new(binary("worker")).args(["join", &addr, "--name", "late", "--secret-file"]).arg(&secret).output().unwrap();
+    assert!(joined.status.success(), "{}", String::from_utf8_lossy(&joined.stderr));
+    let o = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stderr.matches("refused a connection").count() >= 5, "{stderr}");
+    let r = record(&out);
+    assert_eq!(r["stop_reason"], "time");
+    let workers = r["workers"].as_array().unwrap();
+    let late = workers.iter().find(|w| w["name"] == "late").expect("the late worker is in the record");
+    assert_eq!(late["state"], "finished", "{late}");
+    assert!(late["pixel_phases"].as_u64().unwrap() > 0, "{late}");
+    assert!(workers.iter().all(|w| w["state"] == "finished"), "{workers:?}");
+}
