@@ -35,11 +35,82 @@ struct Row {
     wall_s: f64,
     /// Fraction of thread time idle at and between synchronisation rounds (parallel engines).
     idle: Option<f64>,
+    /// Distributed runs: mean bytes per snapshot and per second per worker.
+    snapshot_bytes: Option<(f64, f64)>,
+}
+
+/// A combination or three-level run as a user starts it (`coordinator render`, real worker processes), on
+/// `threads` synthetic NUMA nodes of one core each, read back from its run.json.
+fn distributed_run(
+    name: &str,
+    method: MethodArg,
+    threads: usize,
+    repeat: u32,
+    args: &BenchArgs,
+    dir: &Path,
+) -> Result<Row> {
+    let out = dir.join("runs").join(format!("{name}-{:?}-{threads}-{repeat}", method).to_lowercase());
+    let method_name = method.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default();
+    let exe = std::env::current_exe().context("cannot find this program")?;
+    let mut cmd = std::process::Command::new(exe);
+    cmd.args(["render", &format!("scenes/{name}.toml"), "--quiet", "--method", &method_name])
+        .args(["--topology", &format!("pack:1 numa:{threads} core:1 pu:1")])
+        .args(["--group-size", &args.group_size.to_string(), "--time", &args.time.to_string()])
+        .args(["--seed", &(args.seed + repeat as u64).to_string()])
+        .arg("--out")
+        .arg(&out)
+        .stdout(std::process::Stdio::null());
+    let reference = PathBuf::from("scenes/references").join(format!("{name}-path.exr"));
+    if reference.exists() {
+        cmd.arg("--reference").arg(&reference);
+    }
+    let status = cmd.status().context("cannot start the render")?;
+    if !status.success() {
+        bail!("the {method_name} run on {name} failed ({status})");
+    }
+    let r: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("run.json"))?)?;
+    let f = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
+    let workers = r["workers"].as_array().cloned().unwrap_or_default();
+    let wall = f(&r["wall_time_s"]).max(1e-9);
+    let (snaps, bytes): (f64, f64) =
+        workers.iter().fold((0.0, 0.0), |(n, b), w| (n + f(&w["snapshots"]), b + f(&w["snapshot_bytes"])));
+    Ok(Row {
+        scene: name.to_string(),
+        method: method_name,
+        repeat,
+        threads,
+        layout: format!("{} processes", workers.len()),
+        phases: r["totals"]["phases"].as_u64().unwrap_or(0),
+        backward_rays: r["totals"]["backward_rays"].as_u64().unwrap_or(0),
+        forward_rays: r["totals"]["forward_rays"].as_u64().unwrap_or(0),
+        merges: r["totals"]["merges"].as_u64().unwrap_or(0),
+        delta_unlit: f(&r["error"]["delta_unlit"]),
+        delta_all: f(&r["error"]["delta_all"]),
+        true_unlit: r["true_error"]["rmse_unlit"].as_f64(),
+        true_all: r["true_error"]["rmse_all"].as_f64(),
+        bytes_per_pixel: f(&r["bytes_per_pixel"]),
+        wall_s: wall,
+        idle: None,
+        snapshot_bytes: Some((bytes / snaps.max(1.0), bytes / wall / workers.len().max(1) as f64)),
+    })
 }
 
 impl Row {
     fn rays(&self) -> f64 {
         (self.backward_rays + self.forward_rays) as f64
+    }
+
+    /// One progress line per finished run.
+    fn announce(&self) {
+        eprintln!(
+            "{} {} {} threads, run {}: {:.2} M rays, δ unlit {:.2}%",
+            self.scene,
+            self.method,
+            self.threads,
+            self.repeat + 1,
+            self.rays() / 1e6,
+            100.0 * self.delta_unlit
+        );
     }
 }
 
@@ -58,9 +129,6 @@ pub fn run(args: BenchArgs) -> Result<()> {
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let interrupted = AtomicBool::new(false);
     let mut rows: Vec<Row> = Vec::new();
-    if let Some(m) = args.methods.iter().find(|m| m.is_distributed()) {
-        bail!("the bench runs the in-process methods (pbpm, path, sync, async, two-level); {m:?} runs worker processes: time it with `coordinator render --method three-level`");
-    }
     if args.repeats == 0 {
         bail!("--repeats must be at least 1");
     }
@@ -79,6 +147,12 @@ pub fn run(args: BenchArgs) -> Result<()> {
             for &method in &args.methods {
                 for &threads in &args.threads {
                     let seed = args.seed + repeat as u64;
+                    if method.is_distributed() {
+                        let row = distributed_run(name, method, threads, repeat, &args, &dir)?;
+                        row.announce();
+                        rows.push(row);
+                        continue;
+                    }
                     let estimator = if method == MethodArg::Path { Method::Path } else { Method::Pbpm };
                     let settings = RenderSettings::for_scene(&scene, estimator, seed);
                     let (mut engine, layout): (Box<dyn Progressive + '_>, String) = match parallel_method(method) {
@@ -122,20 +196,13 @@ pub fn run(args: BenchArgs) -> Result<()> {
                         true_all: truth.as_ref().map(|x| x.rmse_all),
                         bytes_per_pixel: engine.bytes_per_pixel(),
                         wall_s: history.last().map(|h| h.time_s).unwrap_or(0.0),
+                        snapshot_bytes: None,
                         idle: engine.stage_seconds().map(|s| {
                             let total = s.backward + s.build + s.forward + s.closing + s.waiting + s.between_rounds;
                             (s.waiting + s.between_rounds) / total.max(1e-12)
                         }),
                     };
-                    eprintln!(
-                        "{} {} {} threads, run {}: {:.2} M rays, δ unlit {:.2}%",
-                        row.scene,
-                        row.method,
-                        row.threads,
-                        repeat + 1,
-                        row.rays() / 1e6,
-                        100.0 * row.delta_unlit
-                    );
+                    row.announce();
                     rows.push(row);
                 }
             }
@@ -164,6 +231,7 @@ fn mean(values: impl Iterator<Item = f64>) -> f64 {
 /// per thread of the same method at the first thread count.
 fn report(rows: &[Row], args: &BenchArgs) -> String {
     let mut s = String::new();
+    let snapshot_rows: Vec<&Row> = rows.iter().filter(|r| r.snapshot_bytes.is_some()).collect();
     let _ = writeln!(
         s,
         "{} run(s) of {} s per configuration; speedup = rays traced / (rays per thread of the same method at {} thread(s)); \
@@ -208,6 +276,24 @@ fn report(rows: &[Row], args: &BenchArgs) -> String {
             mean(group.iter().map(|r| r.bytes_per_pixel)),
             pct(opt_mean(&|r| r.idle)),
         );
+    }
+    if !snapshot_rows.is_empty() {
+        let _ = writeln!(s, "\nDistributed runs (one worker process per synthetic NUMA node of one core):\n");
+        let _ = writeln!(s, "| scene | method | threads | rays/s | MB per snapshot | KB/s per worker |");
+        let _ = writeln!(s, "|---|---|---|---|---|---|");
+        for r in snapshot_rows {
+            let (per, rate) = r.snapshot_bytes.unwrap_or_default();
+            let _ = writeln!(
+                s,
+                "| {} | {} | {} | {:.2} M | {:.2} | {:.0} |",
+                r.scene,
+                r.method,
+                r.threads,
+                r.rays() / r.wall_s / 1e6,
+                per / 1e6,
+                rate / 1e3
+            );
+        }
     }
     s
 }

@@ -245,6 +245,11 @@ pub fn run(args: RenderArgs) -> Result<()> {
     if let Some(e) = save_error {
         return Err(e.context("writing the periodic results failed; the run was stopped"));
     }
+    if reason == StopReason::NoWorkers && engine.sums().pixels.iter().all(|p| p.phases == 0) {
+        let why: Vec<String> =
+            engine.workers().unwrap_or_default().iter().map(|w| format!("{}: {}", w.name, w.state)).collect();
+        bail!("no worker rendered anything ({})", why.join("; "));
+    }
     save_all(engine.as_ref(), &history, reason.name())?;
     let record = record_of(engine.as_ref(), &history, reason.name());
     let e = record.error;

@@ -51,16 +51,22 @@ fn an_insecure_peer_cannot_pass_for_one_that_knows_the_secret() {
     assert!(matches!(c, Err(ProtocolError::Authentication)), "{c:?}");
 }
 
+/// A coordinator that runs one handshake on a loopback port; returns the port and the handshake's outcome.
+async fn coordinator_handshake() -> (std::net::SocketAddr, tokio::task::JoinHandle<Result<(), ProtocolError>>) {
+    let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let server = tokio::spawn(async move {
+        let (s, _) = listener.accept().await.unwrap();
+        let mut c = Connection::new(s).unwrap();
+        handshake(&mut c, Role::Coordinator, "c", &secret("a shared secret of some length")).await.map(|_| ())
+    });
+    (addr, server)
+}
+
 #[test]
 fn another_protocol_version_is_refused_with_a_reason() {
     runtime().block_on(async {
-        let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
-        let addr = listener.local_addr().unwrap();
-        let server = tokio::spawn(async move {
-            let (s, _) = listener.accept().await.unwrap();
-            let mut c = Connection::new(s).unwrap();
-            handshake(&mut c, Role::Coordinator, "c", &secret("a shared secret of some length")).await.map(|_| ())
-        });
+        let (addr, server) = coordinator_handshake().await;
         let mut c = Connection::new(TcpStream::connect(addr).await.unwrap()).unwrap();
         c.write(&Message::Hello {
             version: PROTOCOL_VERSION + 1,
@@ -87,13 +93,7 @@ fn another_protocol_version_is_refused_with_a_reason() {
 #[test]
 fn garbage_instead_of_a_hello_ends_the_handshake_with_an_error() {
     runtime().block_on(async {
-        let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
-        let addr = listener.local_addr().unwrap();
-        let server = tokio::spawn(async move {
-            let (s, _) = listener.accept().await.unwrap();
-            let mut c = Connection::new(s).unwrap();
-            handshake(&mut c, Role::Coordinator, "c", &secret("a shared secret of some length")).await.map(|_| ())
-        });
+        let (addr, server) = coordinator_handshake().await;
         let mut s = TcpStream::connect(addr).await.unwrap();
         // A length prefix of 3.9 GB, then close.
         s.write_all(&[0xe8, 0xd4, 0xa5, 0x10]).await.unwrap();

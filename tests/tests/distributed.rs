@@ -94,7 +94,7 @@ fn wait_for_workers(pid: u32, n: usize) -> Vec<u32> {
 }
 
 #[test]
-fn three_level_on_two_synthetic_nodes_converges_to_the_single_process_image() {
+fn three_level_and_combination_on_two_synthetic_nodes_converge_to_the_single_process_image() {
     let dir = scratch_dir("three-level");
     let scene = small_cornell(&dir, 40);
     let (single, three) = (dir.join("single"), dir.join("three"));
@@ -118,6 +118,18 @@ fn three_level_on_two_synthetic_nodes_converges_to_the_single_process_image() {
     let z2 = mean_z2(&single, &three);
     eprintln!("three-level against one process: mean z² {z2:.3}");
     assert!(z2 < 1.5, "mean z² {z2:.3}: the images disagree beyond their error estimates");
+    // combination: one synchronous group per process.
+    let combination = dir.join("combination");
+    run_ok(coordinator(
+        &scene,
+        &combination,
+        &["--method", "combination", "--topology", TWO_NODES, "--phases", "500", "--seed", "13"],
+    ));
+    let r = record(&combination);
+    assert!(r["workers"].as_array().unwrap().iter().all(|w| w["state"] == "finished"), "{}", r["workers"]);
+    let z2 = mean_z2(&single, &combination);
+    eprintln!("combination against one process: mean z² {z2:.3}");
+    assert!(z2 < 1.5, "mean z² {z2:.3}");
 }
 
 #[test]
@@ -270,11 +282,23 @@ fn hostile_connections_are_refused_and_a_late_worker_joins_without_disturbing_th
     s.write_all(&(hello.len() as u32).to_be_bytes()).unwrap();
     s.write_all(&hello).unwrap();
     // A worker with the wrong secret is refused and says why.
-    let refused = Command::new(binary("worker")).args(["join", &addr, "--name", "intruder", "--secret-file"]).arg(&wrong).output().unwrap();
+    let refused = Command::new(binary("worker"))
+        .args(["join", &addr, "--name", "intruder", "--secret-file"])
+        .arg(&wrong)
+        .output()
+        .unwrap();
     assert!(!refused.status.success());
-    assert!(String::from_utf8_lossy(&refused.stderr).contains("authentication failed"), "{}", String::from_utf8_lossy(&refused.stderr));
+    assert!(
+        String::from_utf8_lossy(&refused.stderr).contains("authentication failed"),
+        "{}",
+        String::from_utf8_lossy(&refused.stderr)
+    );
     // A worker with the right secret joins the running job.
-    let joined = Command::new(binary("worker")).args(["join", &addr, "--name", "late", "--secret-file"]).arg(&secret).output().unwrap();
+    let joined = Command::new(binary("worker"))
+        .args(["join", &addr, "--name", "late", "--secret-file"])
+        .arg(&secret)
+        .output()
+        .unwrap();
     assert!(joined.status.success(), "{}", String::from_utf8_lossy(&joined.stderr));
     let o = child.wait_with_output().unwrap();
     let stderr = String::from_utf8_lossy(&o.stderr);

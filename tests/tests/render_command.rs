@@ -48,9 +48,23 @@ fn render_writes_layers_preview_and_a_complete_run_record() {
 }
 
 #[test]
-fn the_default_parallel_render_gives_every_pixel_at_least_the_phases_asked_for() {
+fn the_in_process_two_level_render_gives_every_pixel_at_least_the_phases_asked_for() {
     let out = scratch_dir("parallel");
-    render(&["scenes/cornell.toml", "--phases", "3", "--threads", "2", "--group-size", "1", "--quiet"], &out);
+    render(
+        &[
+            "scenes/cornell.toml",
+            "--method",
+            "two-level",
+            "--phases",
+            "3",
+            "--threads",
+            "2",
+            "--group-size",
+            "1",
+            "--quiet",
+        ],
+        &out,
+    );
     let r = record(&out);
     assert_eq!(r["method"], "two-level");
     assert_eq!(r["threads"], 2);

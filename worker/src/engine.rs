@@ -289,13 +289,15 @@ impl Progressive for ParallelEngine<'_> {
         let mut t = RayTotals::default();
         for g in &self.groups {
             let s = g.stats;
-            t.phases += s.phases;
-            t.backward_rays += s.backward_rays;
-            t.forward_rays += s.forward_rays;
-            t.light_paths += s.light_paths;
-            t.backward_photons += s.backward_photons;
-            t.merges += s.merges;
-            t.capped_light_paths += s.capped_light_paths;
+            t += RayTotals {
+                phases: s.phases,
+                backward_rays: s.backward_rays,
+                forward_rays: s.forward_rays,
+                light_paths: s.light_paths,
+                backward_photons: s.backward_photons,
+                merges: s.merges,
+                capped_light_paths: s.capped_light_paths,
+            };
         }
         t
     }

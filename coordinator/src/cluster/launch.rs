@@ -28,6 +28,10 @@ pub fn worker_program() -> Result<PathBuf> {
     Ok(path)
 }
 
+fn inner_group_size_is_invalid(args: &RenderArgs) -> bool {
+    args.method == MethodArg::ThreeLevel && ![1, 2, 4].contains(&args.group_size)
+}
+
 fn remote_secret(args: &RenderArgs) -> Result<Secret> {
     if let Some(f) = &args.secret_file {
         return Ok(Secret::from_file(f)?);
@@ -69,6 +73,9 @@ pub fn launch(
         let n = r.sums.pixels.len().max(1) as u64;
         (r.sums.pixels.iter().map(|p| p.phases as u64).sum::<u64>() / n) as u32
     });
+    if inner_group_size_is_invalid(args) {
+        bail!("the group size must be 1, 2 or 4, got {}", args.group_size);
+    }
     let real_cores = worker::topology::all_cores();
     let machine = topology::detect(args.topology.as_deref(), &real_cores)?;
     let secret = remote_secret(args)?;

@@ -324,14 +324,7 @@ impl Progressive for Cluster {
     fn totals(&self) -> RayTotals {
         let mut t = self.base_totals;
         for w in &self.workers {
-            let s = w.record.totals;
-            t.phases += s.phases;
-            t.backward_rays += s.backward_rays;
-            t.forward_rays += s.forward_rays;
-            t.light_paths += s.light_paths;
-            t.backward_photons += s.backward_photons;
-            t.merges += s.merges;
-            t.capped_light_paths += s.capped_light_paths;
+            t += w.record.totals;
         }
         t
     }

@@ -27,14 +27,27 @@ fn f64_plane_mut(p: &mut PixelSums, k: usize) -> &mut f64 {
 }
 
 /// Appends `values` with byte i of every value stored together (a byte shuffle).
-fn push_shuffled<const N: usize>(out: &mut Vec<u8>, values: impl Iterator<Item = [u8; N]> + Clone) {
-    for byte in 0..N {
-        out.extend(values.clone().map(|v| v[byte]));
+fn push_shuffled<const N: usize>(out: &mut Vec<u8>, values: &[[u8; N]]) {
+    let start = out.len();
+    out.resize(start + N * values.len(), 0);
+    let planes = &mut out[start..];
+    let n = values.len();
+    for (i, v) in values.iter().enumerate() {
+        for (byte, &x) in v.iter().enumerate() {
+            planes[byte * n + i] = x;
+        }
     }
 }
 
-fn unshuffle<const N: usize>(plane: &[u8], n: usize, i: usize) -> [u8; N] {
-    std::array::from_fn(|byte| plane[byte * n + i])
+/// The values of one shuffled plane.
+fn unshuffle<const N: usize>(plane: &[u8], n: usize) -> Vec<[u8; N]> {
+    let mut out = vec![[0u8; N]; n];
+    for byte in 0..N {
+        for (v, &x) in out.iter_mut().zip(&plane[byte * n..(byte + 1) * n]) {
+            v[byte] = x;
+        }
+    }
+    out
 }
 
 /// The delta `current − base`, compressed. Pixels with no new phase cost almost nothing after compression.
@@ -45,10 +58,15 @@ pub fn encode_delta(current: &[PixelSums], base: &[PixelSums]) -> Vec<u8> {
     raw.extend_from_slice(MAGIC);
     raw.extend_from_slice(&(n as u32).to_le_bytes());
     let pairs = current.iter().zip(base);
-    push_shuffled(&mut raw, pairs.clone().map(|(c, b)| (c.phases - b.phases).to_le_bytes()));
-    push_shuffled(&mut raw, pairs.clone().map(|(c, b)| (c.camera_rays - b.camera_rays).to_le_bytes()));
+    let counts: Vec<[u8; 4]> = pairs.clone().map(|(c, b)| (c.phases - b.phases).to_le_bytes()).collect();
+    push_shuffled(&mut raw, &counts);
+    let counts: Vec<[u8; 4]> = pairs.clone().map(|(c, b)| (c.camera_rays - b.camera_rays).to_le_bytes()).collect();
+    push_shuffled(&mut raw, &counts);
+    let mut plane: Vec<[u8; 8]> = Vec::with_capacity(n);
     for k in 0..F64_PLANES {
-        push_shuffled(&mut raw, pairs.clone().map(|(c, b)| (f64_plane(c, k) - f64_plane(b, k)).to_le_bytes()));
+        plane.clear();
+        plane.extend(pairs.clone().map(|(c, b)| (f64_plane(c, k) - f64_plane(b, k)).to_le_bytes()));
+        push_shuffled(&mut raw, &plane);
     }
     zstd::bulk::compress(&raw, 1).expect("zstd compression of an in-memory buffer cannot fail")
 }
@@ -78,23 +96,23 @@ pub fn apply_delta(bytes: &[u8], sums: &mut [PixelSums]) -> Result<DeltaSummary,
     let body = &raw[8..];
     let (phases, rest) = body.split_at(4 * n);
     let (rays, planes) = rest.split_at(4 * n);
-    let value = |k: usize, i: usize| f64::from_le_bytes(unshuffle(&planes[8 * n * k..8 * n * (k + 1)], n, i));
-    for k in 0..F64_PLANES {
-        for i in 0..n {
-            let v = value(k, i);
-            if !v.is_finite() || (k >= 12 && v < 0.0) {
-                return Err(ProtocolError::Snapshot(format!("pixel {i} has an invalid sum ({v})")));
-            }
+    let values: Vec<Vec<f64>> = (0..F64_PLANES)
+        .map(|k| unshuffle::<8>(&planes[8 * n * k..8 * n * (k + 1)], n).into_iter().map(f64::from_le_bytes).collect())
+        .collect();
+    for (k, plane) in values.iter().enumerate() {
+        if let Some((i, v)) = plane.iter().enumerate().find(|(_, v)| !v.is_finite() || (k >= 12 && **v < 0.0)) {
+            return Err(ProtocolError::Snapshot(format!("pixel {i} has an invalid sum ({v})")));
         }
     }
+    let (phases, rays) = (unshuffle::<4>(phases, n), unshuffle::<4>(rays, n));
     let mut pixel_phases = 0u64;
     for (i, p) in sums.iter_mut().enumerate() {
-        let dp = u32::from_le_bytes(unshuffle(phases, n, i));
+        let dp = u32::from_le_bytes(phases[i]);
         p.phases += dp;
-        p.camera_rays += u32::from_le_bytes(unshuffle(rays, n, i));
+        p.camera_rays += u32::from_le_bytes(rays[i]);
         pixel_phases += dp as u64;
-        for k in 0..F64_PLANES {
-            *f64_plane_mut(p, k) += value(k, i);
+        for (k, plane) in values.iter().enumerate() {
+            *f64_plane_mut(p, k) += plane[i];
         }
     }
     Ok(DeltaSummary { pixel_phases, raw_bytes: expected })

@@ -28,6 +28,18 @@ pub struct RayTotals {
     pub capped_light_paths: u64,
 }
 
+impl std::ops::AddAssign for RayTotals {
+    fn add_assign(&mut self, o: RayTotals) {
+        self.phases += o.phases;
+        self.backward_rays += o.backward_rays;
+        self.forward_rays += o.forward_rays;
+        self.light_paths += o.light_paths;
+        self.backward_photons += o.backward_photons;
+        self.merges += o.merges;
+        self.capped_light_paths += o.capped_light_paths;
+    }
+}
+
 /// What one phase did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PhaseReport {
