@@ -115,6 +115,11 @@ fn a_remote_worker_behind_a_slow_link_completes_the_run_and_its_snapshot_interva
     // A 256×256 snapshot takes a noticeable time on 100 Mbit/s: the interval grows past its 1 s start so that
     // sending stays under 5% of it.
     let (interval, send) = (w["snapshot_interval_s"].as_f64().unwrap(), w["last_send_s"].as_f64().unwrap());
+    eprintln!(
+        "remote worker: {} snapshots, {:.2} MB each, last send {send:.3} s, interval {interval:.2} s",
+        w["snapshots"],
+        w["snapshot_bytes"].as_f64().unwrap() / w["snapshots"].as_f64().unwrap() / 1e6
+    );
     assert!(send > 0.05 && interval > 1.0 && send <= 0.05 * interval + 1e-3, "interval {interval} s, send {send} s");
     // The image is right: its true error agrees with its own error estimate.
     let (truth, delta) = (r["true_error"]["rmse_unlit"].as_f64().unwrap(), r["error"]["delta_unlit"].as_f64().unwrap());
