@@ -191,6 +191,21 @@ fn a_frozen_worker_is_dropped_after_the_heartbeat_timeout() {
     assert_eq!(workers.len(), 2);
     std::thread::sleep(Duration::from_secs(2));
     assert!(Command::new("kill").args(["-STOP", &workers[1].to_string()]).status().unwrap().success());
+    // Make sure the process really is stopped (state T) before relying on it.
+    let state = |pid: u32| {
+        let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+        stat.rfind(')').and_then(|c| stat[c + 2..].chars().next()).unwrap_or('?')
+    };
+    let start = Instant::now();
+    while state(workers[1]) != 'T' {
+        assert!(
+            start.elapsed() < Duration::from_secs(2),
+            "worker {} is in state {}, not stopped",
+            workers[1],
+            state(workers[1])
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
     let o = child.wait_with_output().unwrap();
     // The coordinator has killed it already; make sure, quietly.
     let _ = Command::new("kill").args(["-9", &workers[1].to_string()]).stderr(Stdio::null()).status();
@@ -198,7 +213,12 @@ fn a_frozen_worker_is_dropped_after_the_heartbeat_timeout() {
     let r = record(&out);
     let states: Vec<String> =
         r["workers"].as_array().unwrap().iter().map(|w| w["state"].as_str().unwrap().to_string()).collect();
-    assert!(states.iter().any(|s| s.contains("presumed hung")), "{states:?}");
+    assert!(
+        states.iter().any(|s| s.contains("presumed hung")),
+        "{states:?}; stopped pid {} of {workers:?}, coordinator log: {}",
+        workers[1],
+        String::from_utf8_lossy(&o.stderr)
+    );
     assert!(states.iter().any(|s| s == "finished"), "{states:?}");
 }
 
