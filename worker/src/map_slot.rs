@@ -143,7 +143,7 @@ impl<T> Drop for Guard<'_, T> {
     }
 }
 
-#[cfg(all(test, not(loom)))]
+#[cfg(all(test, not(photonfarm_loom)))]
 mod tests {
     use super::*;
 
@@ -173,7 +173,7 @@ mod tests {
     }
 }
 
-#[cfg(all(test, loom))]
+#[cfg(all(test, photonfarm_loom))]
 mod loom_tests {
     use super::*;
     use loom::sync::Arc;
