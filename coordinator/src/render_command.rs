@@ -176,7 +176,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         workers: engine.workers(),
     };
 
-    let save_all = |engine: &dyn Progressive, history: &[HistoryEntry], reason: &str| -> Result<()> {
+    let save_all = |engine: &dyn Progressive, history: &[HistoryEntry], reason: &str| -> Result<RunRecord> {
         if distributed {
             // The checkpoint first: it is what a resumed run needs.
             let elapsed = elapsed_before.as_secs_f64() + start.elapsed().as_secs_f64();
@@ -192,7 +192,9 @@ pub fn run(args: RenderArgs) -> Result<()> {
             )
             .save(&dir.join(CHECKPOINT))?;
         }
-        output_folder::save(&dir, engine.sums(), &record_of(engine, history, reason))
+        let record = record_of(engine, history, reason);
+        output_folder::save(&dir, engine.sums(), &record)?;
+        Ok(record)
     };
     let reason = session::run(engine.as_mut(), &stop, &interrupted, &mut history, elapsed_before, |engine, history| {
         let Some(entry) = history.last() else { return };
@@ -250,8 +252,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
             engine.workers().unwrap_or_default().iter().map(|w| format!("{}: {}", w.name, w.state)).collect();
         bail!("no worker rendered anything ({})", why.join("; "));
     }
-    save_all(engine.as_ref(), &history, reason.name())?;
-    let record = record_of(engine.as_ref(), &history, reason.name());
+    let record = save_all(engine.as_ref(), &history, reason.name())?;
     let e = record.error;
     println!(
         "{} phases in {:.1} s ({}), {:.2} M backward + {:.2} M forward rays, δ {:.2}% (unlit pixels) / {:.2}% (all pixels)",

@@ -65,6 +65,13 @@ fn mean_z2(a: &Path, b: &Path) -> f64 {
         / n as f64
 }
 
+/// Asserts that two outputs estimate the same image: mean z² below 1.5 (about 1 when they agree).
+fn assert_same_image(a: &Path, b: &Path, what: &str) {
+    let z2 = mean_z2(a, b);
+    eprintln!("{what}: mean z² {z2:.3}");
+    assert!(z2 < 1.5, "{what}: mean z² {z2:.3}, the images disagree beyond their error estimates");
+}
+
 /// Worker processes whose parent is `pid`.
 fn worker_children(pid: u32) -> Vec<u32> {
     let mut found = Vec::new();
@@ -115,9 +122,7 @@ fn three_level_and_combination_on_two_synthetic_nodes_converge_to_the_single_pro
     }
     assert_ne!(workers[0]["numa_node"], workers[1]["numa_node"]);
     assert!(r["error"]["min_phases"].as_u64().unwrap() >= 500);
-    let z2 = mean_z2(&single, &three);
-    eprintln!("three-level against one process: mean z² {z2:.3}");
-    assert!(z2 < 1.5, "mean z² {z2:.3}: the images disagree beyond their error estimates");
+    assert_same_image(&single, &three, "three-level against one process");
     // combination: one synchronous group per process.
     let combination = dir.join("combination");
     run_ok(coordinator(
@@ -127,9 +132,7 @@ fn three_level_and_combination_on_two_synthetic_nodes_converge_to_the_single_pro
     ));
     let r = record(&combination);
     assert!(r["workers"].as_array().unwrap().iter().all(|w| w["state"] == "finished"), "{}", r["workers"]);
-    let z2 = mean_z2(&single, &combination);
-    eprintln!("combination against one process: mean z² {z2:.3}");
-    assert!(z2 < 1.5, "mean z² {z2:.3}");
+    assert_same_image(&single, &combination, "combination against one process");
 }
 
 #[test]
@@ -160,9 +163,7 @@ fn a_worker_killed_mid_run_is_reported_and_the_run_completes_with_the_others() {
     assert_eq!((lost.len(), finished.len()), (1, 1), "{w:?}");
     // What the lost worker sent before it died stays in the image.
     assert!(lost[0]["pixel_phases"].as_u64().unwrap() > 0, "{}", lost[0]);
-    let z2 = mean_z2(&single, &out);
-    eprintln!("killed run against one process: mean z² {z2:.3}");
-    assert!(z2 < 1.5, "mean z² {z2:.3}");
+    assert_same_image(&single, &out, "killed run against one process");
 }
 
 #[test]
@@ -260,9 +261,7 @@ fn a_coordinator_killed_mid_run_resumes_without_losing_or_recounting_a_checkpoin
     // Every checkpointed phase is in the final image once, with every phase merged after the resume.
     assert_eq!(r["pixel_phases"].as_u64().unwrap(), before + added);
     run_ok(coordinator(&scene, &single, &["--method", "pbpm", "--phases", "1200", "--seed", "32"]));
-    let z2 = mean_z2(&single, &out);
-    eprintln!("resumed run against one process: mean z² {z2:.3}");
-    assert!(z2 < 1.5, "mean z² {z2:.3}");
+    assert_same_image(&single, &out, "resumed run against one process");
 }
 
 #[test]

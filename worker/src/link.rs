@@ -102,17 +102,8 @@ pub async fn serve_job(
     }
     let _stop_guard = StopOnDrop(stop.clone());
 
-    let (mut reader, mut writer) = conn.split();
-    let (incoming_tx, mut incoming) = mpsc::unbounded_channel();
-    let reader_task = tokio::spawn(async move {
-        loop {
-            let m = reader.read().await;
-            let end = m.is_err();
-            if incoming_tx.send(m).is_err() || end {
-                break;
-            }
-        }
-    });
+    let (reader, mut writer) = conn.split();
+    let (mut incoming, reader_task) = reader.forward();
     let (mut sent, mut acked, mut last_seq) = (0u64, 0u64, 0u64);
     let mut finished = false;
     let mut last_sent = Instant::now();
@@ -154,7 +145,7 @@ pub async fn serve_job(
             }
             message = incoming.recv() => {
                 last_heard = Instant::now();
-                match message {
+                match message.map(|(m, _)| m) {
                     Some(Ok(Message::Ack { seq })) => acked = acked.max(seq),
                     Some(Ok(Message::Stop)) => stop.store(true, Ordering::Release),
                     Some(Ok(Message::Heartbeat)) => {}

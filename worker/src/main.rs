@@ -96,10 +96,7 @@ async fn run(cli: Cli) -> Result<()> {
             let stream = loop {
                 match tokio::net::TcpStream::connect(&addrs[..]).await {
                     Ok(s) => break s,
-                    Err(e) if Instant::now() < deadline => {
-                        let _ = e;
-                        tokio::time::sleep(Duration::from_millis(200)).await;
-                    }
+                    Err(_) if Instant::now() < deadline => tokio::time::sleep(Duration::from_millis(200)).await,
                     Err(e) => return Err(e).with_context(|| format!("cannot reach the coordinator at {addr}")),
                 }
             };

@@ -39,9 +39,11 @@ fn remote_secret(args: &RenderArgs) -> Result<Secret> {
     if let Some(s) = Secret::from_env()? {
         return Ok(s);
     }
-    let loopback_only =
-        args.workers.iter().all(|w| w.starts_with("127.") || w.starts_with("localhost:") || w.starts_with("[::1]"))
-            && args.listen.is_none_or(|l| l.ip().is_loopback());
+    let is_loopback = |w: &String| {
+        use std::net::ToSocketAddrs;
+        w.to_socket_addrs().map(|mut a| a.all(|a| a.ip().is_loopback())).unwrap_or(false)
+    };
+    let loopback_only = args.workers.iter().all(is_loopback) && args.listen.is_none_or(|l| l.ip().is_loopback());
     if args.insecure || loopback_only {
         return Ok(Secret::insecure());
     }

@@ -55,11 +55,6 @@ pub struct Cluster {
     children: Vec<Child>,
     /// New workers may still join (`--listen`).
     accepts_joins: bool,
-    /// Seconds spent merging snapshots, and how many.
-    pub merge_seconds: f64,
-    pub merges: u64,
-    /// Connections refused before they became workers.
-    pub refused: Vec<String>,
 }
 
 /// A worker the cluster starts with.
@@ -127,9 +122,6 @@ impl Cluster {
             network: Some(network),
             children,
             accepts_joins,
-            merge_seconds: 0.0,
-            merges: 0,
-            refused: Vec::new(),
         })
     }
 
@@ -195,11 +187,8 @@ impl Cluster {
                     self.set_state(worker, WorkerState::Lost(reason));
                     return false;
                 }
-                let t = Instant::now();
                 match apply_delta(&snapshot.delta, &mut self.sums.pixels) {
                     Ok(summary) => {
-                        self.merge_seconds += t.elapsed().as_secs_f64();
-                        self.merges += 1;
                         let v = &mut self.workers[worker];
                         v.last_seq = snapshot.seq;
                         v.record.snapshots += 1;
@@ -218,7 +207,6 @@ impl Cluster {
             Event::Lost { worker, reason } => self.set_state(worker, WorkerState::Lost(reason)),
             Event::Refused { address, reason } => {
                 eprintln!("coordinator: refused a connection from {address}: {reason}");
-                self.refused.push(format!("{address}: {reason}"));
             }
         }
         false

@@ -272,20 +272,10 @@ async fn drive(
         return;
     }
     let timing = plan.timing;
-    let (mut reader, mut writer) = conn.split();
+    let (reader, mut writer) = conn.split();
     let result: Result<(), String> = async {
         writer.write(&Message::Job(Box::new(job))).await.map_err(|e| e.to_string())?;
-        let (in_tx, mut incoming) = mpsc::unbounded_channel();
-        let reader_task = tokio::spawn(async move {
-            loop {
-                let before = reader.bytes;
-                let m = reader.read().await;
-                let end = m.is_err();
-                if in_tx.send((m, reader.bytes - before)).is_err() || end {
-                    break;
-                }
-            }
-        });
+        let (mut incoming, reader_task) = reader.forward();
         let mut last_heard = Instant::now();
         let mut last_sent = Instant::now();
         let mut tick = tokio::time::interval(Duration::from_millis(250));

@@ -11,6 +11,9 @@ use tokio::io::{AsyncWriteExt, BufReader, BufWriter};
 use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
 use tokio::net::TcpStream;
 
+/// Messages read by `MessageReader::forward`, each with the bytes of its frame.
+pub type Incoming = tokio::sync::mpsc::UnboundedReceiver<(Result<Message, ProtocolError>, u64)>;
+
 /// Reads whole messages.
 pub struct MessageReader {
     inner: BufReader<OwnedReadHalf>,
@@ -78,6 +81,24 @@ impl MessageReader {
             }
             None => Err(ProtocolError::Closed),
         }
+    }
+
+    /// Reads messages on a task of its own and hands each over with its frame's size, so that a link can wait
+    /// for messages and other events at once (reading is not cancel-safe). The stream ends after the first
+    /// error; abort the task to stop reading earlier.
+    pub fn forward(mut self) -> (Incoming, tokio::task::JoinHandle<()>) {
+        let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
+        let task = tokio::spawn(async move {
+            loop {
+                let before = self.bytes;
+                let m = self.read().await;
+                let end = m.is_err();
+                if tx.send((m, self.bytes - before)).is_err() || end {
+                    break;
+                }
+            }
+        });
+        (rx, task)
     }
 
     /// The next message within `limit`. Not cancel-safe across calls: a timeout ends the link.
