@@ -115,9 +115,8 @@ pub fn gather(
     sink: &mut impl Gather,
 ) -> u64 {
     let mut merges = 0;
-    for b in map.candidates(v.hit.p) {
-        if (b.position - v.hit.p).length_squared() > b.radius2
-            || v.wi.dot(b.normal) <= 0.0
+    for b in map.containing(v.hit.p) {
+        if v.wi.dot(b.normal) <= 0.0
             || v.hit.ng.dot(b.normal).abs() < NORMAL_AGREEMENT
             || b.segments as u32 + v.m > max_depth
         {
