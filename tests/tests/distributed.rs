@@ -72,6 +72,26 @@ fn assert_same_image(a: &Path, b: &Path, what: &str) {
     assert!(z2 < 1.5, "{what}: mean z² {z2:.3}, the images disagree beyond their error estimates");
 }
 
+#[test]
+fn workers_on_this_machines_nodes_bind_their_memory_to_their_node() {
+    let dir = scratch_dir("memory-binding");
+    let scene = small_cornell(&dir, 32);
+    let out = dir.join("run");
+    run_ok(coordinator(&scene, &out, &["--method", "three-level", "--phases", "8"]));
+    let r = record(&out);
+    let workers = r["workers"].as_array().unwrap();
+    assert!(!workers.is_empty());
+    for w in workers {
+        let binding = w["binding"].as_str().unwrap();
+        let node = w["numa_node"].as_u64().unwrap();
+        // Bound on any Linux that lets a thread set its memory policy; a container that forbids it must say so.
+        assert!(
+            binding.contains(&format!("bound to NUMA node {node}")) || binding.contains("first touch (the OS refused"),
+            "{w}"
+        );
+    }
+}
+
 /// Worker processes whose parent is `pid`.
 fn worker_children(pid: u32) -> Vec<u32> {
     let mut found = Vec::new();

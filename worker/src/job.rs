@@ -3,6 +3,7 @@
 //! every snapshot is a consistent estimate.
 
 use crate::engine::{EngineConfig, ParallelEngine};
+use crate::memory_binding::{self, MemoryBinding};
 use crate::topology;
 use photonfarm::accumulation::PixelSums;
 use photonfarm::protocol::snapshot::encode_delta;
@@ -87,6 +88,14 @@ pub fn run(
             return;
         }
     };
+    // Before the engine allocates, so that its buffers come from the node's memory.
+    let memory = match job.engine.numa_node {
+        Some(_) if job.engine.synthetic_topology => {
+            MemoryBinding::FirstTouch("synthetic topology: the node is not this machine's".into())
+        }
+        Some(node) => memory_binding::bind_memory(node),
+        None => MemoryBinding::FirstTouch("no NUMA node given".into()),
+    };
     let mut settings = job.settings;
     settings.seed = stream_seed(job.settings.seed, job.stream);
     let layout = config.layout();
@@ -106,7 +115,7 @@ pub fn run(
         cores: cores.clone(),
         numa_node: job.engine.numa_node,
         binding: format!(
-            "{pinned} of {threads} threads pinned to cores {}{}",
+            "{pinned} of {threads} threads pinned to cores {}{}; {memory}",
             cores.iter().map(|c| c.to_string()).collect::<Vec<_>>().join(","),
             if job.engine.synthetic_topology { " (synthetic topology: nodes mapped onto real cores)" } else { "" }
         ),

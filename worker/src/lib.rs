@@ -9,6 +9,7 @@ pub mod job;
 pub mod link;
 pub mod map_slot;
 pub mod mask;
+pub mod memory_binding;
 pub mod sync_primitives;
 pub mod topology;
 
