@@ -55,6 +55,8 @@ pub struct Cluster {
     children: Vec<Child>,
     /// New workers may still join (`--listen`).
     accepts_joins: bool,
+    /// `collect` ran: the workers were stopped and may exit on their own.
+    collected: bool,
 }
 
 /// A worker the cluster starts with.
@@ -122,6 +124,7 @@ impl Cluster {
             network: Some(network),
             children,
             accepts_joins,
+            collected: false,
         })
     }
 
@@ -216,9 +219,10 @@ impl Cluster {
         self.workers.iter().all(|w| w.state.ended())
     }
 
-    /// Stops every worker, collects their last snapshots (up to `limit`), and ends the network and the local
-    /// processes.
-    pub fn shutdown(&mut self, limit: Duration) {
+    /// Stops every worker and merges their last snapshots (waiting up to `limit`): after this the image is
+    /// complete, and the run's wall time ends here.
+    pub fn collect(&mut self, limit: Duration) {
+        self.collected = true;
         self.send(Control::StopAll);
         let deadline = Instant::now() + limit;
         while !self.all_ended() && Instant::now() < deadline {
@@ -235,7 +239,12 @@ impl Cluster {
                 self.set_state(w, WorkerState::Lost(format!("did not finish within {limit:?} of the stop")));
             }
         }
-        // Give the links a moment to deliver the last acknowledgements, then end the network thread.
+    }
+
+    /// Ends the network thread and lets the local worker processes exit, after `collect`.
+    fn teardown(&mut self) {
+        // Give the links a moment to deliver the last acknowledgements, so workers exit knowing their last
+        // snapshot was merged; nothing they send now changes the image.
         let settle = Instant::now() + Duration::from_millis(300);
         while Instant::now() < settle {
             if let Ok(e) = self.events.recv_timeout(Duration::from_millis(50)) {
@@ -270,6 +279,9 @@ impl Cluster {
 
 impl Drop for Cluster {
     fn drop(&mut self) {
+        if self.collected {
+            self.teardown();
+        }
         // Never leave worker processes behind, whatever ended the run.
         for c in &mut self.children {
             let _ = c.kill();
@@ -339,6 +351,6 @@ impl Progressive for Cluster {
     }
 
     fn finish(&mut self) {
-        self.shutdown(Duration::from_secs(60));
+        self.collect(Duration::from_secs(60));
     }
 }
