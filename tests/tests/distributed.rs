@@ -139,6 +139,8 @@ fn three_level_and_combination_on_two_synthetic_nodes_converge_to_the_single_pro
         assert_eq!(w["state"], "finished", "{w}");
         assert!(w["snapshots"].as_u64().unwrap() >= 1 && w["pixel_phases"].as_u64().unwrap() > 0, "{w}");
         assert!(w["binding"].as_str().unwrap().contains("synthetic"), "{w}");
+        let started = w["started_after_s"].as_f64().unwrap();
+        assert!(started > 0.0 && started < r["wall_time_s"].as_f64().unwrap(), "{w}");
     }
     assert_ne!(workers[0]["numa_node"], workers[1]["numa_node"]);
     assert!(r["error"]["min_phases"].as_u64().unwrap() >= 500);

@@ -57,6 +57,7 @@ pub struct Cluster {
     accepts_joins: bool,
     /// `collect` ran: the workers were stopped and may exit on their own.
     collected: bool,
+    started: Instant,
 }
 
 /// A worker the cluster starts with.
@@ -125,6 +126,7 @@ impl Cluster {
             children,
             accepts_joins,
             collected: false,
+            started: Instant::now(),
         })
     }
 
@@ -178,6 +180,7 @@ impl Cluster {
                 if info.numa_node.is_some() {
                     r.numa_node = info.numa_node;
                 }
+                r.started_after_s = self.started.elapsed().as_secs_f64();
                 self.set_state(worker, WorkerState::Running);
             }
             Event::Snapshot { worker, snapshot, frame_bytes } => {
@@ -301,7 +304,12 @@ impl Progressive for Cluster {
             if !self.active() {
                 return;
             }
-            match self.events.recv_timeout(Duration::from_millis(50)) {
+            // Wake at the deadline itself: every millisecond past it is a millisecond the workers render for
+            // nothing but the final collection.
+            let wait = deadline.map_or(Duration::from_millis(50), |d| {
+                d.saturating_duration_since(Instant::now()).min(Duration::from_millis(50))
+            });
+            match self.events.recv_timeout(wait) {
                 Ok(e) => {
                     if self.handle(e) {
                         // Drain what else arrived, so one step merges everything that is waiting.

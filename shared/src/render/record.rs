@@ -69,6 +69,10 @@ pub struct WorkerRecord {
     /// the interval grows on slow links so that sending stays under 5% of it.
     pub snapshot_interval_s: f64,
     pub last_send_s: f64,
+    /// Seconds from the start of the render to the worker's start of rendering (process start, link, job,
+    /// meshes, scene and engine set-up): the distribution's fixed cost.
+    #[serde(default)]
+    pub started_after_s: f64,
 }
 
 fn first_session() -> u32 {
