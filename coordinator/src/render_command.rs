@@ -232,11 +232,13 @@ pub fn run(args: RenderArgs) -> Result<()> {
     bar.set_message("stopping: collecting the last completed phases");
     engine.finish();
     if distributed {
-        // The last snapshots arrived after the run loop ended: one more history entry for them.
+        // The last snapshots arrived after the run loop ended: one more history entry for them, timed when
+        // they were merged.
+        let time_s = elapsed_before.as_secs_f64() + start.elapsed().as_secs_f64();
         let (e, t) = (engine.sums().error(), engine.totals());
         history.push(HistoryEntry {
             phase: t.phases,
-            time_s: elapsed_before.as_secs_f64() + start.elapsed().as_secs_f64(),
+            time_s,
             delta_all: e.delta_all,
             delta_unlit: e.delta_unlit,
             backward_rays: t.backward_rays,
