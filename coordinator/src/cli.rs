@@ -22,17 +22,26 @@ pub enum Command {
 #[derive(clap::Args, Debug)]
 pub struct BenchArgs {
     /// Seconds per run.
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(long, default_value_t = 40.0)]
     pub time: f64,
+    /// Every method on both scenes for 8 s, once: under five minutes on 2 cores.
+    #[arg(long)]
+    pub quick: bool,
     /// Scenes by name in scenes/ (their references in scenes/references/ give the true error).
     #[arg(long, value_delimiter = ',', default_value = "cornell,caustic")]
     pub scenes: Vec<String>,
     /// Methods to run.
-    #[arg(long, value_enum, value_delimiter = ',', default_value = "sync,async,two-level")]
+    #[arg(
+        long,
+        value_enum,
+        value_delimiter = ',',
+        default_value = "path,pbpm,sync,async,two-level,combination,three-level"
+    )]
     pub methods: Vec<MethodArg>,
-    /// Thread counts to run each method at (speedups are relative to the first).
-    #[arg(long, value_delimiter = ',', default_value = "1,2")]
-    pub threads: Vec<usize>,
+    /// Thread counts to run each parallel method at (default 1, 2, 4, … and every core); the distributed
+    /// methods run one worker per synthetic NUMA node of one core, as many nodes as threads.
+    #[arg(long, value_delimiter = ',')]
+    pub threads: Option<Vec<usize>>,
     /// Threads per group for two-level.
     #[arg(long, default_value_t = 2)]
     pub group_size: usize,

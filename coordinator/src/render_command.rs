@@ -197,7 +197,12 @@ pub fn run(args: RenderArgs) -> Result<()> {
         Ok(record)
     };
     let reason = session::run(engine.as_mut(), &stop, &interrupted, &mut history, elapsed_before, |engine, history| {
-        let Some(entry) = history.last() else { return };
+        let Some(entry) = history.last_mut() else { return };
+        if let Some(r) = &reference {
+            let t = r.compare(engine.sums());
+            (entry.true_all, entry.true_unlit) = (Some(t.rmse_all), Some(t.rmse_unlit));
+        }
+        let entry = *entry;
         let secs = entry.time_s.max(1e-9);
         let rays = (entry.backward_rays + entry.forward_rays) as f64;
         let delta = match stop.error_over {
@@ -236,6 +241,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         // they were merged.
         let time_s = elapsed_before.as_secs_f64() + start.elapsed().as_secs_f64();
         let (e, t) = (engine.sums().error(), engine.totals());
+        let truth = reference.as_ref().map(|r| r.compare(engine.sums()));
         history.push(HistoryEntry {
             phase: t.phases,
             time_s,
@@ -243,6 +249,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
             delta_unlit: e.delta_unlit,
             backward_rays: t.backward_rays,
             forward_rays: t.forward_rays,
+            true_all: truth.as_ref().map(|t| t.rmse_all),
+            true_unlit: truth.as_ref().map(|t| t.rmse_unlit),
         });
     }
     bar.finish_and_clear();

@@ -143,6 +143,7 @@ pub fn run(
                 delta: encode_delta(current, &base),
                 interval_ms: interval.as_millis() as u64,
                 previous_send_ms: 0,
+                peak_memory_bytes: photonfarm::render::memory::peak_rss_bytes().unwrap_or(0),
             };
             base.copy_from_slice(current);
             last = Instant::now();

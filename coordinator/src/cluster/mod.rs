@@ -203,6 +203,8 @@ impl Cluster {
                         v.record.pixel_phases += summary.pixel_phases;
                         v.record.snapshot_interval_s = snapshot.interval_ms as f64 / 1000.0;
                         v.record.last_send_s = snapshot.previous_send_ms as f64 / 1000.0;
+                        v.record.peak_memory_bytes =
+                            (snapshot.peak_memory_bytes > 0).then_some(snapshot.peak_memory_bytes);
                         self.send(Control::Ack { worker, seq: snapshot.seq });
                         return true;
                     }

@@ -86,6 +86,8 @@ pub struct Snapshot {
     /// The snapshot interval the worker uses now, and how long sending its previous snapshot took (ms).
     pub interval_ms: u64,
     pub previous_send_ms: u64,
+    /// The worker process's peak resident memory so far (bytes; 0 where the OS does not say).
+    pub peak_memory_bytes: u64,
 }
 
 /// The protocol's messages.

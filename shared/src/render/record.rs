@@ -6,8 +6,9 @@ use super::settings::RenderSettings;
 use crate::accumulation::ErrorEstimate;
 use serde::{Deserialize, Serialize};
 
-/// δ and ray counts after one phase.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+/// δ and ray counts after one step (a phase, a round, or a merged snapshot), and the true error when the run
+/// has a reference: the points of the error-against-time charts.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct HistoryEntry {
     pub phase: u64,
     pub time_s: f64,
@@ -15,6 +16,11 @@ pub struct HistoryEntry {
     pub delta_unlit: f64,
     pub backward_rays: u64,
     pub forward_rays: u64,
+    /// Relative RMSE against the reference over all pixels and over pixels that do not see a light directly.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub true_all: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub true_unlit: Option<f64>,
 }
 
 /// Error against a reference image.
@@ -73,6 +79,9 @@ pub struct WorkerRecord {
     /// meshes, scene and engine set-up): the distribution's fixed cost.
     #[serde(default)]
     pub started_after_s: f64,
+    /// The worker process's peak resident memory at its last snapshot.
+    #[serde(default)]
+    pub peak_memory_bytes: Option<u64>,
 }
 
 fn first_session() -> u32 {

@@ -116,7 +116,7 @@ pub fn run<R: Progressive + ?Sized>(
     interrupted: &AtomicBool,
     history: &mut Vec<HistoryEntry>,
     elapsed_before: Duration,
-    mut on_phase: impl FnMut(&R, &[HistoryEntry]),
+    mut on_phase: impl FnMut(&R, &mut [HistoryEntry]),
 ) -> StopReason {
     let start = Instant::now();
     loop {
@@ -139,6 +139,7 @@ pub fn run<R: Progressive + ?Sized>(
             delta_unlit: e.delta_unlit,
             backward_rays: t.backward_rays,
             forward_rays: t.forward_rays,
+            ..HistoryEntry::default()
         };
         history.push(entry);
         on_phase(engine, history);

@@ -1,0 +1,80 @@
+//! `coordinator bench` as a user runs it: every configuration becomes a real render process, and the bench folder
+//! gets one results row per run, the runs' error against time, and the report with its tables and goals.
+
+use end_to_end::{binary, repo_root, scratch_dir};
+use std::process::Command;
+
+fn csv_rows(path: &std::path::Path) -> (Vec<String>, Vec<Vec<String>>) {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut lines = text.lines();
+    let header = lines.next().unwrap().split(',').map(String::from).collect();
+    (header, lines.map(|l| l.split(',').map(String::from).collect()).collect())
+}
+
+#[test]
+fn bench_writes_a_row_per_run_their_error_series_and_the_report() {
+    let out = scratch_dir("bench");
+    let result = Command::new(binary("coordinator"))
+        .args(["bench", "--time", "1", "--scenes", "cornell", "--methods", "path,pbpm,two-level,three-level"])
+        .args(["--threads", "1,2", "--out"])
+        .arg(&out)
+        .current_dir(repo_root())
+        .output()
+        .unwrap();
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+
+    let (header, rows) = csv_rows(&out.join("results.csv"));
+    let col = |name: &str| header.iter().position(|h| h == name).unwrap_or_else(|| panic!("no column {name}"));
+    for name in ["topology", "processes", "peak_memory_bytes", "true_unlit", "true_all", "merges", "bytes_per_pixel"] {
+        col(name);
+    }
+    // path and pbpm run at one thread only; the parallel methods at both counts.
+    let runs: Vec<(String, String)> =
+        rows.iter().map(|r| (r[col("method")].clone(), r[col("threads")].clone())).collect();
+    let expected = [
+        ("path", "1"),
+        ("pbpm", "1"),
+        ("two-level", "1"),
+        ("two-level", "2"),
+        ("three-level", "1"),
+        ("three-level", "2"),
+    ];
+    assert_eq!(runs, expected.map(|(m, t)| (m.to_string(), t.to_string())).to_vec());
+    for r in &rows {
+        assert_eq!(r.len(), header.len(), "{r:?}");
+        let number = |name: &str| r[col(name)].parse::<f64>().unwrap_or_else(|_| panic!("{name} in {r:?}"));
+        assert!(number("wall_s") > 0.9 && number("peak_memory_bytes") > 1e6, "{r:?}");
+        // cornell ships a reference, so every run has a true error.
+        assert!(number("true_unlit") > 0.0 && number("true_unlit") < 1.0, "{r:?}");
+        let processes = if r[col("method")] == "three-level" { r[col("threads")].as_str() } else { "1" };
+        assert_eq!(r[col("processes")], processes, "{r:?}");
+    }
+
+    let (series_header, series) = csv_rows(&out.join("series.csv"));
+    assert_eq!(series_header[..5], ["scene", "method", "threads", "repeat", "time_s"]);
+    for (method, threads) in expected {
+        let points: Vec<&Vec<String>> = series.iter().filter(|p| p[1] == method && p[2] == threads).collect();
+        // A parallel step is a whole round (or snapshot), longer than a one-second run may last.
+        let least = if method == "path" || method == "pbpm" { 2 } else { 1 };
+        assert!(points.len() >= least, "{method} at {threads} threads has {} series points", points.len());
+        let times: Vec<f64> = points.iter().map(|p| p[4].parse().unwrap()).collect();
+        assert!(times.windows(2).all(|w| w[0] <= w[1]), "{method}: series out of time order");
+    }
+
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(report.contains("| cornell | two-level | 2 |") && report.contains("tracing speedup"), "{report}");
+    assert!(report.contains("Goals") && report.contains("cornell: path tracer"), "{report}");
+}
+
+#[test]
+fn bench_refuses_bad_arguments_with_a_message() {
+    for (args, needle) in [
+        (vec!["bench", "--time", "0"], "--time"),
+        (vec!["bench", "--threads", "0"], "--threads"),
+        (vec!["bench", "--scenes", "no-such-scene"], "no-such-scene"),
+    ] {
+        let out = Command::new(binary("coordinator")).args(&args).current_dir(repo_root()).output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && stderr.contains(needle), "{args:?}: {stderr}");
+    }
+}
