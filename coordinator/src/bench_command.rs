@@ -36,6 +36,8 @@ struct Row {
     delta_all: f64,
     true_unlit: Option<f64>,
     true_all: Option<f64>,
+    /// The reference's own δ over unlit pixels: it adds in quadrature to every true error of the run.
+    reference_delta_unlit: Option<f64>,
     /// The largest peak resident memory of the run's processes (coordinator and workers).
     peak_memory_bytes: Option<u64>,
     bytes_per_pixel: f64,
@@ -202,6 +204,7 @@ fn run_one(
         delta_all: f(&r["error"]["delta_all"]),
         true_unlit: r["true_error"]["rmse_unlit"].as_f64(),
         true_all: r["true_error"]["rmse_all"].as_f64(),
+        reference_delta_unlit: r["true_error"]["reference_delta_unlit"].as_f64(),
         peak_memory_bytes: peak,
         bytes_per_pixel: f(&r["bytes_per_pixel"]),
         idle: if method.is_distributed() { None } else { idle },
@@ -436,22 +439,24 @@ Goals (true error = relative RMSE against the scene's reference, unlit pixels):
                 e_pbpm / e_path
             );
         }
-        // Calibration: true error / δ wherever δ < 10%.
+        // Calibration: true error / δ wherever δ < 10%, δ combined in quadrature with the reference's own.
         let ratios: Vec<f64> = rows
             .iter()
             .filter(|r| r.scene == scene && r.method != "path")
-            .flat_map(|r| r.series.iter())
-            .filter(|p| p.delta_unlit < 0.10)
-            .filter_map(|p| p.true_unlit.map(|t| t / p.delta_unlit))
+            .flat_map(|r| r.series.iter().map(move |p| (p, r.reference_delta_unlit.unwrap_or(0.0))))
+            .filter(|(p, _)| p.delta_unlit < 0.10)
+            .filter_map(|(p, d_ref)| p.true_unlit.map(|t| t / p.delta_unlit.hypot(d_ref)))
             .filter(|x| x.is_finite())
             .collect();
         if !ratios.is_empty() {
             any = true;
             let lo = ratios.iter().copied().fold(f64::INFINITY, f64::min);
             let hi = ratios.iter().copied().fold(0.0, f64::max);
+            let d_ref = rows.iter().find(|r| r.scene == scene).and_then(|r| r.reference_delta_unlit);
             let _ = writeln!(
                 s,
-                "- {scene}: calibration, true error / δ over {} points of PBPM runs with δ < 10%: {lo:.2} … {hi:.2} (goal within 0.5 … 2).",
+                "- {scene}: the reference's own δ {}; calibration, true error / √(δ² + δ_ref²) over {} points of PBPM runs with δ < 10%: {lo:.2} … {hi:.2} (goal within 0.5 … 2).",
+                pct(d_ref),
                 ratios.len()
             );
         }
@@ -464,12 +469,13 @@ Goals (true error = relative RMSE against the scene's reference, unlit pixels):
 fn csv(rows: &[Row]) -> String {
     let mut s = String::from(
         "scene,method,topology,processes,groups,threads_per_group,threads,repeat,wall_s,backward_rays,forward_rays,\
-         merges,phases,delta_unlit,delta_all,true_unlit,true_all,peak_memory_bytes,bytes_per_pixel,idle_fraction\n",
+         merges,phases,delta_unlit,delta_all,true_unlit,true_all,peak_memory_bytes,bytes_per_pixel,idle_fraction,\
+         reference_delta_unlit\n",
     );
     for r in rows {
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{},{},{:.1},{}",
+            "{},{},{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{},{},{:.1},{},{}",
             r.scene,
             r.method,
             r.topology.replace(',', ";"),
@@ -489,7 +495,8 @@ fn csv(rows: &[Row]) -> String {
             opt(r.true_all),
             r.peak_memory_bytes.map(|b| b.to_string()).unwrap_or_default(),
             r.bytes_per_pixel,
-            opt(r.idle)
+            opt(r.idle),
+            opt(r.reference_delta_unlit)
         );
     }
     s

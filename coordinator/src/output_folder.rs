@@ -2,8 +2,10 @@
 
 use anyhow::{Context, Result};
 use photonfarm::accumulation::{relative_rmse, Accumulator};
+use photonfarm::color::luminance_f64;
 use photonfarm::image_io::exr_file::{find_layer, read_exr, write_exr, LayerImage};
 use photonfarm::image_io::preview::{auto_exposure, write_preview_png};
+use photonfarm::render::images::luminance_of;
 use photonfarm::render::images::{layer_images, total_image};
 use photonfarm::render::record::{RunRecord, TrueError};
 use std::path::{Path, PathBuf};
@@ -14,6 +16,8 @@ pub struct Reference {
     pub total: Vec<[f64; 3]>,
     /// Pixels that see a light directly in the reference (its visible_lights layer, when it has one).
     pub lit: Option<Vec<bool>>,
+    /// Luminance of the reference's standard error per pixel (its `sem` layer, when it has one).
+    pub sem: Option<Vec<f64>>,
 }
 
 impl Reference {
@@ -34,10 +38,12 @@ impl Reference {
         let lit = find_layer(&layers, path, "visible_lights")
             .ok()
             .map(|v| v.rgb.iter().map(|p| p.iter().any(|&c| c > 0.0)).collect());
+        let sem = find_layer(&layers, path, "sem").ok().map(|s| s.rgb.iter().map(|&p| luminance_of(p)).collect());
         Ok(Reference {
             path: path.to_path_buf(),
             total: total.rgb.iter().map(|p| [p[0] as f64, p[1] as f64, p[2] as f64]).collect(),
             lit,
+            sem,
         })
     }
 
@@ -48,10 +54,22 @@ impl Reference {
             Some(l) => l[i],
             None => sums.sees_light(i),
         };
+        // δ of the reference itself: its SEMs against its own values (paper eq. 6).
+        let reference_delta = |include: &dyn Fn(usize) -> bool| {
+            let sem = self.sem.as_ref()?;
+            let (mut num, mut den) = (0.0, 0.0);
+            for (_, (s, r)) in sem.iter().zip(&self.total).enumerate().filter(|&(i, _)| include(i)) {
+                num += s * s;
+                den += luminance_f64(*r).powi(2);
+            }
+            (den > 0.0).then(|| (num / den).sqrt())
+        };
         TrueError {
             reference: self.path.display().to_string(),
             rmse_all: relative_rmse(&image, &self.total, |_| true),
             rmse_unlit: relative_rmse(&image, &self.total, |i| !lit(i)),
+            reference_delta_all: reference_delta(&|_| true),
+            reference_delta_unlit: reference_delta(&|i| !lit(i)),
         }
     }
 }

@@ -32,6 +32,12 @@ pub struct TrueError {
     pub rmse_all: f64,
     /// Relative RMSE over pixels that do not see a light directly.
     pub rmse_unlit: f64,
+    /// The reference's own δ over the same pixels (from its `sem` layer): it adds in quadrature to the error
+    /// measured against it, so a true error near it says more about the reference than about the run.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference_delta_all: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference_delta_unlit: Option<f64>,
 }
 
 /// Thread-seconds spent in each stage of the phases, summed over threads: where a parallel engine's time goes.
