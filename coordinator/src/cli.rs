@@ -17,6 +17,32 @@ pub enum Command {
     Render(Box<RenderArgs>),
     /// Run every parallel method at several thread counts for a fixed time and print the paper's Table-1 rows.
     Bench(BenchArgs),
+    /// Render a long reference image of a scene into scenes/references/, for the true error of every run.
+    Reference(ReferenceArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct ReferenceArgs {
+    /// The scene file, e.g. scenes/cornell.toml.
+    pub scene: PathBuf,
+    /// Seconds to render.
+    #[arg(long)]
+    pub time: f64,
+    /// The estimator: the path tracer (default), or a PBPM method where the path tracer cannot converge.
+    #[arg(long, value_enum, default_value = "path")]
+    pub method: MethodArg,
+    /// NUMA layout for combination and three-level (see `render --topology`).
+    #[arg(long)]
+    pub topology: Option<String>,
+    /// Seed, kept apart from the bench's (1, 2, …) so the reference's noise is independent of the runs'.
+    #[arg(long, default_value_t = 1000)]
+    pub seed: u64,
+    /// Folder for <scene>-<path|pbpm>.exr and .json.
+    #[arg(long, default_value = "scenes/references")]
+    pub out: PathBuf,
+    /// Replace an existing reference.
+    #[arg(long)]
+    pub force: bool,
 }
 
 #[derive(clap::Args, Debug)]

@@ -5,6 +5,7 @@ mod bench_command;
 mod cli;
 mod cluster;
 mod output_folder;
+mod reference_command;
 mod render_command;
 
 use clap::Parser;
@@ -14,6 +15,7 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         cli::Command::Render(args) => render_command::run(*args),
         cli::Command::Bench(args) => bench_command::run(args),
+        cli::Command::Reference(args) => reference_command::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

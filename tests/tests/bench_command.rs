@@ -1,5 +1,6 @@
-//! `coordinator bench` as a user runs it: every configuration becomes a real render process, and the bench folder
-//! gets one results row per run, the runs' error against time, and the report with its tables and goals.
+//! `coordinator bench` and `coordinator reference` as a user runs them: every bench configuration becomes a real
+//! render process, and the bench folder gets one results row per run, the runs' error against time, and the
+//! report with its tables and goals.
 
 use end_to_end::{binary, repo_root, scratch_dir};
 use std::process::Command;
@@ -77,4 +78,30 @@ fn bench_refuses_bad_arguments_with_a_message() {
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success() && stderr.contains(needle), "{args:?}: {stderr}");
     }
+}
+
+#[test]
+fn reference_command_keeps_the_image_and_how_to_remake_it_and_never_overwrites_by_accident() {
+    let out = scratch_dir("reference");
+    let reference = |extra: &[&str]| {
+        Command::new(binary("coordinator"))
+            .args(["reference", "scenes/cornell.toml", "--time", "1", "--out"])
+            .arg(&out)
+            .args(extra)
+            .current_dir(repo_root())
+            .output()
+            .unwrap()
+    };
+    let first = reference(&[]);
+    assert!(first.status.success(), "{}", String::from_utf8_lossy(&first.stderr));
+    assert!(out.join("cornell-path.exr").is_file());
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("cornell-path.json")).unwrap()).unwrap();
+    assert_eq!(record["command"], "coordinator render scenes/cornell.toml --method path --time 1 --seed 1000");
+    assert!(record.get("history").is_none() && record["error"]["delta_unlit"].as_f64().unwrap() > 0.0);
+
+    let again = reference(&[]);
+    assert!(!again.status.success() && String::from_utf8_lossy(&again.stderr).contains("--force"));
+    let forced = reference(&["--force"]);
+    assert!(forced.status.success(), "{}", String::from_utf8_lossy(&forced.stderr));
 }
