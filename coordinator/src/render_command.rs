@@ -7,7 +7,7 @@ use anyhow::{bail, Context, Result};
 use clap::ValueEnum;
 use indicatif::{ProgressBar, ProgressStyle};
 use photonfarm::render::checkpoint::Checkpoint;
-use photonfarm::render::record::{HistoryEntry, RunRecord};
+use photonfarm::render::record::{flags_of, HistoryEntry, RunRecord};
 use photonfarm::render::session::{self, ErrorOver, Progressive, StopReason, StopRule};
 use photonfarm::render::{memory, Engine, Method, RenderSettings};
 use photonfarm::scene::Scene;
@@ -150,30 +150,36 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let mut save_error: Option<anyhow::Error> = None;
     let save_interval = Duration::from_secs_f64(args.save_interval.max(0.5));
     let method_name = args.method.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default();
-    let record_of = |engine: &dyn Progressive, history: &[HistoryEntry], reason: &str| RunRecord {
-        photonfarm_version: env!("CARGO_PKG_VERSION").to_string(),
-        scene: args.scene.display().to_string(),
-        scene_hash: scene.hash.clone(),
-        width: scene.camera.width,
-        height: scene.camera.height,
-        method: method_name.clone(),
-        layout: layout.clone(),
-        pinned_threads: engine.pinned_threads(),
-        settings: *engine.settings(),
-        radius_at_1m: engine.settings().radius_schedule(&scene).radius(1.0, 1),
-        threads: engine.threads() as u32,
-        stop_reason: reason.to_string(),
-        totals: engine.totals(),
-        stage_seconds: engine.stage_seconds(),
-        wall_time_s: elapsed_before.as_secs_f64() + start.elapsed().as_secs_f64(),
-        peak_memory_bytes: memory::peak_rss_bytes(),
-        bytes_per_pixel: engine.bytes_per_pixel(),
-        error: engine.sums().error(),
-        pixel_phases: engine.sums().pixels.iter().map(|p| p.phases as u64).sum(),
-        session: session_number,
-        true_error: reference.as_ref().map(|r| r.compare(engine.sums())),
-        history: history.to_vec(),
-        workers: engine.workers(),
+    let record_of = |engine: &dyn Progressive, history: &[HistoryEntry], reason: &str| {
+        let workers = engine.workers();
+        let dropped = photonfarm::accumulation::non_finite_dropped()
+            + workers.iter().flatten().map(|w| w.non_finite_dropped).sum::<u64>();
+        RunRecord {
+            photonfarm_version: env!("CARGO_PKG_VERSION").to_string(),
+            scene: args.scene.display().to_string(),
+            scene_hash: scene.hash.clone(),
+            width: scene.camera.width,
+            height: scene.camera.height,
+            method: method_name.clone(),
+            layout: layout.clone(),
+            pinned_threads: engine.pinned_threads(),
+            settings: *engine.settings(),
+            radius_at_1m: engine.settings().radius_schedule(&scene).radius(1.0, 1),
+            threads: engine.threads() as u32,
+            stop_reason: reason.to_string(),
+            totals: engine.totals(),
+            stage_seconds: engine.stage_seconds(),
+            wall_time_s: elapsed_before.as_secs_f64() + start.elapsed().as_secs_f64(),
+            peak_memory_bytes: memory::peak_rss_bytes(),
+            bytes_per_pixel: engine.bytes_per_pixel(),
+            error: engine.sums().error(),
+            pixel_phases: engine.sums().pixels.iter().map(|p| p.phases as u64).sum(),
+            session: session_number,
+            true_error: reference.as_ref().map(|r| r.compare(engine.sums())),
+            history: history.to_vec(),
+            flags: flags_of(&engine.totals(), dropped, workers.as_deref()),
+            workers,
+        }
     };
 
     let save_all = |engine: &dyn Progressive, history: &[HistoryEntry], reason: &str| -> Result<RunRecord> {
@@ -274,6 +280,9 @@ pub fn run(args: RenderArgs) -> Result<()> {
         100.0 * e.delta_unlit,
         100.0 * e.delta_all
     );
+    for flag in &record.flags {
+        eprintln!("note: {flag}");
+    }
     if let Some(t) = &record.true_error {
         println!(
             "true relative RMSE against {}: {:.2}% (unlit pixels) / {:.2}% (all pixels)",

@@ -4,6 +4,7 @@
 use crate::color::{luminance, luminance_f64, Rgb};
 use crate::integrator::{Layer, LayerValues};
 use serde::{Deserialize, Serialize};
+use std::sync::atomic::{AtomicU64, Ordering};
 
 /// The sums one pixel keeps (paper §2's layers, in f64 as the final image needs).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -165,12 +166,22 @@ impl Accumulator {
     }
 }
 
-/// No NaN or infinity may ever reach the sums: such a sample is dropped (and is a bug to find).
+/// Phase values this process dropped for not being finite.
+static NON_FINITE_DROPPED: AtomicU64 = AtomicU64::new(0);
+
+/// How many phase values with a NaN or an infinity this process has dropped; the run record flags any.
+pub fn non_finite_dropped() -> u64 {
+    NON_FINITE_DROPPED.load(Ordering::Relaxed)
+}
+
+/// No NaN or infinity may ever reach the sums: such a sample is dropped, counted, and flagged in the record (it
+/// is a bug to find).
 #[inline]
 fn sanitize(v: Rgb) -> Rgb {
     if v.is_finite() {
         v
     } else {
+        NON_FINITE_DROPPED.fetch_add(1, Ordering::Relaxed);
         Rgb::ZERO
     }
 }

@@ -74,6 +74,23 @@ fn the_in_process_two_level_render_gives_every_pixel_at_least_the_phases_asked_f
 }
 
 #[test]
+fn the_record_flags_light_paths_that_max_depth_cut_short_and_nothing_for_a_complete_run() {
+    let capped = scratch_dir("flags-capped");
+    let result =
+        render(&["scenes/cornell.toml", "--method", "pbpm", "--phases", "3", "--max-depth", "3", "--quiet"], &capped);
+    let r = record(&capped);
+    let flags: Vec<&str> = r["flags"].as_array().unwrap().iter().map(|f| f.as_str().unwrap()).collect();
+    let n = r["totals"]["capped_light_paths"].as_u64().unwrap();
+    assert!(n > 0 && flags.len() == 1 && flags[0].starts_with(&format!("{n} light paths")), "{flags:?}");
+    assert!(String::from_utf8_lossy(&result.stderr).contains("note: "), "the terminal shows the flag too");
+
+    // At the default depth of 12 the paths capped in a closed box are flagged too; the path tracer caps none.
+    let complete = scratch_dir("flags-complete");
+    render(&["scenes/cornell.toml", "--method", "path", "--phases", "2", "--quiet"], &complete);
+    assert_eq!(record(&complete)["flags"], serde_json::json!([]));
+}
+
+#[test]
 fn render_with_a_reference_reports_the_true_error() {
     let out = scratch_dir("reference");
     render(

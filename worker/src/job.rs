@@ -144,6 +144,7 @@ pub fn run(
                 interval_ms: interval.as_millis() as u64,
                 previous_send_ms: 0,
                 peak_memory_bytes: photonfarm::render::memory::peak_rss_bytes().unwrap_or(0),
+                non_finite_dropped: photonfarm::accumulation::non_finite_dropped(),
             };
             base.copy_from_slice(current);
             last = Instant::now();

@@ -88,6 +88,8 @@ pub struct Snapshot {
     pub previous_send_ms: u64,
     /// The worker process's peak resident memory so far (bytes; 0 where the OS does not say).
     pub peak_memory_bytes: u64,
+    /// Phase values with a NaN or an infinity the worker has dropped so far.
+    pub non_finite_dropped: u64,
 }
 
 /// The protocol's messages.

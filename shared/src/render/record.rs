@@ -88,6 +88,9 @@ pub struct WorkerRecord {
     /// The worker process's peak resident memory at its last snapshot.
     #[serde(default)]
     pub peak_memory_bytes: Option<u64>,
+    /// Phase values with a NaN or an infinity the worker dropped (any is a bug, and flagged in the record).
+    #[serde(default)]
+    pub non_finite_dropped: u64,
 }
 
 fn first_session() -> u32 {
@@ -133,4 +136,33 @@ pub struct RunRecord {
     /// The worker processes of a distributed run.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub workers: Option<Vec<WorkerRecord>>,
+    /// Whatever the run clamped, capped, dropped or lost, in words: empty for a run that estimated everything
+    /// it was asked to.
+    #[serde(default)]
+    pub flags: Vec<String>,
+}
+
+/// The flags of a run record: light paths capped by `max_depth`, non-finite values dropped, workers lost.
+pub fn flags_of(totals: &RayTotals, non_finite_dropped: u64, workers: Option<&[WorkerRecord]>) -> Vec<String> {
+    let mut flags = Vec::new();
+    if totals.capped_light_paths > 0 {
+        flags.push(format!(
+            "{} light paths ({:.3}%) were stopped by max_depth while still carrying flux: the image lacks their \
+             light (raise [render] max_depth to include it)",
+            totals.capped_light_paths,
+            100.0 * totals.capped_light_paths as f64 / totals.light_paths.max(1) as f64
+        ));
+    }
+    if non_finite_dropped > 0 {
+        flags.push(format!(
+            "{non_finite_dropped} phase values with a NaN or an infinity were dropped (a renderer bug: please \
+             report it with this scene)"
+        ));
+    }
+    for w in workers.unwrap_or_default() {
+        if w.state.starts_with("lost") || w.state.starts_with("failed") {
+            flags.push(format!("worker {} {}; its merged phases stay in the image", w.name, w.state));
+        }
+    }
+    flags
 }
