@@ -149,9 +149,15 @@ fn run_one(
     if let Some(reference) = reference_of(scene) {
         cmd.arg("--reference").arg(reference);
     }
-    let status = cmd.status().context("cannot start the render")?;
-    if !status.success() {
-        bail!("the {name} run on {scene} at {threads} threads failed ({status}); its output is in {}", out.display());
+    // The run's notes (flags) are in its run.json; its terminal output only matters when it fails.
+    let output = cmd.stderr(std::process::Stdio::piped()).output().context("cannot start the render")?;
+    if !output.status.success() {
+        bail!(
+            "the {name} run on {scene} at {threads} threads failed ({}): {}; its output is in {}",
+            output.status,
+            String::from_utf8_lossy(&output.stderr).trim(),
+            out.display()
+        );
     }
     let path = out.join("run.json");
     let r: serde_json::Value =

@@ -213,4 +213,50 @@ pub struct RenderArgs {
     /// No progress bar (for logs and scripts).
     #[arg(long)]
     pub quiet: bool,
+    /// Memory the process may use, e.g. 2G or 500M: checked before the in-process parallel methods allocate
+    /// (memory in use after loading the scene plus the engine's buffers). `async`, whose buffers grow with its
+    /// threads, runs with fewer threads to fit; the other methods refuse to start. The record flags either.
+    #[arg(long, value_name = "SIZE", value_parser = parse_size)]
+    pub memory_limit: Option<u64>,
+}
+
+/// Parses a size in bytes with an optional K, M, G or T suffix (powers of 1024; "B", "iB" accepted), e.g. 2G.
+pub fn parse_size(text: &str) -> Result<u64, String> {
+    let t = text.trim();
+    let upper = t.to_ascii_uppercase();
+    let number = upper.trim_end_matches('B').trim_end_matches('I');
+    let (digits, unit) = match number.char_indices().last() {
+        Some((i, c)) if c.is_ascii_alphabetic() => (&number[..i], c),
+        _ => (number, ' '),
+    };
+    let scale: f64 = match unit {
+        ' ' => 1.0,
+        'K' => 1024.0,
+        'M' => 1024.0 * 1024.0,
+        'G' => 1024.0 * 1024.0 * 1024.0,
+        'T' => 1024.0 * 1024.0 * 1024.0 * 1024.0,
+        _ => return Err(format!("'{t}' has an unknown unit (use K, M, G or T, e.g. 2G)")),
+    };
+    let value: f64 = digits.trim().parse().map_err(|_| format!("'{t}' is not a size (e.g. 2G or 500M)"))?;
+    if !(value.is_finite() && value > 0.0) {
+        return Err(format!("'{t}' is not a positive size"));
+    }
+    Ok((value * scale) as u64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::parse_size;
+
+    #[test]
+    fn sizes_parse_with_binary_units_and_bad_ones_are_refused() {
+        assert_eq!(parse_size("2G"), Ok(2 << 30));
+        assert_eq!(parse_size("500M"), Ok(500 << 20));
+        assert_eq!(parse_size("1.5GiB"), Ok(3 << 29));
+        assert_eq!(parse_size("4096"), Ok(4096));
+        assert_eq!(parse_size("64kb"), Ok(64 << 10));
+        for bad in ["", "G", "-1G", "2X", "lots"] {
+            assert!(parse_size(bad).is_err(), "{bad}");
+        }
+    }
 }

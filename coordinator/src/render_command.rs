@@ -112,6 +112,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
     bar.set_style(ProgressStyle::with_template("{spinner} [{elapsed_precise}] {msg}").expect("static template"));
     bar.enable_steady_tick(Duration::from_millis(200));
 
+    // What the run changed from what it was asked (flags of the record).
+    let mut notes: Vec<String> = Vec::new();
     let (mut engine, layout): (Box<dyn Progressive + '_>, String) = match parallel_method(args.method) {
         None if args.method.is_distributed() => {
             let resume = match &checkpoint {
@@ -131,7 +133,10 @@ pub fn run(args: RenderArgs) -> Result<()> {
                 Some(list) => topology::parse_cores(list).map_err(|e| anyhow::anyhow!("--cores: {e}"))?,
                 None => topology::all_cores(),
             };
-            let threads = args.threads.unwrap_or(cores.len());
+            let mut threads = args.threads.unwrap_or(cores.len());
+            if let Some(limit) = args.memory_limit {
+                threads = fit_memory(limit, m, threads, &args, &scene, &settings, &cores, &mut notes)?;
+            }
             let mut config = EngineConfig::for_method(m, threads, args.group_size, cores)?;
             if let Some(t) = args.tile_size {
                 config.tile_size = t;
@@ -177,7 +182,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
             session: session_number,
             true_error: reference.as_ref().map(|r| r.compare(engine.sums())),
             history: history.to_vec(),
-            flags: flags_of(&engine.totals(), dropped, workers.as_deref()),
+            flags: notes.iter().cloned().chain(flags_of(&engine.totals(), dropped, workers.as_deref())).collect(),
             workers,
         }
     };
@@ -306,6 +311,51 @@ pub fn parallel_method(m: MethodArg) -> Option<ParallelMethod> {
         MethodArg::Async => Some(ParallelMethod::Async),
         MethodArg::TwoLevel => Some(ParallelMethod::TwoLevel),
     }
+}
+
+/// The threads an in-process method may use under `--memory-limit`: memory in use now (the scene loaded) plus
+/// the engine's buffers must fit. `async` gives up threads to fit (and `notes` says so); the others refuse.
+#[allow(clippy::too_many_arguments)]
+fn fit_memory(
+    limit: u64,
+    method: ParallelMethod,
+    threads: usize,
+    args: &RenderArgs,
+    scene: &Scene,
+    settings: &RenderSettings,
+    cores: &[usize],
+    notes: &mut Vec<String>,
+) -> Result<usize> {
+    let base = memory::current_rss_bytes().unwrap_or(0);
+    let pixels = scene.camera.width as u64 * scene.camera.height as u64;
+    let need = |t: usize| -> Result<u64> {
+        let c = EngineConfig::for_method(method, t, args.group_size, cores.to_vec())?;
+        Ok(base + (c.bytes_per_pixel(settings.backward_diffuse_depth) * pixels as f64) as u64)
+    };
+    let mb = |b: u64| format!("{:.0} MiB", b as f64 / (1u64 << 20) as f64);
+    let asked = need(threads)?;
+    if asked <= limit {
+        return Ok(threads);
+    }
+    if method == ParallelMethod::Async {
+        if let Some(t) = (1..threads).rev().find(|&t| need(t).is_ok_and(|n| n <= limit)) {
+            notes.push(format!(
+                "--memory-limit {}: async needs about {} at {threads} threads (its buffers grow with its threads), \
+                 so it ran with {t}",
+                mb(limit),
+                mb(asked)
+            ));
+            return Ok(t);
+        }
+    }
+    bail!(
+        "--memory-limit {} is too small: this render needs about {} ({} in use after loading the scene, plus the \
+         engine's buffers){}",
+        mb(limit),
+        mb(need(if method == ParallelMethod::Async { 1 } else { threads })?),
+        mb(base),
+        if method == ParallelMethod::Async { " even with one thread" } else { "" }
+    )
 }
 
 fn stop_rule(args: &RenderArgs) -> Result<StopRule> {

@@ -100,6 +100,22 @@ impl EngineConfig {
         self.groups * self.threads_per_group
     }
 
+    /// Bytes per image pixel of an engine with this configuration: the merged sums, plus each group's per-pixel
+    /// buffers over the pixels it renders (its mask, or the whole image without masks) and its photons. Known
+    /// before anything is allocated, so `--memory-limit` can be checked up front.
+    pub fn bytes_per_pixel(&self, backward_diffuse_depth: u32) -> f64 {
+        use photonfarm::accumulation::PixelSums;
+        use photonfarm::integrator::LayerValues;
+        // Masks partition the image among the groups; without masks every group covers all of it.
+        let coverage = if self.masks { 1 } else { self.groups };
+        let per_pixel = std::mem::size_of::<LayerValues>()
+            + std::mem::size_of::<PixelSums>()
+            + 8
+            + 24
+            + backward_diffuse_depth as usize * std::mem::size_of::<photonfarm::pbpm::BackwardPhoton>();
+        (Accumulator::bytes_per_pixel() + coverage * per_pixel) as f64
+    }
+
     /// The layout in words, e.g. "2 groups × 1 thread, 32-pixel tile masks, shared maps".
     pub fn layout(&self) -> String {
         format!(
@@ -307,22 +323,8 @@ impl Progressive for ParallelEngine<'_> {
     }
 
     fn bytes_per_pixel(&self) -> f64 {
-        // Needs the owner tokens (mutable); callers wanting it exactly use `capacity_bytes` between rounds.
-        let pixels = self.sums.pixels.len().max(1);
-        let per_group: usize = self
-            .groups
-            .iter()
-            .map(|g| {
-                g.mask().len()
-                    * (std::mem::size_of::<photonfarm::integrator::LayerValues>()
-                        + std::mem::size_of::<photonfarm::accumulation::PixelSums>()
-                        + 8
-                        + 24
-                        + self.settings.backward_diffuse_depth as usize
-                            * std::mem::size_of::<photonfarm::pbpm::BackwardPhoton>())
-            })
-            .sum();
-        (self.sums.pixels.len() * Accumulator::bytes_per_pixel() + per_group) as f64 / pixels as f64
+        // A formula, not a measurement: exact capacities need the owner tokens (`capacity_bytes`, between rounds).
+        self.config.bytes_per_pixel(self.settings.backward_diffuse_depth)
     }
 
     fn threads(&self) -> usize {
