@@ -43,36 +43,46 @@ pub fn region_phase_means(
     let w = engine.sums().width;
     let h = engine.sums().height;
     let pixels: Vec<usize> = (0..w * h).filter(|&i| region(i % w, i / w)).map(|i| i as usize).collect();
+    regions_phase_means(engine, phases, &[(&pixels, layer)]).remove(0)
+}
+
+/// Mean luminance of `layer` (None: the total) summed over phases, averaged over `pixels`.
+pub fn region_sum(engine: &Engine, pixels: &[usize], layer: Option<Layer>) -> f64 {
     assert!(!pixels.is_empty(), "empty test region");
-    let value = |e: &Engine| -> f64 {
-        pixels
-            .iter()
-            .map(|&p| {
-                let px = &e.sums().pixels[p];
-                let rgb = match layer {
-                    Some(l) => px.sum[l as usize],
-                    None => {
-                        let mut t = [0.0; 3];
-                        for l in 0..4 {
-                            for c in 0..3 {
-                                t[c] += px.sum[l][c];
-                            }
+    pixels
+        .iter()
+        .map(|&p| {
+            let px = &engine.sums().pixels[p];
+            let rgb = match layer {
+                Some(l) => px.sum[l as usize],
+                None => {
+                    let mut t = [0.0; 3];
+                    for l in 0..4 {
+                        for c in 0..3 {
+                            t[c] += px.sum[l][c];
                         }
-                        t
                     }
-                };
-                photonfarm::color::luminance_f64(rgb)
-            })
-            .sum::<f64>()
-            / pixels.len() as f64
-    };
-    let mut out = Vec::with_capacity(phases);
-    let mut before = value(engine);
+                    t
+                }
+            };
+            photonfarm::color::luminance_f64(rgb)
+        })
+        .sum::<f64>()
+        / pixels.len() as f64
+}
+
+/// [`region_phase_means`] for several regions (pixel indices and layer) over the same phases: one list of
+/// per-phase means per region.
+pub fn regions_phase_means(engine: &mut Engine, phases: usize, regions: &[(&[usize], Option<Layer>)]) -> Vec<Vec<f64>> {
+    let mut out = vec![Vec::with_capacity(phases); regions.len()];
+    let mut before: Vec<f64> = regions.iter().map(|(p, l)| region_sum(engine, p, *l)).collect();
     for _ in 0..phases {
         engine.run_phase();
-        let after = value(engine);
-        out.push(after - before);
-        before = after;
+        for (k, (p, l)) in regions.iter().enumerate() {
+            let after = region_sum(engine, p, *l);
+            out[k].push(after - before[k]);
+            before[k] = after;
+        }
     }
     out
 }
