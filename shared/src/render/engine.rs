@@ -60,8 +60,6 @@ pub struct Engine<'s> {
     /// Gathered (indirect, caustic) luminance of the phase, before division by the light-path count.
     gathered: Vec<[Rgb; 2]>,
     totals: RayTotals,
-    /// Pixel phase values with a NaN or infinite component: the sums drop them, so only this count shows them.
-    non_finite_values: u64,
 }
 
 impl<'s> Engine<'s> {
@@ -79,7 +77,6 @@ impl<'s> Engine<'s> {
             phase_values: vec![[Rgb::ZERO; 4]; pixels],
             gathered: vec![[Rgb::ZERO; 2]; pixels],
             totals: RayTotals::default(),
-            non_finite_values: 0,
         }
     }
 
@@ -91,11 +88,6 @@ impl<'s> Engine<'s> {
     /// Totals so far.
     pub fn totals(&self) -> RayTotals {
         self.totals
-    }
-
-    /// Pixel phase values so far that held a NaN or an infinity (each a bug): the sums dropped them.
-    pub fn non_finite_values(&self) -> u64 {
-        self.non_finite_values
     }
 
     /// The settings.
@@ -135,7 +127,7 @@ impl<'s> Engine<'s> {
             let mut s = Sampler::new(self.settings.seed, Pass::Path, phase, pixel as u64);
             let ray = cam.generate_ray(x, y, s.next_2d(), s.next_2d());
             let v = path_tracer::trace(self.scene, self.settings.max_depth, ray, &mut s, &mut stats);
-            self.close_pixel(pixel, &v);
+            self.sums.add_phase(pixel, &v, 1);
         }
         PhaseReport { phase, backward_rays: stats.rays, ..Default::default() }
     }
@@ -191,7 +183,7 @@ impl<'s> Engine<'s> {
             let mut v = self.phase_values[pixel];
             v[Layer::Indirect as usize] += self.gathered[pixel][0] * inv_n;
             v[Layer::Caustic as usize] += self.gathered[pixel][1] * inv_n;
-            self.close_pixel(pixel, &v);
+            self.sums.add_phase(pixel, &v, 1);
         }
         self.totals.backward_photons += bstats.photons;
         self.totals.capped_light_paths += fstats.capped;
@@ -202,13 +194,5 @@ impl<'s> Engine<'s> {
             light_paths: fstats.light_paths,
             merges: fstats.merges,
         }
-    }
-
-    /// Adds a pixel's phase value to the sums, counting it first if it is not finite.
-    fn close_pixel(&mut self, pixel: usize, v: &LayerValues) {
-        if !v.iter().all(|c| c.is_finite()) {
-            self.non_finite_values += 1;
-        }
-        self.sums.add_phase(pixel, v, 1);
     }
 }
