@@ -17,6 +17,14 @@ pub enum Command {
     Render(Box<RenderArgs>),
     /// Run every parallel method at several thread counts for a fixed time and print the paper's Table-1 rows.
     Bench(BenchArgs),
+    /// Draw charts (SVG and PNG) of a bench folder's results.csv and series.csv into DIR/charts/.
+    Charts(ChartsArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct ChartsArgs {
+    /// The bench output folder holding results.csv and series.csv.
+    pub dir: PathBuf,
 }
 
 #[derive(clap::Args, Debug)]

@@ -2,6 +2,7 @@
 //! and writes the image, its layers and the run record.
 
 mod bench_command;
+mod charts;
 mod cli;
 mod cluster;
 mod output_folder;
@@ -14,6 +15,7 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         cli::Command::Render(args) => render_command::run(*args),
         cli::Command::Bench(args) => bench_command::run(args),
+        cli::Command::Charts(args) => charts::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
