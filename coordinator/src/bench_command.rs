@@ -303,6 +303,8 @@ pub fn run(mut args: BenchArgs) -> Result<()> {
     let report = report(&rows, &args, &threads);
     println!("{report}");
     write(&dir.join("report.md"), &report)?;
+    let charts = crate::charts::write_charts(&dir)?;
+    println!("{} charts in {}", charts.len(), dir.join("charts").display());
     println!("wrote {}", dir.display());
     Ok(())
 }

@@ -19,6 +19,8 @@ pub enum Command {
     Bench(BenchArgs),
     /// Render a long reference image of a scene into scenes/references/, for the true error of every run.
     Reference(ReferenceArgs),
+    /// Draw charts (SVG and PNG) of a bench folder's results.csv and series.csv into DIR/charts/.
+    Charts(ChartsArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -43,6 +45,12 @@ pub struct ReferenceArgs {
     /// Replace an existing reference.
     #[arg(long)]
     pub force: bool,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct ChartsArgs {
+    /// The bench output folder holding results.csv and series.csv.
+    pub dir: PathBuf,
 }
 
 #[derive(clap::Args, Debug)]

@@ -2,6 +2,7 @@
 //! and writes the image, its layers and the run record.
 
 mod bench_command;
+mod charts;
 mod cli;
 mod cluster;
 mod output_folder;
@@ -16,6 +17,7 @@ fn main() -> std::process::ExitCode {
         cli::Command::Render(args) => render_command::run(*args),
         cli::Command::Bench(args) => bench_command::run(args),
         cli::Command::Reference(args) => reference_command::run(args),
+        cli::Command::Charts(args) => charts::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
