@@ -125,7 +125,18 @@ mod tests {
             radius_alpha: 2.0 / 3.0,
             light_paths_per_pixel: 1.0,
         };
-        let c = Checkpoint::new(&a, "abc", "three-level", settings, 1, 2.5, RayTotals::default(), &[]);
+        // History with and without a true error: bincode cannot skip a field, so every one must round-trip.
+        let history = [
+            HistoryEntry { phase: 1, time_s: 0.5, delta_all: 0.2, ..HistoryEntry::default() },
+            HistoryEntry {
+                phase: 2,
+                time_s: 1.0,
+                true_all: Some(0.1),
+                true_unlit: Some(0.3),
+                ..HistoryEntry::default()
+            },
+        ];
+        let c = Checkpoint::new(&a, "abc", "three-level", settings, 1, 2.5, RayTotals::default(), &history);
         let dir = std::env::temp_dir().join(format!("pf-checkpoint-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("checkpoint.bin");

@@ -17,9 +17,11 @@ pub struct HistoryEntry {
     pub backward_rays: u64,
     pub forward_rays: u64,
     /// Relative RMSE against the reference over all pixels and over pixels that do not see a light directly.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    /// Always serialized (null without a reference): checkpoints keep the history with bincode, which cannot
+    /// skip fields.
+    #[serde(default)]
     pub true_all: Option<f64>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(default)]
     pub true_unlit: Option<f64>,
 }
 
@@ -34,9 +36,9 @@ pub struct TrueError {
     pub rmse_unlit: f64,
     /// The reference's own δ over the same pixels (from its `sem` layer): it adds in quadrature to the error
     /// measured against it, so a true error near it says more about the reference than about the run.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(default)]
     pub reference_delta_all: Option<f64>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(default)]
     pub reference_delta_unlit: Option<f64>,
 }
 
