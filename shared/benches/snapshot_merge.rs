@@ -8,7 +8,7 @@
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use photonfarm::accumulation::{Accumulator, PixelSums};
 use photonfarm::color::Rgb;
-use photonfarm::protocol::snapshot::{apply_delta, encode_delta};
+use photonfarm::protocol::snapshot::{apply_delta, encode_delta, Compression};
 use photonfarm::sampling::{Pass, Sampler};
 use std::hint::black_box;
 
@@ -32,16 +32,21 @@ fn snapshot_merge(c: &mut Criterion) {
         let base = sums(w, h, 6, 1);
         let mut current = base.clone();
         current.merge(&sums(w, h, 6, 2));
-        let delta = encode_delta(&current.pixels, &base.pixels);
-        eprintln!(
-            "{w}×{h}: a snapshot of 6 new phases per pixel is {:.2} MB compressed ({:.1} bytes per pixel, {:.0} raw)",
-            delta.len() as f64 / 1e6,
-            delta.len() as f64 / (w * h) as f64,
-            8.0 + 8.0 * 17.0
-        );
-        group.bench_with_input(BenchmarkId::new("encode", format!("{w}x{h}")), &(), |b, _| {
-            b.iter(|| black_box(encode_delta(&current.pixels, &base.pixels)))
-        });
+        for compression in [Compression::Fast, Compression::Small] {
+            let delta = encode_delta(&current.pixels, &base.pixels, compression);
+            eprintln!(
+                "{w}×{h}, {compression:?}: a snapshot of 6 new phases per pixel is {:.2} MB ({:.1} bytes per pixel, \
+                 {:.0} raw)",
+                delta.len() as f64 / 1e6,
+                delta.len() as f64 / (w * h) as f64,
+                8.0 + 8.0 * 17.0
+            );
+            let id = format!("{w}x{h}-{compression:?}").to_lowercase();
+            group.bench_with_input(BenchmarkId::new("encode", id), &(), |b, _| {
+                b.iter(|| black_box(encode_delta(&current.pixels, &base.pixels, compression)))
+            });
+        }
+        let delta = encode_delta(&current.pixels, &base.pixels, Compression::Small);
         let mut target = vec![PixelSums::default(); (w * h) as usize];
         group.bench_with_input(BenchmarkId::new("check_and_merge", format!("{w}x{h}")), &(), |b, _| {
             b.iter(|| black_box(apply_delta(&delta, &mut target).unwrap()))

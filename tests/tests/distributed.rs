@@ -353,3 +353,39 @@ fn hostile_connections_are_refused_and_a_late_worker_joins_without_disturbing_th
     assert!(late["pixel_phases"].as_u64().unwrap() > 0, "{late}");
     assert!(workers.iter().all(|w| w["state"] == "finished"), "{workers:?}");
 }
+
+#[test]
+fn a_straggling_worker_contributes_less_and_the_image_stays_correct() {
+    let dir = scratch_dir("straggler");
+    let scene = small_cornell(&dir, 40);
+    let (single, out) = (dir.join("single"), dir.join("straggled"));
+    let secret = dir.join("secret");
+    std::fs::write(&secret, "a secret for the straggler test").unwrap();
+    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let addr = format!("127.0.0.1:{port}");
+    let one_node = "pack:1 numa:1 core:1 pu:1";
+    let mut c = coordinator(&scene, &out, &["--method", "three-level", "--topology", one_node, "--phases", "1500"]);
+    c.args(["--group-size", "1", "--seed", "41", "--listen", &addr]).arg("--secret-file").arg(&secret);
+    let child = c.stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
+    // A worker four times slower than its machine joins the run.
+    let straggler = Command::new(binary("worker"))
+        .args(["join", &addr, "--name", "straggler", "--slowdown", "4", "--secret-file"])
+        .arg(&secret)
+        .output()
+        .unwrap();
+    assert!(straggler.status.success(), "{}", String::from_utf8_lossy(&straggler.stderr));
+    let o = child.wait_with_output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r = record(&out);
+    let workers = r["workers"].as_array().unwrap();
+    let by_name = |n: &str| workers.iter().find(|w| w["name"] == n).unwrap_or_else(|| panic!("no {n} in {workers:?}"));
+    let (fast, slow) = (by_name("node0"), by_name("straggler"));
+    assert!(slow["binding"].as_str().unwrap().contains("slowed down 4×"), "{slow}");
+    assert!(workers.iter().all(|w| w["state"] == "finished"), "{workers:?}");
+    let (pf, ps) = (fast["pixel_phases"].as_u64().unwrap(), slow["pixel_phases"].as_u64().unwrap());
+    eprintln!("pixel-phases: full-speed worker {pf}, straggler {ps}");
+    // It added what it could, a fraction of the other's, and never held the run back.
+    assert!(ps > 0 && (ps as f64) < 0.6 * pf as f64, "straggler {ps} against {pf} pixel-phases");
+    run_ok(coordinator(&scene, &single, &["--method", "pbpm", "--phases", "1500", "--seed", "42"]));
+    assert_same_image(&single, &out, "a run with a straggler against one process");
+}

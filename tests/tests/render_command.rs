@@ -100,6 +100,53 @@ fn render_with_a_reference_reports_the_true_error() {
     let r = record(&out);
     let t = r["true_error"]["rmse_unlit"].as_f64().unwrap();
     assert!(t > 0.0 && t < 1.0, "{t}");
+    // The reference's own noise is reported beside it, and every step of the history has its true error.
+    let d_ref = r["true_error"]["reference_delta_unlit"].as_f64().unwrap();
+    assert!(d_ref > 0.0 && d_ref < t, "reference δ {d_ref}, true error {t}");
+    assert!(r["history"].as_array().unwrap().iter().all(|h| h["true_unlit"].as_f64().is_some_and(|e| e > 0.0)));
+}
+
+/// The Cornell box at 512 × 512 in a scratch folder: large enough that async's per-thread buffers (about 160 MB
+/// per extra thread) dwarf the variation of the memory a process has in use after loading a scene.
+fn large_cornell(name: &str) -> std::path::PathBuf {
+    let dir = scratch_dir(name);
+    let root = repo_root().join("scenes");
+    let text = std::fs::read_to_string(root.join("cornell.toml")).unwrap();
+    std::fs::create_dir_all(dir.join("cornell")).unwrap();
+    for e in std::fs::read_dir(root.join("cornell")).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), dir.join("cornell").join(e.file_name())).unwrap();
+    }
+    let path = dir.join("cornell.toml");
+    std::fs::write(&path, text.replace("width = 256", "width = 512").replace("height = 256", "height = 512")).unwrap();
+    path
+}
+
+#[test]
+fn a_memory_limit_makes_async_give_up_threads_and_other_methods_refuse_up_front() {
+    let scene = large_cornell("memory-limit");
+    let scene = scene.to_str().unwrap();
+    // Async needs about 756 bytes per pixel at one thread and 1368 at two: 198 and 359 MB over what is in use.
+    let out = scratch_dir("memory-limit-async");
+    let result = render(
+        &[scene, "--method", "async", "--threads", "2", "--phases", "2", "--memory-limit", "300M", "--quiet"],
+        &out,
+    );
+    let r = record(&out);
+    assert_eq!(r["threads"], 1, "{}", String::from_utf8_lossy(&result.stderr));
+    let flags = r["flags"].as_array().unwrap();
+    assert!(flags.iter().any(|f| f.as_str().unwrap().starts_with("--memory-limit 300 MiB: async needs")), "{flags:?}");
+    assert!(r["peak_memory_bytes"].as_u64().unwrap() < 300 << 20);
+
+    let refused = Command::new(binary("coordinator"))
+        .args(["render", scene, "--method", "sync", "--threads", "2", "--phases", "2", "--memory-limit", "20M"])
+        .arg("--out")
+        .arg(scratch_dir("memory-limit-sync"))
+        .current_dir(repo_root())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success() && stderr.contains("--memory-limit 20 MiB is too small"), "{stderr}");
 }
 
 #[test]

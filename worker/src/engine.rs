@@ -108,11 +108,15 @@ impl EngineConfig {
         use photonfarm::integrator::LayerValues;
         // Masks partition the image among the groups; without masks every group covers all of it.
         let coverage = if self.masks { 1 } else { self.groups };
+        // A photon is held twice during a phase (the backward pass's list, then the map's copy), and the grid
+        // enters it in at most eight cells (its sphere spans at most two cells of three mean radii per axis),
+        // each entry a u32 plus the build's u64 (cell, photon) pair, with a table of half a bucket per photon.
+        let photon = 2 * std::mem::size_of::<photonfarm::pbpm::BackwardPhoton>() + 8 * (4 + 8) + 2;
         let per_pixel = std::mem::size_of::<LayerValues>()
             + std::mem::size_of::<PixelSums>()
             + 8
             + 24
-            + backward_diffuse_depth as usize * std::mem::size_of::<photonfarm::pbpm::BackwardPhoton>();
+            + backward_diffuse_depth as usize * photon;
         (Accumulator::bytes_per_pixel() + coverage * per_pixel) as f64
     }
 

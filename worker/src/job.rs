@@ -6,7 +6,7 @@ use crate::engine::{EngineConfig, ParallelEngine};
 use crate::memory_binding::{self, MemoryBinding};
 use crate::topology;
 use photonfarm::accumulation::PixelSums;
-use photonfarm::protocol::snapshot::encode_delta;
+use photonfarm::protocol::snapshot::{encode_delta, Compression};
 use photonfarm::protocol::{Job, Snapshot, WorkerInfo};
 use photonfarm::render::session::Progressive;
 use photonfarm::scene::Scene;
@@ -79,6 +79,8 @@ pub fn run(
     job: &Job,
     stop: &AtomicBool,
     interval_ms: &AtomicU64,
+    slowdown: f64,
+    compression: Compression,
     mut emit: impl FnMut(JobEvent) -> bool,
 ) {
     let config = match engine_config(job) {
@@ -115,9 +117,10 @@ pub fn run(
         cores: cores.clone(),
         numa_node: job.engine.numa_node,
         binding: format!(
-            "{pinned} of {threads} threads pinned to cores {}{}; {memory}",
+            "{pinned} of {threads} threads pinned to cores {}{}; {memory}{}",
             cores.iter().map(|c| c.to_string()).collect::<Vec<_>>().join(","),
-            if job.engine.synthetic_topology { " (synthetic topology: nodes mapped onto real cores)" } else { "" }
+            if job.engine.synthetic_topology { " (synthetic topology: nodes mapped onto real cores)" } else { "" },
+            if slowdown > 1.0 { format!("; slowed down {slowdown}× (--slowdown)") } else { String::new() }
         ),
         layout,
     };
@@ -130,7 +133,13 @@ pub fn run(
     loop {
         let stopping = stop.load(Ordering::Acquire);
         if !stopping {
+            let round = Instant::now();
             engine.run_round(stop, None);
+            // A straggler idles (slowdown − 1) round times after each round, but still answers a stop at once.
+            let idle_until = Instant::now() + round.elapsed().mul_f64(slowdown - 1.0);
+            while Instant::now() < idle_until && !stop.load(Ordering::Acquire) {
+                std::thread::sleep(Duration::from_millis(5).min(idle_until.saturating_duration_since(Instant::now())));
+            }
         }
         let stopping = stop.load(Ordering::Acquire);
         let interval = Duration::from_millis(interval_ms.load(Ordering::Relaxed).max(1));
@@ -140,7 +149,7 @@ pub fn run(
             let snapshot = Snapshot {
                 seq,
                 totals: engine.totals(),
-                delta: encode_delta(current, &base),
+                delta: encode_delta(current, &base, compression),
                 interval_ms: interval.as_millis() as u64,
                 previous_send_ms: 0,
                 peak_memory_bytes: photonfarm::render::memory::peak_rss_bytes().unwrap_or(0),

@@ -3,6 +3,7 @@
 
 use crate::job::{self, JobEvent};
 use photonfarm::protocol::auth::{handshake, Peer};
+use photonfarm::protocol::snapshot::Compression;
 use photonfarm::protocol::{Connection, Job, Message, ProtocolError, Role, Secret};
 use sha2::{Digest, Sha256};
 use std::collections::BTreeMap;
@@ -21,12 +22,20 @@ pub struct LinkOptions {
     pub heartbeat: Duration,
     /// The coordinator is presumed gone when nothing arrived for this long.
     pub peer_timeout: Duration,
+    /// Render this many times slower than possible (1 = full speed): a straggler for tests.
+    pub slowdown: f64,
 }
 
 impl LinkOptions {
     /// Defaults: heartbeats every second, the coordinator presumed gone after 15 s of silence.
     pub fn new(name: String, secret: Secret) -> Self {
-        LinkOptions { name, secret, heartbeat: Duration::from_secs(1), peer_timeout: Duration::from_secs(15) }
+        LinkOptions {
+            name,
+            secret,
+            heartbeat: Duration::from_secs(1),
+            peer_timeout: Duration::from_secs(15),
+            slowdown: 1.0,
+        }
     }
 }
 
@@ -87,10 +96,14 @@ pub async fn serve_job(
     let mut previous_send_ms = 0u64;
     let (events_tx, mut events) = mpsc::unbounded_channel();
     let engine = {
-        let (job, stop, interval_ms) = (job.clone(), stop.clone(), interval_ms.clone());
+        let (job, stop, interval_ms, slowdown) = (job.clone(), stop.clone(), interval_ms.clone(), opts.slowdown);
+        // On this machine the link is free and the worker's time is not: compress fast.
+        let compression = Compression::for_peer(conn.peer);
         std::thread::Builder::new()
             .name("job".into())
-            .spawn(move || job::run(&scene, &job, &stop, &interval_ms, |e| events_tx.send(e).is_ok()))
+            .spawn(move || {
+                job::run(&scene, &job, &stop, &interval_ms, slowdown, compression, |e| events_tx.send(e).is_ok())
+            })
             .map_err(|e| LinkError::Job(format!("cannot start the engine thread: {e}")))?
     };
     // Whatever ends the link, the engine stops.

@@ -29,6 +29,17 @@ struct SecretArgs {
     /// The name this worker gives the coordinator (default: the host name).
     #[arg(long)]
     name: Option<String>,
+    /// Render this many times slower than the machine can (the worker sleeps after each round): a straggler,
+    /// to test how a run copes with one.
+    #[arg(long, default_value_t = 1.0, value_parser = parse_slowdown)]
+    slowdown: f64,
+}
+
+fn parse_slowdown(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(f) if f.is_finite() && f >= 1.0 => Ok(f),
+        _ => Err(format!("'{text}' is not a slowdown factor of at least 1 (e.g. 3)")),
+    }
 }
 
 #[derive(Subcommand)]
@@ -89,8 +100,9 @@ async fn run(cli: Cli) -> Result<()> {
                 .with_context(|| format!("cannot resolve the coordinator address {addr}"))?
                 .collect();
             let loopback = !addrs.is_empty() && addrs.iter().all(|a| a.ip().is_loopback());
-            let opts =
+            let mut opts =
                 LinkOptions::new(s.name.clone().unwrap_or_else(worker::topology::hostname), secret(&s, loopback)?);
+            opts.slowdown = s.slowdown;
             // The coordinator may still be starting: retry for a while.
             let deadline = Instant::now() + Duration::from_secs(15);
             let stream = loop {
@@ -109,10 +121,11 @@ async fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Serve { listen, secret: s } => {
-            let opts = LinkOptions::new(
+            let mut opts = LinkOptions::new(
                 s.name.clone().unwrap_or_else(worker::topology::hostname),
                 secret(&s, listen.ip().is_loopback())?,
             );
+            opts.slowdown = s.slowdown;
             let listener =
                 tokio::net::TcpListener::bind(listen).await.with_context(|| format!("cannot listen on {listen}"))?;
             eprintln!("worker {}: listening on {}", opts.name, listener.local_addr()?);

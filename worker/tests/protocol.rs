@@ -87,10 +87,17 @@ fn async_memory_grows_with_threads_and_the_other_methods_do_not() {
     let settings = RenderSettings::for_scene(&sc, Method::Pbpm, 4);
     let bytes = |method: ParallelMethod, threads: usize| {
         let config = EngineConfig::for_method(method, threads, 2, vec![0, 1]).unwrap();
+        let estimate = config.bytes_per_pixel(settings.backward_diffuse_depth) * (64 * 64) as f64;
         let mut engine = ParallelEngine::new(&sc, settings, config).unwrap();
         let never = AtomicBool::new(false);
         engine.run_round(&never, None);
-        engine.capacity_bytes() as f64
+        let held = engine.capacity_bytes() as f64;
+        // --memory-limit trusts the estimate made before allocating: it must not fall short of what is held.
+        assert!(
+            estimate >= held && estimate < 2.0 * held,
+            "{method:?} × {threads}: estimated {estimate} bytes, holds {held}"
+        );
+        held
     };
     let (a1, a4) = (bytes(ParallelMethod::Async, 1), bytes(ParallelMethod::Async, 4));
     let (s1, s4) = (bytes(ParallelMethod::Sync, 1), bytes(ParallelMethod::Sync, 4));

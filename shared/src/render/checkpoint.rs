@@ -5,7 +5,7 @@ use super::engine::RayTotals;
 use super::record::HistoryEntry;
 use super::settings::RenderSettings;
 use crate::accumulation::{Accumulator, PixelSums};
-use crate::protocol::snapshot::{apply_delta, encode_delta};
+use crate::protocol::snapshot::{apply_delta, encode_delta, Compression};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -66,7 +66,7 @@ impl Checkpoint {
             elapsed_s,
             totals,
             history: history.to_vec(),
-            sums: encode_delta(&sums.pixels, &zero),
+            sums: encode_delta(&sums.pixels, &zero, Compression::Small),
         }
     }
 
