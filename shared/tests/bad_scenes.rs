@@ -224,6 +224,9 @@ fn a_missing_scene_file_is_an_error_naming_it() {
 
 #[test]
 fn the_shipped_scenes_load() {
+    let lens = Scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/lens.toml"))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!((lens.camera.width, lens.camera.height), (360, 240));
     for name in ["cornell.toml", "caustic.toml"] {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes").join(name);
         let s = Scene::load(&path).unwrap_or_else(|e| panic!("{e}"));
