@@ -42,7 +42,7 @@ fn ray_tracing(c: &mut Criterion) {
 
     let camera = Camera::new(Vec3::new(0.0, 0.3, -3.0), Vec3::ZERO, Vec3::Y, 40.0, 512, 512, Lens::Pinhole);
     let primary: Vec<Ray> = (0..512 * 512)
-        .map(|i| camera.generate_ray((i % 512) as u32, (i / 512) as u32, Vec2::splat(0.5), Vec2::ZERO))
+        .map(|i| camera.generate_ray((i % 512) as u32, (i / 512) as u32, Vec2::splat(0.5), Vec2::ZERO).ray)
         .collect();
     let mut s = Sampler::new(1, Pass::Light, 1, 1);
     let incoherent: Vec<Ray> = (0..512 * 512)

@@ -1,8 +1,21 @@
-//! The camera: a pinhole or a thin lens, with the pixel footprint that sets the photon radius.
+//! The camera: a pinhole, a thin lens, or a sensor behind a real lens modelled in the scene (paper §6.1,
+//! Fig. 14), with the pixel footprint that sets the photon radius.
 
 use crate::geometry::Ray;
-use crate::sampling::concentric_disk;
+use crate::sampling::{concentric_disk, Frame};
 use glam::{Vec2, Vec3};
+
+/// The disc a sensor camera aims its rays at: the clear aperture of the rear lens element, in the plane of its
+/// rim. It stands in for the exit pupil: every ray that can leave the lens toward the sensor passes through it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RearElement {
+    /// Centre of the disc (on the optical axis).
+    pub center: Vec3,
+    /// Unit normal of the disc (the lens's optical axis; either orientation).
+    pub axis: Vec3,
+    /// Radius of the clear aperture (m).
+    pub radius: f32,
+}
 
 /// Which projection the camera uses.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -11,6 +24,18 @@ pub enum Lens {
     Pinhole,
     /// A thin lens of `radius` (m) focused at `focus_distance` (m) along the view direction.
     Thin { radius: f32, focus_distance: f32 },
+    /// A sensor `width` metres wide (its height follows from the pixel aspect) at the camera's position, facing
+    /// the rear element of a lens that is part of the scene geometry; the scene's lens surfaces form the image.
+    Sensor { width: f32, rear: RearElement },
+}
+
+/// A camera ray and the weight of its contribution to the pixel measurement.
+#[derive(Clone, Copy, Debug)]
+pub struct CameraRay {
+    pub ray: Ray,
+    /// Factor every contribution of the path is multiplied by: 1 for the pinhole and the thin lens (the pixel is
+    /// the box-filtered radiance), the irradiance estimator's weight for the sensor camera.
+    pub weight: f32,
 }
 
 /// A perspective camera; image row 0 is the top of the image.
@@ -45,19 +70,40 @@ impl Camera {
         }
     }
 
+    /// A sensor camera: the sensor's centre at `position`, facing `look_at` (along the optical axis, toward the
+    /// lens), `sensor_width` metres wide, aiming its rays at `rear`.
+    pub fn sensor(
+        position: Vec3,
+        look_at: Vec3,
+        up: Vec3,
+        sensor_width: f32,
+        width: u32,
+        height: u32,
+        rear: RearElement,
+    ) -> Self {
+        let mut camera =
+            Camera::new(position, look_at, up, 90.0, width, height, Lens::Sensor { width: sensor_width, rear });
+        // Only `pixel_angle` reads the field of view here: a pixel seen from the rear element, which is close to
+        // the angle it subtends through the lens (exactly so from the rear principal plane).
+        let distance = (rear.center - position).dot(camera.forward).abs().max(f32::MIN_POSITIVE);
+        camera.tan_half_fov_y = 0.5 * sensor_width * height as f32 / width as f32 / distance;
+        camera
+    }
+
     /// Number of pixels.
     pub fn pixel_count(&self) -> usize {
         self.width as usize * self.height as usize
     }
 
-    /// The ray through image position (x + jitter.x, y + jitter.y) in pixels; `lens_u` samples the aperture.
-    /// The box-filtered pixel measurement gives every such ray weight one.
-    pub fn generate_ray(&self, x: u32, y: u32, jitter: Vec2, lens_u: Vec2) -> Ray {
+    /// The ray for image position (x + jitter.x, y + jitter.y) in pixels; `lens_u` samples the aperture (the
+    /// thin lens's disc or the sensor camera's rear element).
+    pub fn generate_ray(&self, x: u32, y: u32, jitter: Vec2, lens_u: Vec2) -> CameraRay {
         let aspect = self.width as f32 / self.height as f32;
         let sx = (2.0 * (x as f32 + jitter.x) / self.width as f32 - 1.0) * self.tan_half_fov_y * aspect;
         let sy = (1.0 - 2.0 * (y as f32 + jitter.y) / self.height as f32) * self.tan_half_fov_y;
         let dir = (self.forward + self.right * sx + self.up * sy).normalize();
-        match self.lens {
+        // The box-filtered pixel measurement of radiance gives every pinhole and thin-lens ray weight one.
+        let ray = match self.lens {
             Lens::Pinhole => Ray::new(self.position, dir),
             Lens::Thin { radius, focus_distance } => {
                 let focus = self.position + dir * (focus_distance / dir.dot(self.forward));
@@ -65,11 +111,42 @@ impl Camera {
                 let origin = self.position + self.right * d.x + self.up * d.y;
                 Ray::new(origin, (focus - origin).normalize())
             }
-        }
+            Lens::Sensor { width, rear } => return self.sensor_ray(width, &rear, x, y, jitter, lens_u),
+        };
+        CameraRay { ray, weight: 1.0 }
+    }
+
+    /// A sensor camera's ray: from a uniform point of the pixel on the sensor toward a uniform point of the rear
+    /// element's disc.
+    ///
+    /// A pixel measures the sensor irradiance averaged over the pixel, E = ∫ L cos θ_s dω (W·m⁻² per channel),
+    /// from the light that leaves the lens through the rear element. Written over the disc's area A,
+    /// E = ∫_A L cos θ_s cos θ_d / d² dA, and a uniform point of the disc (pdf 1/A) gives the weight
+    /// A cos θ_s cos θ_d / d², θ_s and θ_d being the ray's angles to the sensor's and the disc's normals and d the
+    /// distance between the two points. Light arriving from outside the disc's solid angle is blocked by the
+    /// lens barrel in a real camera, and here by the scene's mounts around the elements.
+    fn sensor_ray(&self, width: f32, rear: &RearElement, x: u32, y: u32, jitter: Vec2, lens_u: Vec2) -> CameraRay {
+        let height = width * self.height as f32 / self.width as f32;
+        let u = (x as f32 + jitter.x) / self.width as f32 - 0.5;
+        let v = (y as f32 + jitter.y) / self.height as f32 - 0.5;
+        // The lens forms an inverted image; the sensor is read out rotated by 180°, like a real camera's, so that
+        // image row 0 shows the top of the scene and the image's right is forward × up as for the other cameras.
+        let origin = self.position - self.right * (u * width) + self.up * (v * height);
+        let frame = Frame::from_normal(rear.axis);
+        let d = concentric_disk(lens_u) * rear.radius;
+        let target = rear.center + frame.s * d.x + frame.t * d.y;
+        let to = target - origin;
+        let dist2 = to.length_squared();
+        let dir = to / dist2.sqrt();
+        let cos_s = dir.dot(self.forward);
+        let cos_d = dir.dot(rear.axis).abs();
+        let area = std::f32::consts::PI * rear.radius * rear.radius;
+        let weight = if cos_s > 0.0 && dist2 > 0.0 { area * cos_s * cos_d / dist2 } else { 0.0 };
+        CameraRay { ray: Ray::new(origin, dir), weight: if weight.is_finite() { weight } else { 0.0 } }
     }
 
     /// Angle one pixel subtends at the image centre (radians): the footprint of a pixel at distance d is
-    /// d times this.
+    /// d times this. For a sensor camera, the pixel pitch over the sensor's distance to the rear element.
     pub fn pixel_angle(&self) -> f32 {
         2.0 * self.tan_half_fov_y / self.height as f32
     }
@@ -94,17 +171,17 @@ mod tests {
     #[test]
     fn row_zero_is_the_top_and_right_is_minus_x_looking_down_plus_z() {
         let c = cornell_camera();
-        let top_left = c.generate_ray(0, 0, Vec2::ZERO, Vec2::ZERO);
+        let top_left = c.generate_ray(0, 0, Vec2::ZERO, Vec2::ZERO).ray;
         assert!(top_left.direction.y > 0.0, "row 0 looks up");
         assert!(top_left.direction.x > 0.0, "column 0 is at +x (the red wall's side)");
-        let centre = c.generate_ray(128, 128, Vec2::ZERO, Vec2::ZERO);
+        let centre = c.generate_ray(128, 128, Vec2::ZERO, Vec2::ZERO).ray;
         assert!((centre.direction - Vec3::Z).length() < 1e-5);
     }
 
     #[test]
     fn field_of_view_spans_the_image_height() {
         let c = cornell_camera();
-        let top = c.generate_ray(128, 0, Vec2::new(0.0, 0.0), Vec2::ZERO).direction;
+        let top = c.generate_ray(128, 0, Vec2::new(0.0, 0.0), Vec2::ZERO).ray.direction;
         let half = top.y.atan2(top.z).to_degrees();
         assert!((half - 39.3076 / 2.0).abs() < 1e-3, "{half}");
     }
@@ -113,11 +190,59 @@ mod tests {
     fn thin_lens_rays_meet_at_the_focus_distance() {
         let mut c = cornell_camera();
         c.lens = Lens::Thin { radius: 0.05, focus_distance: 1.0 };
-        let a = c.generate_ray(100, 70, Vec2::splat(0.5), Vec2::new(0.1, 0.9));
-        let b = c.generate_ray(100, 70, Vec2::splat(0.5), Vec2::new(0.8, 0.3));
+        let a = c.generate_ray(100, 70, Vec2::splat(0.5), Vec2::new(0.1, 0.9)).ray;
+        let b = c.generate_ray(100, 70, Vec2::splat(0.5), Vec2::new(0.8, 0.3)).ray;
         let pa = a.at((1.0 - (a.origin.z + 0.8)) / a.direction.z);
         let pb = b.at((1.0 - (b.origin.z + 0.8)) / b.direction.z);
         assert!((pa - pb).length() < 1e-4);
         assert!((a.origin - b.origin).length() > 0.01);
+    }
+
+    fn sensor_camera() -> Camera {
+        // A 36 × 24 mm sensor 50 mm behind a rear element of radius 10 mm, looking down +z.
+        let rear = RearElement { center: Vec3::new(0.0, 0.0, 0.05), axis: -Vec3::Z, radius: 0.01 };
+        Camera::sensor(Vec3::ZERO, Vec3::Z, Vec3::Y, 0.036, 360, 240, rear)
+    }
+
+    #[test]
+    fn sensor_rays_start_on_the_rotated_sensor_and_aim_at_the_rear_element() {
+        let c = sensor_camera();
+        let top_left = c.generate_ray(0, 0, Vec2::ZERO, Vec2::splat(0.5)).ray;
+        // Row 0 images the top of the scene, so it lies at the bottom of the sensor; column 0 images the scene's
+        // left (−right = +x looking down +z), so it lies at −x.
+        assert!((top_left.origin - Vec3::new(-0.018, -0.012, 0.0)).length() < 1e-6, "{:?}", top_left.origin);
+        assert!((top_left.at(0.05 / top_left.direction.z) - Vec3::new(0.0, 0.0, 0.05)).length() < 1e-6);
+        for i in 0..64 {
+            let u = Vec2::new((i % 8) as f32 / 8.0 + 0.01, (i / 8) as f32 / 8.0 + 0.02);
+            let r = c.generate_ray(200, 90, Vec2::splat(0.5), u).ray;
+            let p = r.at((0.05 - r.origin.z) / r.direction.z);
+            assert!(p.truncate().length() <= 0.01 + 1e-6, "lands on the disc: {p:?}");
+        }
+    }
+
+    #[test]
+    fn sensor_weights_average_to_the_solid_angle_integral_of_the_rear_element() {
+        // With unit radiance the pixel value is the irradiance from the disc, which for the centre of the sensor
+        // is π sin²α with tan α = 10/50 (a disc seen on axis).
+        let c = sensor_camera();
+        let n = 64;
+        let mut sum = 0.0f64;
+        for i in 0..n {
+            for j in 0..n {
+                let u = Vec2::new((i as f32 + 0.5) / n as f32, (j as f32 + 0.5) / n as f32);
+                // Pixel (180, 120) with zero jitter starts exactly at the sensor's centre.
+                sum += c.generate_ray(180, 120, Vec2::ZERO, u).weight as f64;
+            }
+        }
+        let estimate = sum / (n * n) as f64;
+        let sin2 = 0.01f64.powi(2) / (0.01f64.powi(2) + 0.05f64.powi(2));
+        let exact = std::f64::consts::PI * sin2;
+        assert!((estimate / exact - 1.0).abs() < 2e-3, "{estimate} vs {exact}");
+    }
+
+    #[test]
+    fn sensor_pixel_angle_is_the_pitch_over_the_rear_element_distance() {
+        let c = sensor_camera();
+        assert!((c.pixel_angle() - 0.0001 / 0.05).abs() < 1e-7, "{}", c.pixel_angle());
     }
 }

@@ -15,8 +15,10 @@ pub enum Material {
     /// Ideal specular reflector, two-sided.
     Mirror { reflectance: Rgb },
     /// Smooth dielectric interface with Fresnel reflection and refraction; `ior` on the back side of the
-    /// surface normal (inside), `ext_ior` on the front (outside).
-    Dielectric { ior: f32, ext_ior: f32 },
+    /// surface normal (inside), `ext_ior` on the front (outside). With `anti_reflection` the surface has an ideal
+    /// anti-reflection coating: it refracts everything except under total internal reflection (a lens without
+    /// ghosts, to compare with the uncoated one).
+    Dielectric { ior: f32, ext_ior: f32, anti_reflection: bool },
     /// A thin partially reflecting coating (e.g. a head-up display combiner): specular reflection with
     /// `reflectance`, straight-through transmission with `transmittance`, the rest absorbed.
     Coating { reflectance: Rgb, transmittance: Rgb },
@@ -90,10 +92,12 @@ impl Material {
                     ScatterSample { wi: -wo, weight: transmittance / (1.0 - p_reflect), pdf: 0.0, delta: true }
                 }
             }
-            Material::Dielectric { ior, ext_ior } => {
+            Material::Dielectric { ior, ext_ior, anti_reflection } => {
                 let (eta_o, eta_t) = if front { (ext_ior, ior) } else { (ior, ext_ior) };
                 let cos_o = wo.dot(ns).clamp(-1.0, 1.0).abs();
                 let f = fresnel_dielectric(cos_o, eta_o, eta_t);
+                // A coating cannot undo total internal reflection (f = 1): there is no transmitted wave.
+                let f = if anti_reflection && f < 1.0 { 0.0 } else { f };
                 if u.x < f {
                     ScatterSample { wi: reflect(wo, ns), weight: Rgb::ONE, pdf: 0.0, delta: true }
                 } else {
@@ -171,7 +175,7 @@ mod tests {
 
     #[test]
     fn refraction_obeys_snell_and_radiance_scales_by_eta_squared() {
-        let glass = Material::Dielectric { ior: 1.5, ext_ior: 1.0 };
+        let glass = Material::Dielectric { ior: 1.5, ext_ior: 1.0, anti_reflection: false };
         let hit = flat_hit(Vec3::Z);
         let wo = Vec3::new(0.5, 0.0, 0.75f32.sqrt());
         // u.x = 0.999 selects transmission (F is small here).
@@ -183,6 +187,19 @@ mod tests {
         assert!((s.weight.x - 1.0 / 2.25).abs() < 1e-5);
         let s = glass.sample(&hit, wo, Vec2::new(0.999, 0.0), Transport::Importance).unwrap();
         assert!((s.weight.x - 1.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn anti_reflection_coating_refracts_everything_but_total_internal_reflection() {
+        let coated = Material::Dielectric { ior: 1.5, ext_ior: 1.0, anti_reflection: true };
+        let hit = flat_hit(Vec3::Z);
+        // u.x = 0 would pick reflection whenever F > 0.
+        let s = coated.sample(&hit, Vec3::Z, Vec2::ZERO, Transport::Radiance).unwrap();
+        assert!(s.wi.z < 0.0, "refracted into the glass");
+        // From inside at a grazing angle: total internal reflection stays.
+        let wo = Vec3::new(0.9, 0.0, -(1.0f32 - 0.81).sqrt());
+        let s = coated.sample(&hit, wo, Vec2::new(0.999, 0.0), Transport::Radiance).unwrap();
+        assert!(s.wi.z < 0.0, "reflected back inside");
     }
 
     #[test]

@@ -88,7 +88,7 @@ fn pixel_average(sc: &photonfarm::scene::Scene, x: u32, y: u32, f: &dyn Fn(f64, 
     for j in 0..n {
         for i in 0..n {
             let jitter = glam::Vec2::new((i as f32 + 0.5) / n as f32, (j as f32 + 0.5) / n as f32);
-            let r = sc.camera.generate_ray(x, y, jitter, glam::Vec2::ZERO);
+            let r = sc.camera.generate_ray(x, y, jitter, glam::Vec2::ZERO).ray;
             let t = -r.origin.y as f64 / r.direction.y as f64;
             let px = r.origin.x as f64 + t * r.direction.x as f64;
             let pz = r.origin.z as f64 + t * r.direction.z as f64;

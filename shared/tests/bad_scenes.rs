@@ -159,6 +159,49 @@ fn lens_aperture_larger_than_its_curvature_is_refused() {
 }
 
 #[test]
+fn annulus_whose_hole_is_not_smaller_than_its_rim_is_refused() {
+    let t = GOOD.replace(
+        "quad = { corner = [-1.0, -1.0, 0.0], edge1 = [2.0, 0.0, 0.0], edge2 = [0.0, 2.0, 0.0] }",
+        "annulus = { center = [0.0, 0.0, 0.0], axis = [0.0, 0.0, 1.0], inner_radius = 0.2, outer_radius = 0.1 }",
+    );
+    expect_error(&t, line_of(&t, "annulus"), &["objects[0].annulus.outer_radius", "larger than inner_radius"]);
+}
+
+/// GOOD with a lens surface named "rear" in front of a sensor camera (replacing the pinhole's field of view).
+fn sensor_scene(rear_element: &str) -> String {
+    GOOD.replace(
+        "fov_y_deg = 40",
+        &format!("type = \"sensor\"\nsensor_width = 0.036\nrear_element = \"{rear_element}\""),
+    ) + r#"
+[[objects]]
+name = "rear"
+material = "white"
+lens_surface = { vertex = [0.0, 0.0, -0.5], axis = [0.0, 0.0, -1.0], curvature_radius = -0.1, aperture_radius = 0.02 }
+"#
+}
+
+#[test]
+fn sensor_camera_names_an_unknown_rear_element_and_the_known_ones() {
+    load(&sensor_scene("rear")).unwrap();
+    let t = sensor_scene("raer");
+    expect_error(&t, line_of(&t, "raer"), &["camera.rear_element", "raer", "\"rear\""]);
+}
+
+#[test]
+fn sensor_camera_refuses_a_field_of_view_and_a_rear_element_behind_it() {
+    let t = sensor_scene("rear").replace("sensor_width = 0.036", "sensor_width = 0.036\nfov_y_deg = 40");
+    expect_error(&t, line_of(&t, "fov_y_deg"), &["camera.fov_y_deg", "sensor"]);
+    let t = sensor_scene("rear").replace("vertex = [0.0, 0.0, -0.5]", "vertex = [0.0, 0.0, -1.5]");
+    expect_error(&t, line_of(&t, "rear_element ="), &["camera.rear_element", "in front of the sensor"]);
+}
+
+#[test]
+fn pinhole_camera_without_a_field_of_view_is_refused() {
+    let t = GOOD.replace("fov_y_deg = 40\n", "");
+    expect_error(&t, line_of(&t, "[camera]"), &["camera.fov_y_deg", "pinhole"]);
+}
+
+#[test]
 fn unknown_material_type_is_refused() {
     let t = GOOD.replace("type = \"diffuse\"", "type = \"velvet\"");
     let err = load(&t).err().expect("accepted an unknown material type");
@@ -181,6 +224,9 @@ fn a_missing_scene_file_is_an_error_naming_it() {
 
 #[test]
 fn the_shipped_scenes_load() {
+    let lens = Scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/lens.toml"))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!((lens.camera.width, lens.camera.height), (360, 240));
     for name in ["cornell.toml", "caustic.toml"] {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes").join(name);
         let s = Scene::load(&path).unwrap_or_else(|e| panic!("{e}"));

@@ -128,7 +128,7 @@ fn pixels_landing(scene: &Scene, object: &str, inside: &dyn Fn(Vec3) -> bool) ->
         .filter(|&i| {
             let (x, y) = ((i % cam.width as usize) as u32, (i / cam.width as usize) as u32);
             points.iter().all(|&j| {
-                landing(scene, cam.generate_ray(x, y, j, Vec2::ZERO))
+                landing(scene, cam.generate_ray(x, y, j, Vec2::ZERO).ray)
                     .is_some_and(|h| scene.objects[h.object as usize].name == object && inside(h.p))
             })
         })

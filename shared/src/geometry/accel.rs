@@ -52,6 +52,7 @@ impl SceneGeometry {
             let (c, r) = match a {
                 Analytic::Sphere(s) => (s.center, s.radius),
                 Analytic::Lens(l) => (l.vertex, l.curvature_radius.abs().max(l.aperture_radius)),
+                Analytic::Annulus(a) => (a.center, a.outer_radius),
             };
             extent = extent.max(c.abs().max_element() + r);
         }

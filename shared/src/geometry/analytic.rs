@@ -1,5 +1,5 @@
-//! Analytic surfaces: spheres and spherical lens surfaces with a circular aperture, exact where facets would
-//! put ghosts and aberrations in the wrong place.
+//! Analytic surfaces: spheres, spherical lens surfaces with a circular aperture and flat annuli (aperture stops
+//! and lens mounts), exact where facets would put ghosts and aberrations in the wrong place.
 
 use super::ray::Ray;
 use glam::Vec3;
@@ -25,11 +25,24 @@ pub struct LensSurface {
     pub aperture_radius: f32,
 }
 
+/// A flat ring: the points of the plane through `center` perpendicular to `axis` whose distance from `center`
+/// lies in [`inner_radius`, `outer_radius`]. With an opaque material it is an aperture stop (the hole is the
+/// opening) or a lens mount that keeps light from going around an element. The normal faces −axis, like a lens
+/// surface's.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Annulus {
+    pub center: Vec3,
+    pub axis: Vec3,
+    pub inner_radius: f32,
+    pub outer_radius: f32,
+}
+
 /// Any analytic primitive.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Analytic {
     Sphere(Sphere),
     Lens(LensSurface),
+    Annulus(Annulus),
 }
 
 /// Both roots of |o + t d − c|² = r² for unit d, in increasing order, computed without cancellation.
@@ -60,6 +73,7 @@ impl Analytic {
                 Some((t, (ray.at(t) - s.center) / s.radius))
             }
             Analytic::Lens(l) => l.intersect(ray, t_min),
+            Analytic::Annulus(a) => a.intersect(ray, t_min),
         }
     }
 
@@ -68,11 +82,42 @@ impl Analytic {
         match self {
             Analytic::Sphere(s) => 4.0 * std::f32::consts::PI * s.radius * s.radius,
             Analytic::Lens(l) => l.area(),
+            Analytic::Annulus(a) => {
+                std::f32::consts::PI * (a.outer_radius * a.outer_radius - a.inner_radius * a.inner_radius)
+            }
         }
     }
 }
 
+impl Annulus {
+    fn intersect(&self, ray: &Ray, t_min: f32) -> Option<(f32, Vec3)> {
+        let denom = ray.direction.dot(self.axis);
+        if denom == 0.0 {
+            return None;
+        }
+        let t = (self.center - ray.origin).dot(self.axis) / denom;
+        if t <= t_min || t >= ray.t_max {
+            return None;
+        }
+        let r2 = (ray.at(t) - self.center).length_squared();
+        if r2 < self.inner_radius * self.inner_radius || r2 > self.outer_radius * self.outer_radius {
+            return None;
+        }
+        Some((t, -self.axis))
+    }
+}
+
 impl LensSurface {
+    /// Axial distance from the vertex to the plane of the aperture's rim (signed along `axis`): the sag of the
+    /// cap at the aperture radius, zero for a flat surface.
+    pub fn rim_sag(&self) -> f32 {
+        let (r, h) = (self.curvature_radius, self.aperture_radius);
+        if r == 0.0 {
+            return 0.0;
+        }
+        r - r.signum() * (r * r - h * h).max(0.0).sqrt()
+    }
+
     fn within_aperture(&self, p: Vec3) -> bool {
         let v = p - self.vertex;
         let along = v.dot(self.axis);
@@ -161,5 +206,26 @@ mod tests {
         assert!(l.intersect(&Ray::new(Vec3::new(0.3, 0.0, -1.0), Vec3::Z), 1e-4).is_none());
         // From inside the sphere toward the far side: only the far cap lies there, which is not the surface.
         assert!(l.intersect(&Ray::new(Vec3::new(0.0, 0.0, 0.5), Vec3::Z), 1e-4).is_none());
+    }
+
+    #[test]
+    fn rim_sag_puts_the_rim_on_the_cap_for_both_curvature_signs() {
+        for r in [0.5f32, -0.5] {
+            let l = LensSurface { vertex: Vec3::ZERO, axis: Vec3::Z, curvature_radius: r, aperture_radius: 0.2 };
+            let rim = Vec3::new(0.2, 0.0, l.rim_sag());
+            let center = Vec3::Z * r;
+            assert!(((rim - center).length() - 0.5).abs() < 1e-6, "r = {r}");
+            assert!(l.rim_sag() * r > 0.0, "the rim lies on the centre's side of the vertex");
+        }
+    }
+
+    #[test]
+    fn annulus_blocks_the_ring_and_lets_the_hole_through() {
+        let a = Analytic::Annulus(Annulus { center: Vec3::ZERO, axis: Vec3::Z, inner_radius: 0.1, outer_radius: 0.3 });
+        let (t, n) = a.intersect(&Ray::new(Vec3::new(0.2, 0.0, -1.0), Vec3::Z), 1e-4).unwrap();
+        assert!((t - 1.0).abs() < 1e-5 && (n + Vec3::Z).length() < 1e-6);
+        assert!(a.intersect(&Ray::new(Vec3::new(0.05, 0.0, -1.0), Vec3::Z), 1e-4).is_none(), "the hole");
+        assert!(a.intersect(&Ray::new(Vec3::new(0.4, 0.0, -1.0), Vec3::Z), 1e-4).is_none(), "outside");
+        assert!((a.area() - std::f32::consts::PI * 0.08).abs() < 1e-6);
     }
 }

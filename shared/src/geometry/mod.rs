@@ -1,4 +1,4 @@
-//! Geometry: rays, triangle meshes, analytic optical surfaces and the acceleration structure over all of them.
+//! Geometry: rays, triangle meshes, analytic optical surfaces (spheres, lens surfaces, annuli) and the acceleration structure over all of them.
 
 pub mod accel;
 pub mod analytic;
@@ -7,7 +7,7 @@ pub mod mesh;
 pub mod ray;
 
 pub use accel::SceneGeometry;
-pub use analytic::{Analytic, LensSurface, Sphere};
+pub use analytic::{Analytic, Annulus, LensSurface, Sphere};
 pub use hit::SurfaceHit;
 pub use mesh::{Mesh, MeshTriangle};
 pub use ray::Ray;

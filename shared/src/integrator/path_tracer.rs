@@ -2,6 +2,7 @@
 //! roulette. It splits its estimate into the same layers as PBPM so that every layer can be compared.
 
 use super::{sample_direct, Layer, LayerValues};
+use crate::camera::CameraRay;
 use crate::color::Rgb;
 use crate::geometry::{ray::offset_origin, Ray};
 use crate::material::Transport;
@@ -36,10 +37,22 @@ fn layer_of(diffuse_vertices: u32, through_specular: bool) -> Layer {
     }
 }
 
-/// Estimates the radiance arriving along `ray`, split into layers; `max_depth` counts path segments.
-pub fn trace(scene: &Scene, max_depth: u32, mut ray: Ray, sampler: &mut Sampler, stats: &mut PathStats) -> LayerValues {
+/// Estimates the camera ray's weight times the radiance arriving along it (the pixel measurement), split into
+/// layers; `max_depth` counts path segments.
+pub fn trace(
+    scene: &Scene,
+    max_depth: u32,
+    camera_ray: CameraRay,
+    sampler: &mut Sampler,
+    stats: &mut PathStats,
+) -> LayerValues {
     let mut out: LayerValues = [Rgb::ZERO; 4];
-    let mut beta = Rgb::ONE;
+    let weight = camera_ray.weight;
+    if !(weight > 0.0 && weight.is_finite()) {
+        return out;
+    }
+    let mut ray = camera_ray.ray;
+    let mut beta = Rgb::splat(weight);
     let mut previous = Previous::Specular;
     let mut diffuse_vertices = 0u32;
     let mut segments = 0u32;
@@ -74,7 +87,8 @@ pub fn trace(scene: &Scene, max_depth: u32, mut ray: Ray, sampler: &mut Sampler,
         beta *= s.weight;
         previous = if s.delta { Previous::Specular } else { Previous::Diffuse { p: hit.p, pdf: s.pdf } };
         if segments >= 3 {
-            let q = beta.max_element().min(1.0);
+            // Relative to the camera ray's weight, a unit of measurement rather than a loss.
+            let q = (beta.max_element() / weight).min(1.0);
             if sampler.next_f32() >= q {
                 break;
             }

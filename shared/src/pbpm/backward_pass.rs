@@ -4,6 +4,7 @@
 
 use super::photon::BackwardPhoton;
 use super::radius::RadiusSchedule;
+use crate::camera::CameraRay;
 use crate::color::Rgb;
 use crate::geometry::{ray::offset_origin, Ray};
 use crate::integrator::{sample_direct, Layer, LayerValues};
@@ -32,18 +33,24 @@ pub struct BackwardStats {
 }
 
 /// Traces one camera path for `pixel`, returns its visible-light and next-event contributions per layer and
-/// hands every backward photon to `store`.
+/// hands every backward photon to `store`. The camera ray's weight starts the path throughput, so that it also
+/// reaches the photons' filter τ and with them the forward pass's gathered light.
 pub fn trace_camera_path(
     scene: &Scene,
     settings: &BackwardSettings,
     pixel: u32,
-    mut ray: Ray,
+    camera_ray: CameraRay,
     sampler: &mut Sampler,
     stats: &mut BackwardStats,
     store: &mut impl FnMut(BackwardPhoton),
 ) -> LayerValues {
     let mut out: LayerValues = [Rgb::ZERO; 4];
-    let mut beta = Rgb::ONE;
+    let weight = camera_ray.weight;
+    if !(weight > 0.0 && weight.is_finite()) {
+        return out;
+    }
+    let mut ray = camera_ray.ray;
+    let mut beta = Rgb::splat(weight);
     let mut k = 0u32; // diffuse vertices so far
     let mut segments = 0u32;
     let mut path_length = 0.0f32;
@@ -112,8 +119,9 @@ pub fn trace_camera_path(
         beta *= s.weight;
         from_diffuse = (!s.delta).then_some((hit.p, s.pdf));
         if segments >= 4 {
-            // Long specular chains (light trapped in glass) end by roulette, unbiased.
-            let q = beta.max_element().min(1.0);
+            // Long specular chains (light trapped in glass) end by roulette, unbiased. Relative to the camera
+            // ray's weight, which is a unit of measurement (a sensor camera's is far below one), not a loss.
+            let q = (beta.max_element() / weight).min(1.0);
             if sampler.next_f32() >= q {
                 break;
             }

@@ -39,11 +39,16 @@ pub struct CameraSection {
     pub look_at: Spanned<[f32; 3]>,
     #[serde(default = "up_y")]
     pub up: Spanned<[f32; 3]>,
-    pub fov_y_deg: Spanned<f32>,
+    /// Pinhole and thin-lens cameras only.
+    pub fov_y_deg: Option<Spanned<f32>>,
     pub width: Spanned<u32>,
     pub height: Spanned<u32>,
     pub lens_radius: Option<Spanned<f32>>,
     pub focus_distance: Option<Spanned<f32>>,
+    /// Sensor camera: the sensor's width in metres.
+    pub sensor_width: Option<Spanned<f32>>,
+    /// Sensor camera: the name of the `lens_surface` object nearest the sensor (the rear element).
+    pub rear_element: Option<Spanned<String>>,
 }
 
 fn pinhole() -> Spanned<String> {
@@ -69,6 +74,8 @@ pub enum MaterialSection {
         ior: f32,
         #[serde(default = "one")]
         ext_ior: f32,
+        #[serde(default)]
+        anti_reflection: bool,
     },
     Coating {
         reflectance: [f32; 3],
@@ -97,6 +104,7 @@ pub struct ObjectSection {
     pub box_shape: Option<Spanned<BoxSection>>,
     pub sphere: Option<Spanned<SphereSection>>,
     pub lens_surface: Option<Spanned<LensSurfaceSection>>,
+    pub annulus: Option<Spanned<AnnulusSection>>,
 }
 
 /// A parallelogram: corner and two edges; the front face is along edge1 × edge2.
@@ -132,6 +140,16 @@ pub struct LensSurfaceSection {
     pub axis: [f32; 3],
     pub curvature_radius: f32,
     pub aperture_radius: f32,
+}
+
+/// A flat ring (aperture stop, lens mount): centre, axis and the radii of the hole and of the rim.
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct AnnulusSection {
+    pub center: [f32; 3],
+    pub axis: [f32; 3],
+    pub inner_radius: f32,
+    pub outer_radius: f32,
 }
 
 /// A point or spot light.

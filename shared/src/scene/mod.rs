@@ -5,9 +5,9 @@ pub mod file;
 
 pub use error::SceneError;
 
-use crate::camera::{Camera, Lens};
+use crate::camera::{Camera, Lens, RearElement};
 use crate::color::Rgb;
-use crate::geometry::{Analytic, LensSurface, Mesh, MeshTriangle, SceneGeometry, Sphere, SurfaceHit};
+use crate::geometry::{Analytic, Annulus, LensSurface, Mesh, MeshTriangle, SceneGeometry, Sphere, SurfaceHit};
 use crate::light::{Light, Lights};
 use crate::material::Material;
 use error::line_of;
@@ -189,7 +189,6 @@ impl Loader<'_> {
         })?;
 
         let render = self.render_settings(&parsed)?;
-        let camera = self.camera(&parsed.camera)?;
 
         let mut materials = Vec::new();
         let mut material_index = BTreeMap::new();
@@ -202,6 +201,8 @@ impl Loader<'_> {
         let mut triangles: Vec<(u32, MeshTriangle)> = Vec::new();
         let mut analytic = Vec::new();
         let mut lights = Vec::new();
+        // Named lens surfaces, for the sensor camera's rear element (the first object of a name wins).
+        let mut lens_surfaces: BTreeMap<String, LensSurface> = BTreeMap::new();
         for (i, o) in parsed.objects.iter().enumerate() {
             let span = o.span();
             let obj = o.get_ref();
@@ -224,13 +225,16 @@ impl Loader<'_> {
                 obj.box_shape.is_some(),
                 obj.sphere.is_some(),
                 obj.lens_surface.is_some(),
+                obj.annulus.is_some(),
             ];
             let count = shapes.iter().filter(|&&s| s).count();
             if count != 1 {
                 return Err(self.error(
                     Some(span.clone()),
                     format!("objects[{i}]"),
-                    format!("needs exactly one shape (mesh, quad, box, sphere or lens_surface), found {count}"),
+                    format!(
+                        "needs exactly one shape (mesh, quad, box, sphere, lens_surface or annulus), found {count}"
+                    ),
                 ));
             }
             let id = objects.len() as u32;
@@ -287,10 +291,14 @@ impl Loader<'_> {
                         return Err(self.error(
                             obj.emission.as_ref().map(|e| e.span()),
                             field("emission"),
-                            "analytic surfaces (sphere, lens_surface) cannot emit; use a mesh, quad or box",
+                            "analytic surfaces (sphere, lens_surface, annulus) cannot emit; use a mesh, quad or box",
                         ));
                     }
-                    analytic.push((id, self.analytic(obj, &field)?));
+                    let shape = self.analytic(obj, &field)?;
+                    if let (Analytic::Lens(l), Some(name)) = (&shape, &obj.name) {
+                        lens_surfaces.entry(name.clone()).or_insert(*l);
+                    }
+                    analytic.push((id, shape));
                 }
             }
             objects.push(SceneObject {
@@ -303,6 +311,8 @@ impl Loader<'_> {
         for (i, l) in parsed.lights.iter().enumerate() {
             lights.push(self.light(l, i)?);
         }
+        // After the objects: a sensor camera refers to one of them.
+        let camera = self.camera(&parsed.camera, &lens_surfaces)?;
         let geometry = SceneGeometry::build(triangles, analytic);
         let lights = Lights::new(lights, geometry.triangle_count());
         if !lights.any() {
@@ -367,7 +377,11 @@ impl Loader<'_> {
         Ok(s)
     }
 
-    fn camera(&self, c: &Spanned<file::CameraSection>) -> Result<Camera, SceneError> {
+    fn camera(
+        &self,
+        c: &Spanned<file::CameraSection>,
+        lens_surfaces: &BTreeMap<String, LensSurface>,
+    ) -> Result<Camera, SceneError> {
         let cam = c.get_ref();
         let position = self.vec3(*cam.position.get_ref(), &cam.position.span(), "camera.position")?;
         let look_at = self.vec3(*cam.look_at.get_ref(), &cam.look_at.span(), "camera.look_at")?;
@@ -379,53 +393,130 @@ impl Loader<'_> {
         if forward.normalize().cross(up).length_squared() < 1e-8 {
             return Err(self.error(Some(cam.up.span()), "camera.up", "must not be parallel to the view direction"));
         }
-        let fov = self.scalar(
-            *cam.fov_y_deg.get_ref(),
-            &cam.fov_y_deg.span(),
-            "camera.fov_y_deg",
-            |v| v > 0.0 && v < 180.0,
-            "between 0 and 180 degrees",
-        )?;
         for (v, name) in [(&cam.width, "camera.width"), (&cam.height, "camera.height")] {
             if !(1..=16384).contains(v.get_ref()) {
                 return Err(self.error(Some(v.span()), name, format!("must be 1..=16384 pixels, got {}", v.get_ref())));
             }
         }
-        let lens = match cam.kind.get_ref().as_str() {
-            "pinhole" => Lens::Pinhole,
-            "thin_lens" => {
-                let radius = cam.lens_radius.as_ref().ok_or_else(|| {
-                    self.error(Some(c.span()), "camera.lens_radius", "a thin_lens camera needs lens_radius (m)")
-                })?;
-                let focus = cam.focus_distance.as_ref().ok_or_else(|| {
-                    self.error(Some(c.span()), "camera.focus_distance", "a thin_lens camera needs focus_distance (m)")
-                })?;
-                Lens::Thin {
-                    radius: self.scalar(
-                        *radius.get_ref(),
-                        &radius.span(),
-                        "camera.lens_radius",
-                        |v| v > 0.0,
-                        "a positive number",
-                    )?,
-                    focus_distance: self.scalar(
-                        *focus.get_ref(),
-                        &focus.span(),
-                        "camera.focus_distance",
-                        |v| v > 0.0,
-                        "a positive number",
-                    )?,
-                }
-            }
+        let (width, height) = (*cam.width.get_ref(), *cam.height.get_ref());
+        let kind = cam.kind.get_ref().as_str();
+        match kind {
+            "pinhole" | "thin_lens" => {}
+            "sensor" => return self.sensor_camera(c, position, look_at, up, lens_surfaces),
             other => {
                 return Err(self.error(
                     Some(cam.kind.span()),
                     "camera.type",
-                    format!("unknown camera type '{other}' (known: pinhole, thin_lens)"),
+                    format!("unknown camera type '{other}' (known: pinhole, thin_lens, sensor)"),
                 ));
             }
+        }
+        let fov = cam.fov_y_deg.as_ref().ok_or_else(|| {
+            self.error(
+                Some(c.span()),
+                "camera.fov_y_deg",
+                format!("a {kind} camera needs fov_y_deg (the full vertical field of view in degrees)"),
+            )
+        })?;
+        let fov = self.scalar(
+            *fov.get_ref(),
+            &fov.span(),
+            "camera.fov_y_deg",
+            |v| v > 0.0 && v < 180.0,
+            "between 0 and 180 degrees",
+        )?;
+        let lens = if kind == "pinhole" {
+            Lens::Pinhole
+        } else {
+            let radius = cam.lens_radius.as_ref().ok_or_else(|| {
+                self.error(Some(c.span()), "camera.lens_radius", "a thin_lens camera needs lens_radius (m)")
+            })?;
+            let focus = cam.focus_distance.as_ref().ok_or_else(|| {
+                self.error(Some(c.span()), "camera.focus_distance", "a thin_lens camera needs focus_distance (m)")
+            })?;
+            Lens::Thin {
+                radius: self.scalar(
+                    *radius.get_ref(),
+                    &radius.span(),
+                    "camera.lens_radius",
+                    |v| v > 0.0,
+                    "a positive number",
+                )?,
+                focus_distance: self.scalar(
+                    *focus.get_ref(),
+                    &focus.span(),
+                    "camera.focus_distance",
+                    |v| v > 0.0,
+                    "a positive number",
+                )?,
+            }
         };
-        Ok(Camera::new(position, look_at, up, fov, *cam.width.get_ref(), *cam.height.get_ref(), lens))
+        Ok(Camera::new(position, look_at, up, fov, width, height, lens))
+    }
+
+    /// A sensor behind a lens of the scene: `position` is the sensor's centre, `look_at` a point along the
+    /// optical axis in front of it, and `rear_element` names the lens surface nearest the sensor.
+    fn sensor_camera(
+        &self,
+        c: &Spanned<file::CameraSection>,
+        position: Vec3,
+        look_at: Vec3,
+        up: Vec3,
+        lens_surfaces: &BTreeMap<String, LensSurface>,
+    ) -> Result<Camera, SceneError> {
+        let cam = c.get_ref();
+        if let Some(fov) = &cam.fov_y_deg {
+            return Err(self.error(
+                Some(fov.span()),
+                "camera.fov_y_deg",
+                "a sensor camera's field of view follows from sensor_width and the lens: remove fov_y_deg",
+            ));
+        }
+        let sensor_width = cam.sensor_width.as_ref().ok_or_else(|| {
+            self.error(Some(c.span()), "camera.sensor_width", "a sensor camera needs sensor_width (m)")
+        })?;
+        let sensor_width = self.scalar(
+            *sensor_width.get_ref(),
+            &sensor_width.span(),
+            "camera.sensor_width",
+            |v| v > 0.0,
+            "a positive width in metres",
+        )?;
+        let rear_name = cam.rear_element.as_ref().ok_or_else(|| {
+            self.error(
+                Some(c.span()),
+                "camera.rear_element",
+                "a sensor camera needs rear_element, the name of the lens_surface object nearest the sensor",
+            )
+        })?;
+        let Some(surface) = lens_surfaces.get(rear_name.get_ref()) else {
+            let known: Vec<&String> = lens_surfaces.keys().collect();
+            return Err(self.error(
+                Some(rear_name.span()),
+                "camera.rear_element",
+                format!("no lens_surface object is named '{}' (named lens surfaces: {known:?})", rear_name.get_ref()),
+            ));
+        };
+        let rear = RearElement {
+            center: surface.vertex + surface.axis * surface.rim_sag(),
+            axis: surface.axis,
+            radius: surface.aperture_radius,
+        };
+        // Every point of the disc must lie in front of the sensor, or some rays would leave it backwards.
+        let forward = (look_at - position).normalize();
+        let depth = (rear.center - position).dot(forward);
+        let tilt = (1.0 - rear.axis.dot(forward).powi(2)).max(0.0).sqrt();
+        if depth <= rear.radius * tilt {
+            return Err(self.error(
+                Some(rear_name.span()),
+                "camera.rear_element",
+                format!(
+                    "the rear element's clear aperture must lie entirely in front of the sensor (toward look_at); \
+                     its centre is {depth} m in front"
+                ),
+            ));
+        }
+        Ok(Camera::sensor(position, look_at, up, sensor_width, *cam.width.get_ref(), *cam.height.get_ref(), rear))
     }
 
     fn material(&self, name: &str, m: &Spanned<MaterialSection>) -> Result<Material, SceneError> {
@@ -438,9 +529,10 @@ impl Loader<'_> {
             MaterialSection::Mirror { reflectance } => {
                 Material::Mirror { reflectance: self.colour(*reflectance, &s, &f("reflectance"), Some(1.0))? }
             }
-            MaterialSection::Dielectric { ior, ext_ior } => Material::Dielectric {
+            MaterialSection::Dielectric { ior, ext_ior, anti_reflection } => Material::Dielectric {
                 ior: self.scalar(*ior, &s, &f("ior"), |v| v > 0.0, "a positive index of refraction")?,
                 ext_ior: self.scalar(*ext_ior, &s, &f("ext_ior"), |v| v > 0.0, "a positive index of refraction")?,
+                anti_reflection: *anti_reflection,
             },
             MaterialSection::Coating { reflectance, transmittance } => {
                 let r = self.colour(*reflectance, &s, &f("reflectance"), Some(1.0))?;
@@ -464,6 +556,35 @@ impl Loader<'_> {
             let radius =
                 self.scalar(sp.get_ref().radius, &s, &field("sphere.radius"), |v| v > 0.0, "a positive radius")?;
             return Ok(Analytic::Sphere(Sphere { center, radius }));
+        }
+        if let Some(an) = &obj.annulus {
+            let s = an.span();
+            let a = an.get_ref();
+            let center = self.vec3(a.center, &s, &field("annulus.center"))?;
+            let axis = self.vec3(a.axis, &s, &field("annulus.axis"))?;
+            if axis.length_squared() == 0.0 {
+                return Err(self.error(Some(s), field("annulus.axis"), "must not be the zero vector"));
+            }
+            let inner = self.scalar(
+                a.inner_radius,
+                &s,
+                &field("annulus.inner_radius"),
+                |v| v >= 0.0,
+                "zero (a full disc) or a positive radius",
+            )?;
+            let outer = self.scalar(
+                a.outer_radius,
+                &s,
+                &field("annulus.outer_radius"),
+                |v| v > inner,
+                &format!("larger than inner_radius = {inner}"),
+            )?;
+            return Ok(Analytic::Annulus(Annulus {
+                center,
+                axis: axis.normalize(),
+                inner_radius: inner,
+                outer_radius: outer,
+            }));
         }
         let Some(l) = &obj.lens_surface else {
             unreachable!("the caller checked that the object has exactly one shape")

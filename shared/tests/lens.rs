@@ -1,0 +1,226 @@
+//! The camera-lens scene (`scenes/lens.toml`): its lens surfaces are the published double Gauss, its sensor is
+//! in focus, and both methods render it, ghosts included. `cargo test --release -p photonfarm --test lens --
+//! --nocapture` prints the measured numbers.
+
+mod common;
+
+use glam::{Vec2, Vec3};
+use photonfarm::accumulation::non_finite_dropped;
+use photonfarm::geometry::{ray::offset_origin, Ray};
+use photonfarm::integrator::Layer;
+use photonfarm::material::{Material, Transport};
+use photonfarm::render::{Engine, Method};
+use photonfarm::scene::Scene;
+use std::path::{Path, PathBuf};
+
+/// The prescription the scene cites (Kolb's dgauss.txt, from Smith, "Modern Lens Design", p. 312): per row the
+/// radius of curvature (mm; None for the stop), the axial position relative to the previous row (mm), the index
+/// behind the surface (None for the stop) and the clear-aperture diameter (mm).
+const PRESCRIPTION: [(Option<f64>, f64, Option<f64>, f64); 11] = [
+    (Some(58.950), 0.000, Some(1.670), 50.4),
+    (Some(169.660), 7.520, Some(1.0), 50.4),
+    (Some(38.550), 0.240, Some(1.670), 46.0),
+    (Some(81.540), 8.050, Some(1.699), 46.0),
+    (Some(25.500), 6.550, Some(1.0), 36.0),
+    (None, 11.410, None, 34.2),
+    (Some(-28.990), 9.000, Some(1.603), 34.0),
+    (Some(81.540), 2.360, Some(1.658), 40.0),
+    (Some(-40.770), 12.130, Some(1.0), 40.0),
+    (Some(874.130), 0.380, Some(1.717), 40.0),
+    (Some(-79.460), 6.440, Some(1.0), 40.0),
+];
+
+/// The scene's scale: the 100 mm design halved, in metres.
+const SCALE_TO_METRES: f64 = 0.5e-3;
+
+/// Object distance the sensor is focused for, in front of the front vertex (the vase's axis), metres.
+const FOCUS_DISTANCE: f32 = 1.2;
+
+/// Pixel pitch of the shipped scene: 36 mm over 360 pixels.
+const PIXEL_PITCH: f32 = 0.036 / 360.0;
+
+fn scene_path() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/lens.toml")
+}
+
+/// The shipped scene, optionally at another resolution (the sensor keeps its size) and with every lens surface
+/// given an ideal anti-reflection coating.
+fn lens_scene(resolution: Option<(u32, u32)>, anti_reflection: bool) -> Scene {
+    let path = scene_path();
+    let mut text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    if let Some((w, h)) = resolution {
+        assert!(text.contains("width = 360\n") && text.contains("height = 240\n"), "the scene's resolution moved");
+        text = text
+            .replace("width = 360\n", &format!("width = {w}\n"))
+            .replace("height = 240\n", &format!("height = {h}\n"));
+    }
+    if anti_reflection {
+        text = text.replace("type = \"dielectric\"\n", "type = \"dielectric\"\nanti_reflection = true\n");
+    }
+    Scene::from_toml(&text, &path, path.parent().unwrap()).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Paraxial (y–nu) trace of the prescription, scaled to the scene: a ray parallel to the axis at height 1 gives
+/// the effective focal length −1/u' in the last medium (air), in metres.
+fn paraxial_focal_length() -> f64 {
+    let (mut y, mut u, mut n) = (1.0f64, 0.0f64, 1.0f64);
+    for (i, &(radius, position, index, _)) in PRESCRIPTION.iter().enumerate() {
+        if i > 0 {
+            y += u * position * SCALE_TO_METRES;
+        }
+        let (Some(r), Some(n_after)) = (radius, index) else { continue };
+        // Refraction: n'u' = n u − y φ with the surface power φ = (n' − n)/R.
+        let power = (n_after - n) / (r * SCALE_TO_METRES);
+        u = (n * u - y * power) / n_after;
+        n = n_after;
+    }
+    -1.0 / u
+}
+
+/// Follows a ray through the scene's lens by the geometry's intersections and the dielectric's refraction
+/// (reflection excluded), until it leaves the lens toward the sensor. None when a mount or the stop blocks it.
+fn through_lens(scene: &Scene, mut ray: Ray) -> Option<Ray> {
+    for _ in 0..64 {
+        let Some(hit) = scene.geometry.intersect(&ray) else { return Some(ray) };
+        if ray.direction.z >= 0.0 || hit.p.z > 0.01 || hit.p.z < -0.05 {
+            // Anything but the lens (it spans z from 0 to −0.032 m) or a ray turned back.
+            return None;
+        }
+        let material = *scene.material(&hit);
+        if !matches!(material, Material::Dielectric { .. }) {
+            return None;
+        }
+        let wo = -ray.direction;
+        // u.x just below 1 selects refraction wherever the Fresnel reflectance is below 1.
+        let s = material.sample(&hit, wo, Vec2::new(1.0 - 1e-7, 0.5), Transport::Radiance)?;
+        assert!(s.wi.dot(hit.ng) * wo.dot(hit.ng) < 0.0, "total internal reflection on a near-axial ray");
+        ray = Ray::new(offset_origin(hit.p, hit.ng, s.wi), s.wi);
+    }
+    None
+}
+
+#[test]
+fn traced_focal_length_of_the_scene_lens_matches_the_paraxial_prescription_within_one_percent() {
+    let scene = lens_scene(None, false);
+    let expected = paraxial_focal_length();
+    // A ray parallel to the axis, 0.5 mm above it (1/25 of the front aperture: paraxial), from in front of the
+    // lens.
+    let h = 0.5e-3f32;
+    let out = through_lens(&scene, Ray::new(Vec3::new(0.0, h, 0.5), -Vec3::Z)).expect("the ray passes the lens");
+    let d = out.direction;
+    // The exit ray's slope gives the focal length: f = h / tan(u').
+    let traced = h as f64 * (-d.z as f64) / (-d.y as f64);
+    let rel = traced / expected - 1.0;
+    println!(
+        "effective focal length: traced {:.4} mm, paraxial y–nu {:.4} mm ({:+.3} %)",
+        traced * 1e3,
+        expected * 1e3,
+        rel * 100.0
+    );
+    assert!((expected * 1e3 - 50.36).abs() < 0.01, "the prescription itself: {expected}");
+    assert!(rel.abs() < 0.01, "traced {traced} m vs paraxial {expected} m");
+}
+
+#[test]
+fn on_axis_point_at_the_focus_distance_images_to_a_spot_below_one_pixel_rms() {
+    let scene = lens_scene(None, false);
+    let sensor_z = scene.camera.position.z;
+    let source = Vec3::new(0.0, 0.0, FOCUS_DISTANCE);
+    // Aim at a 64 × 64 grid over a disc wider than the front element: the stop decides which rays pass, so the
+    // spot covers the whole pupil.
+    let n = 64;
+    let radius = 0.014f32;
+    let mut points = Vec::new();
+    for i in 0..n {
+        for j in 0..n {
+            let q = Vec2::new((i as f32 + 0.5) / n as f32 * 2.0 - 1.0, (j as f32 + 0.5) / n as f32 * 2.0 - 1.0);
+            if q.length() > 1.0 {
+                continue;
+            }
+            let target = Vec3::new(q.x * radius, q.y * radius, 0.0);
+            let dir = (target - source).normalize();
+            // Start just in front of the lens: the source point itself lies inside the vase.
+            let start = source + dir * ((0.05 - source.z) / dir.z);
+            let Some(out) = through_lens(&scene, Ray::new(start, dir)) else { continue };
+            let t = (sensor_z - out.origin.z) / out.direction.z;
+            points.push(out.at(t).truncate());
+        }
+    }
+    let count = points.len() as f32;
+    let centroid = points.iter().copied().sum::<Vec2>() / count;
+    let rms = (points.iter().map(|p| (*p - centroid).length_squared()).sum::<f32>() / count).sqrt();
+    println!(
+        "spot of an on-axis point at {FOCUS_DISTANCE} m: {} rays through the pupil, RMS radius {:.2} µm = {:.3} \
+         pixels, centroid {:.2} µm from the sensor centre",
+        points.len(),
+        rms * 1e6,
+        rms / PIXEL_PITCH,
+        centroid.length() * 1e6
+    );
+    // The stop (radius 8.55 mm) passes a pupil of about 2/3 of the front element's radius: hundreds of rays.
+    assert!(points.len() > 500, "only {} rays passed the lens", points.len());
+    assert!(rms < PIXEL_PITCH, "RMS spot radius {rms} m is not below one pixel ({PIXEL_PITCH} m)");
+    assert!(centroid.length() < 0.1 * PIXEL_PITCH, "the on-axis point images off the sensor centre: {centroid:?}");
+}
+
+/// Mean luminance of the visible-lights layer (E S* L: the light seen through the lens surfaces, directly or
+/// after reflections between them) per pixel.
+fn visible_lights(engine: &Engine) -> Vec<f64> {
+    let sums = engine.sums();
+    (0..sums.pixels.len()).map(|p| photonfarm::color::luminance_f64(sums.mean(p, Layer::VisibleLights))).collect()
+}
+
+fn render(scene: &Scene, method: Method, phases: usize) -> Engine<'_> {
+    let mut engine = Engine::new(scene, common::settings(scene, method, 7));
+    for _ in 0..phases {
+        engine.run_phase();
+    }
+    engine
+}
+
+#[test]
+fn both_methods_render_the_lens_scene_finite_with_ghosts_outside_the_direct_image_of_the_light() {
+    let (w, h) = (72u32, 48u32);
+    let dropped_before = non_finite_dropped();
+    let coated = lens_scene(Some((w, h)), true);
+    let uncoated = lens_scene(Some((w, h)), false);
+    for method in [Method::Pbpm, Method::Path] {
+        let phases = 64;
+        let plain = render(&coated, method, phases);
+        let ghosts = render(&uncoated, method, phases);
+        for engine in [&plain, &ghosts] {
+            for p in 0..(w * h) as usize {
+                for l in Layer::ALL {
+                    assert!(engine.sums().mean(p, l).iter().all(|v| v.is_finite()), "{method:?}: pixel {p} {l:?}");
+                }
+            }
+        }
+        // The direct image of the light: where the coated lens shows it, widened by two pixels for the pixels
+        // whose share of the image this run did not sample.
+        let direct = visible_lights(&plain);
+        let near_direct = |p: usize| {
+            let (x, y) = ((p as u32 % w) as i64, (p as u32 / w) as i64);
+            (-2..=2i64).any(|dy| {
+                (-2..=2i64).any(|dx| {
+                    let (nx, ny) = (x + dx, y + dy);
+                    nx >= 0 && ny >= 0 && nx < w as i64 && ny < h as i64 && direct[(ny * w as i64 + nx) as usize] > 0.0
+                })
+            })
+        };
+        let direct_pixels = (0..direct.len()).filter(|&p| direct[p] > 0.0).count();
+        let with_ghosts = visible_lights(&ghosts);
+        let ghost_pixels: Vec<usize> =
+            (0..with_ghosts.len()).filter(|&p| with_ghosts[p] > 0.0 && !near_direct(p)).collect();
+        let ghost_light: f64 = ghost_pixels.iter().map(|&p| with_ghosts[p]).sum();
+        let direct_light: f64 = direct.iter().sum();
+        println!(
+            "{method:?}, {w}×{h}, {phases} phases: the coated lens images the light onto {direct_pixels} pixels; the \
+             uncoated one also onto {} pixels outside them (ghosts), carrying {:.3} % of the light's direct image",
+            ghost_pixels.len(),
+            100.0 * ghost_light / direct_light
+        );
+        assert!(direct_pixels > 0, "{method:?}: the light is not in the picture");
+        assert!(ghost_pixels.len() >= 10, "{method:?}: only {} ghost pixels", ghost_pixels.len());
+    }
+    assert_eq!(non_finite_dropped(), dropped_before, "non-finite values were dropped");
+}
