@@ -94,7 +94,8 @@ pub struct Lights {
 }
 
 impl Light {
-    /// Emitted power in luminance units, the weight that chooses this light.
+    /// Emitted power in luminance units, the weight that chooses this light (without an emission texture:
+    /// `Lights::with_textures` weighs a textured one by the texture's mean over its triangle).
     pub fn power(&self) -> f32 {
         match *self {
             Light::Area { emission, area, .. } => PI * area * luminance(emission),
