@@ -70,8 +70,9 @@ fn closest_on_first(a: Vec3, da: Vec3, b: Vec3, db: Vec3) -> Vec3 {
 }
 
 /// Distances from the eye of the virtual image of the screen point seen along `view`: where pairs of rays
-/// leaving that point 1 mm apart at the mirror (about the bundle a 2 mm pupil takes in) (one pair across the plane of the fold, one in it) appear to
-/// diverge from once the mirror and the combiner have reflected them. Returns (sagittal, tangential).
+/// leaving that point 1 mm apart at the mirror, about the bundle a 2 mm pupil takes in (one pair across the
+/// plane of the fold, one in it), appear to diverge from once the mirror and the combiner have reflected
+/// them. Returns (sagittal, tangential).
 fn virtual_image_distances(scene: &Scene, eye: Vec3, view: Vec3) -> (f32, f32) {
     let (hits, _) = reflect_to(scene, Ray::new(eye, view), "screen")
         .unwrap_or_else(|| panic!("the view ray {view} from {eye} does not reach the screen"));
@@ -202,8 +203,8 @@ fn the_combiner_reflects_r_and_transmits_t_of_the_incident_energy_in_both_transp
         eprintln!("{mode:?}: reflected {mr:.4} ± {sr:.4} (r = {er}), transmitted {mt:.4} ± {st:.4} (t = {et})");
         assert!((mr - er).abs() < 4.0 * sr, "reflected {mr} ± {sr}, expected {er}");
         assert!((mt - et).abs() < 4.0 * st, "transmitted {mt} ± {st}, expected {et}");
-        // Each sample carries r or t scaled by its probability, so the sum is r + t exactly on average and its
-        // luminance is r + t in every sample-independent sense.
+        // Each sample carries r or t divided by the probability of its branch: together they return r + t of
+        // the incident energy, the rest (1 − r − t) being absorbed.
         assert!(((mr + mt) - (er + et)).abs() < 4.0 * (sr * sr + st * st).sqrt());
     }
 }
