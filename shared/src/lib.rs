@@ -14,3 +14,4 @@ pub mod protocol;
 pub mod render;
 pub mod sampling;
 pub mod scene;
+pub mod texture;

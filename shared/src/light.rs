@@ -5,8 +5,10 @@ use crate::color::{luminance, Rgb};
 use crate::geometry::{SceneGeometry, SurfaceHit};
 use crate::sampling::cosine_hemisphere;
 use crate::sampling::{uniform_cone, uniform_sphere, uniform_triangle, Discrete, Frame};
+use crate::texture::{barycentric, interpolate_uv, Texture};
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
+use std::sync::Arc;
 
 /// One light source.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -48,16 +50,52 @@ pub struct EmissionSample {
     pub light: u32,
 }
 
+/// An emission texture on one emitting triangle: its radiance is `emission` times the texture at the point.
+#[derive(Clone, Debug)]
+pub struct EmissionTexture {
+    pub texture: Arc<Texture>,
+    /// The triangle's vertices, to find the texture coordinates of a point hit on it.
+    pub vertices: [Vec3; 3],
+    /// Texture coordinates of the vertices.
+    pub uv: [Vec2; 3],
+}
+
+impl EmissionTexture {
+    /// The texture's value at barycentrics `b`.
+    #[inline]
+    fn at_barycentric(&self, b: Vec2) -> Rgb {
+        self.texture.lookup(interpolate_uv(&self.uv, b))
+    }
+
+    /// Mean of the texture over the triangle, estimated on a stratified grid of 16 × 16 cells. Light selection
+    /// only needs it roughly (every estimator divides by the probability it used), but it must not be zero
+    /// where the texture is not: it is kept at least 1/1000 of the whole texture's mean.
+    pub fn mean_over_triangle(&self) -> Rgb {
+        const N: usize = 16;
+        let mut sum = Rgb::ZERO;
+        for i in 0..N {
+            for j in 0..N {
+                let u = Vec2::new((i as f32 + 0.5) / N as f32, (j as f32 + 0.5) / N as f32);
+                sum += self.at_barycentric(uniform_triangle(u));
+            }
+        }
+        (sum / (N * N) as f32).max(self.texture.mean() * 1e-3)
+    }
+}
+
 /// All lights of a scene and the power distribution that selects among them.
 pub struct Lights {
     lights: Vec<Light>,
     by_power: Option<Discrete>,
     /// Light index of every scene triangle, u32::MAX for non-emitters.
     light_of_triangle: Vec<u32>,
+    /// Emission texture of each light, parallel to `lights` (None for most).
+    textures: Vec<Option<EmissionTexture>>,
 }
 
 impl Light {
-    /// Emitted power in luminance units, the weight that chooses this light.
+    /// Emitted power in luminance units, the weight that chooses this light (without an emission texture:
+    /// `Lights::with_textures` weighs a textured one by the texture's mean over its triangle).
     pub fn power(&self) -> f32 {
         match *self {
             Light::Area { emission, area, .. } => PI * area * luminance(emission),
@@ -84,14 +122,43 @@ fn spot_falloff(cos_theta: f32, cos_total: f32, cos_falloff_start: f32) -> f32 {
 impl Lights {
     /// Collects the lights; `triangle_count` sizes the triangle → light table.
     pub fn new(lights: Vec<Light>, triangle_count: usize) -> Self {
+        let textures = vec![None; lights.len()];
+        Lights::with_textures(lights, textures, triangle_count)
+    }
+
+    /// Collects the lights with the emission texture of each (parallel to `lights`). A textured light's power,
+    /// which chooses it, is its emission times the texture's mean over its triangle; the emitted flux Φ = π A
+    /// E[Le] is then what the sampled paths carry on average, since their positions stay uniform on the
+    /// triangle and each carries the texture's value at its point.
+    pub fn with_textures(lights: Vec<Light>, textures: Vec<Option<EmissionTexture>>, triangle_count: usize) -> Self {
         let mut light_of_triangle = vec![u32::MAX; triangle_count];
         for (i, l) in lights.iter().enumerate() {
             if let Light::Area { triangle, .. } = l {
                 light_of_triangle[*triangle as usize] = i as u32;
             }
         }
-        let powers: Vec<f32> = lights.iter().map(Light::power).collect();
-        Lights { by_power: Discrete::new(&powers), lights, light_of_triangle }
+        let mut textures = textures;
+        textures.resize(lights.len(), None);
+        let powers: Vec<f32> = lights
+            .iter()
+            .zip(&textures)
+            .map(|(l, t)| match (l, t) {
+                (Light::Area { emission, area, .. }, Some(t)) => {
+                    PI * area * luminance(*emission * t.mean_over_triangle())
+                }
+                _ => l.power(),
+            })
+            .collect();
+        Lights { by_power: Discrete::new(&powers), lights, light_of_triangle, textures }
+    }
+
+    /// The emission texture's factor for light `l` at barycentrics `b` (one when it has none).
+    #[inline]
+    fn texture_factor(&self, l: usize, b: impl FnOnce(&EmissionTexture) -> Vec2) -> Rgb {
+        match &self.textures[l] {
+            Some(t) => t.at_barycentric(b(t)),
+            None => Rgb::ONE,
+        }
     }
 
     /// True when the scene has at least one light with power.
@@ -106,7 +173,9 @@ impl Lights {
         }
         match self.light_of_triangle.get(hit.triangle as usize) {
             Some(&l) if l != u32::MAX => match self.lights[l as usize] {
-                Light::Area { emission, normal, .. } if ray_dir.dot(normal) < 0.0 => emission,
+                Light::Area { emission, normal, .. } if ray_dir.dot(normal) < 0.0 => {
+                    emission * self.texture_factor(l as usize, |t| barycentric(&t.vertices, hit.p))
+                }
                 _ => Rgb::ZERO,
             },
             _ => Rgb::ZERO,
@@ -152,7 +221,8 @@ impl Lights {
                 if cos_l <= 0.0 {
                     return None;
                 }
-                Some(IncidentSample { wi, point: q, li: emission, pdf: pmf * d2 / (area * cos_l), delta: false })
+                let li = emission * self.texture_factor(index, |_| b);
+                Some(IncidentSample { wi, point: q, li, pdf: pmf * d2 / (area * cos_l), delta: false })
             }
             Light::Point { position, intensity } => {
                 let d = position - p;
@@ -195,7 +265,7 @@ impl Lights {
                     origin,
                     normal,
                     direction: Frame::from_normal(normal).to_world(local),
-                    beta: emission * (PI * area / pmf),
+                    beta: emission * self.texture_factor(index, |_| b) * (PI * area / pmf),
                     light: index as u32,
                 }
             }

@@ -234,3 +234,58 @@ fn the_shipped_scenes_load() {
         assert_eq!(s.render.max_depth, 12);
     }
 }
+
+/// GOOD with the floor's material given an albedo texture.
+fn textured(texture: &str) -> String {
+    GOOD.replace("albedo = [0.5, 0.5, 0.5]", &format!("albedo = [0.5, 0.5, 0.5]\nalbedo_texture = \"{texture}\""))
+}
+
+#[test]
+fn a_textured_quad_loads_with_texture_coordinates() {
+    let s = load(&textured("hud/slide.png")).unwrap();
+    assert!(s.albedo_textures[0].is_some());
+    assert!(s.triangle_uvs.iter().all(|uv| uv.is_some()));
+    assert!(s.mesh_files.iter().any(|(p, _)| p == "hud/slide.png"), "the texture travels with the scene's files");
+}
+
+#[test]
+fn a_missing_texture_file_names_the_field_and_the_path() {
+    let t = textured("hud/no-such.png");
+    expect_error(
+        &t,
+        line_of(&t, "[materials.white]"),
+        &["materials.white.albedo_texture", "no-such.png", "cannot read"],
+    );
+}
+
+#[test]
+fn a_texture_that_is_not_a_png_is_refused() {
+    let t = GOOD.replace("name = \"floor\"", "name = \"floor\"\nemission_texture = \"cornell/floor.obj\"");
+    expect_error(&t, line_of(&t, "emission_texture"), &["objects[0].emission_texture", "floor.obj", "PNG"]);
+}
+
+#[test]
+fn a_texture_on_a_shape_without_texture_coordinates_is_refused() {
+    let quad = "quad = { corner = [-1.0, -1.0, 0.0], edge1 = [2.0, 0.0, 0.0], edge2 = [0.0, 2.0, 0.0] }";
+    let t = textured("hud/slide.png").replace(quad, "box = { min = [-1.0, -1.0, 0.0], max = [1.0, 1.0, 0.1] }");
+    expect_error(
+        &t,
+        line_of(&t, "material = \"white\""),
+        &["objects[0].material", "albedo_texture", "box", "texture coordinates"],
+    );
+    let t = textured("hud/slide.png").replace(quad, "mesh = \"cornell/floor.obj\"");
+    expect_error(&t, line_of(&t, "material = \"white\""), &["objects[0].material", "vt"]);
+    let t =
+        GOOD.replace(quad, "sphere = { center = [0.0, 0.0, 1.0], radius = 0.5 }\nemission_texture = \"hud/slide.png\"");
+    expect_error(
+        &t,
+        line_of(&t, "emission_texture"),
+        &["objects[0].emission_texture", "sphere", "texture coordinates"],
+    );
+}
+
+#[test]
+fn a_diffuse_material_needs_an_albedo_or_a_texture() {
+    let t = GOOD.replace("albedo = [0.5, 0.5, 0.5]", "");
+    expect_error(&t, line_of(&t, "[materials.white]"), &["materials.white.albedo"]);
+}

@@ -389,3 +389,74 @@ fn a_straggling_worker_contributes_less_and_the_image_stays_correct() {
     run_ok(coordinator(&scene, &single, &["--method", "pbpm", "--phases", "1500", "--seed", "42"]));
     assert_same_image(&single, &out, "a run with a straggler against one process");
 }
+
+/// A small scene with an emission texture on a quad and an albedo texture on an OBJ floor with `vt`, in its own
+/// folder (the HUD slide as both textures).
+fn textured_scene(dir: &Path) -> PathBuf {
+    std::fs::create_dir_all(dir.join("tex")).unwrap();
+    std::fs::copy(repo_root().join("scenes/hud/slide.png"), dir.join("tex/slide.png")).unwrap();
+    std::fs::write(
+        dir.join("tex/floor.obj"),
+        "v -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nvt 0 0\nvt 2 0\nvt 2 2\nvt 0 2\nf 1/1 4/4 3/3\nf 1/1 3/3 2/2\n",
+    )
+    .unwrap();
+    let text = r#"
+[camera]
+position = [0.0, 0.9, -1.6]
+look_at = [0.0, 0.3, 0.0]
+fov_y_deg = 50
+width = 40
+height = 40
+
+[materials.black]
+type = "diffuse"
+albedo = [0.0, 0.0, 0.0]
+
+[materials.printed]
+type = "diffuse"
+albedo = [0.9, 0.9, 0.9]
+albedo_texture = "tex/slide.png"
+
+[[objects]]
+name = "slide"
+material = "black"
+emission = [4.0, 4.0, 4.0]
+emission_texture = "tex/slide.png"
+quad = { corner = [0.6, 0.05, 0.6], edge1 = [-1.2, 0.0, 0.0], edge2 = [0.0, 0.6, 0.0] }
+
+[[objects]]
+name = "floor"
+material = "printed"
+mesh = "tex/floor.obj"
+
+[[lights]]
+type = "point"
+position = [0.0, 1.0, -0.5]
+intensity = [0.5, 0.5, 0.5]
+"#;
+    let path = dir.join("textured.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+#[test]
+fn a_textured_scene_renders_the_same_through_three_level_workers_that_received_its_textures() {
+    let dir = scratch_dir("textured");
+    let scene = textured_scene(&dir);
+    let (single, three) = (dir.join("single"), dir.join("three"));
+    run_ok(coordinator(&scene, &single, &["--method", "pbpm", "--phases", "300", "--seed", "41"]));
+    run_ok(coordinator(
+        &scene,
+        &three,
+        &["--method", "three-level", "--topology", TWO_NODES, "--group-size", "1", "--phases", "300", "--seed", "42"],
+    ));
+    let r = record(&three);
+    let workers = r["workers"].as_array().unwrap();
+    assert_eq!(workers.len(), 2, "{workers:?}");
+    // A worker that could not build the scene from the files sent would have failed its job.
+    for w in workers {
+        assert_eq!(w["state"], "finished", "{w}");
+        assert!(w["pixel_phases"].as_u64().unwrap() > 0, "{w}");
+    }
+    assert_same_image(&single, &three, "textured scene, three-level against one process");
+}

@@ -64,7 +64,10 @@ fn up_y() -> Spanned<[f32; 3]> {
 #[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
 pub enum MaterialSection {
     Diffuse {
-        albedo: [f32; 3],
+        /// Multiplies `albedo_texture` when both are given; required without a texture.
+        albedo: Option<[f32; 3]>,
+        /// A PNG (sRGB) path relative to the scene file.
+        albedo_texture: Option<String>,
     },
     Mirror {
         #[serde(default = "ones")]
@@ -98,6 +101,8 @@ pub struct ObjectSection {
     pub name: Option<String>,
     pub material: Spanned<String>,
     pub emission: Option<Spanned<[f32; 3]>>,
+    /// A PNG (sRGB) path relative to the scene file that multiplies `emission` (default 1 with a texture).
+    pub emission_texture: Option<Spanned<String>>,
     pub mesh: Option<Spanned<String>>,
     pub quad: Option<Spanned<QuadSection>>,
     #[serde(rename = "box")]

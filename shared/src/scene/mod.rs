@@ -8,14 +8,17 @@ pub use error::SceneError;
 use crate::camera::{Camera, Lens, RearElement};
 use crate::color::Rgb;
 use crate::geometry::{Analytic, Annulus, LensSurface, Mesh, MeshTriangle, SceneGeometry, Sphere, SurfaceHit};
-use crate::light::{Light, Lights};
+use crate::light::{EmissionTexture, Light, Lights};
 use crate::material::Material;
+use crate::texture::{barycentric, interpolate_uv, quad_uvs, Texture};
 use error::line_of;
 use file::{LightSection, MaterialSection, SceneFile};
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 use sha2::{Digest, Sha256};
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use toml::Spanned;
 
 /// One object of the scene.
@@ -51,20 +54,25 @@ pub struct Scene {
     pub path: PathBuf,
     pub camera: Camera,
     pub materials: Vec<Material>,
+    /// The albedo texture of each material, parallel to `materials`; it multiplies a diffuse albedo.
+    pub albedo_textures: Vec<Option<Arc<Texture>>>,
+    /// Texture coordinates of each triangle, by the index it was added with; None where its shape has none.
+    pub triangle_uvs: Vec<Option<[Vec2; 3]>>,
     pub objects: Vec<SceneObject>,
     pub geometry: SceneGeometry,
     pub lights: Lights,
     pub render: SceneRenderSettings,
-    /// SHA-256 over the scene file and every mesh it references, in order.
+    /// SHA-256 over the scene file and every mesh and texture it references, in order.
     pub hash: String,
-    /// Every mesh file the scene references: its path as written in the scene and its SHA-256 (hex).
+    /// Every file the scene references, meshes and textures: its path as written in the scene and its SHA-256
+    /// (hex). Jobs send these to workers.
     pub mesh_files: Vec<(String, String)>,
     /// True when any object has a specular material (then caustics exist).
     pub has_delta_surfaces: bool,
 }
 
 impl Scene {
-    /// Reads and validates a scene file; meshes are resolved relative to its folder.
+    /// Reads and validates a scene file; meshes and textures are resolved relative to its folder.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
         let text = std::fs::read_to_string(path).map_err(|e| SceneError {
             file: path.to_path_buf(),
@@ -78,28 +86,50 @@ impl Scene {
 
     /// Parses scene text; `file` names it in errors and `base_dir` resolves mesh paths.
     pub fn from_toml(text: &str, file: &Path, base_dir: &Path) -> Result<Scene, SceneError> {
-        Loader { text, file, source: MeshSource::Folder(base_dir), hasher: Sha256::new(), mesh_files: Vec::new() }
-            .load()
+        Loader::new(text, file, MeshSource::Folder(base_dir)).load()
     }
 
-    /// Parses scene text whose meshes are given in memory, keyed by the path the scene writes (a worker that
-    /// received them over the network).
+    /// Parses scene text whose meshes and textures are given in memory, keyed by the path the scene writes (a
+    /// worker that received them over the network).
     pub fn from_toml_with_meshes(
         text: &str,
         file: &Path,
         meshes: &BTreeMap<String, Vec<u8>>,
     ) -> Result<Scene, SceneError> {
-        Loader { text, file, source: MeshSource::Memory(meshes), hasher: Sha256::new(), mesh_files: Vec::new() }.load()
+        Loader::new(text, file, MeshSource::Memory(meshes)).load()
     }
 
-    /// The material of the surface hit.
+    /// The material at the surface hit, its albedo multiplied by the material's texture there if it has one
+    /// (a copy, so that textured and plain materials look the same to the integrators).
     #[inline]
-    pub fn material(&self, hit: &SurfaceHit) -> &Material {
-        &self.materials[self.objects[hit.object as usize].material as usize]
+    pub fn material(&self, hit: &SurfaceHit) -> Material {
+        let index = self.objects[hit.object as usize].material as usize;
+        let material = self.materials[index];
+        match (material, &self.albedo_textures[index]) {
+            (Material::Diffuse { albedo }, Some(texture)) => {
+                Material::Diffuse { albedo: albedo * self.texture_at(texture, hit) }
+            }
+            _ => material,
+        }
+    }
+
+    /// The texture's value at the hit point (one where the surface has no texture coordinates, which the
+    /// loader does not let happen).
+    fn texture_at(&self, texture: &Texture, hit: &SurfaceHit) -> Vec3 {
+        match self.triangle_uvs.get(hit.triangle as usize) {
+            Some(Some(uv)) => {
+                let b = barycentric(&self.geometry.triangle(hit.triangle).v, hit.p);
+                texture.lookup(interpolate_uv(uv, b))
+            }
+            _ => Vec3::ONE,
+        }
     }
 }
 
-/// Where mesh files come from.
+/// Texture coordinates of a shape's triangles, in order, when it has them.
+type TriangleUvs = Option<Vec<[Vec2; 3]>>;
+
+/// Where mesh and texture files come from.
 enum MeshSource<'a> {
     /// Paths relative to the scene file's folder.
     Folder(&'a Path),
@@ -113,9 +143,15 @@ struct Loader<'a> {
     source: MeshSource<'a>,
     hasher: Sha256,
     mesh_files: Vec<(String, String)>,
+    /// Textures decoded so far, by the path the scene writes: a texture used twice is read once.
+    textures: BTreeMap<String, Arc<Texture>>,
 }
 
-impl Loader<'_> {
+impl<'a> Loader<'a> {
+    fn new(text: &'a str, file: &'a Path, source: MeshSource<'a>) -> Self {
+        Loader { text, file, source, hasher: Sha256::new(), mesh_files: Vec::new(), textures: BTreeMap::new() }
+    }
+
     fn error(
         &self,
         span: Option<std::ops::Range<usize>>,
@@ -191,18 +227,23 @@ impl Loader<'_> {
         let render = self.render_settings(&parsed)?;
 
         let mut materials = Vec::new();
+        let mut albedo_textures = Vec::new();
         let mut material_index = BTreeMap::new();
         for (name, m) in &parsed.materials {
             material_index.insert(name.clone(), materials.len() as u32);
-            materials.push(self.material(name, m)?);
+            let (material, texture) = self.material(name, m)?;
+            materials.push(material);
+            albedo_textures.push(texture);
         }
 
         let mut objects = Vec::new();
         let mut triangles: Vec<(u32, MeshTriangle)> = Vec::new();
+        let mut triangle_uvs: Vec<Option<[Vec2; 3]>> = Vec::new();
         let mut analytic = Vec::new();
         let mut lights = Vec::new();
         // Named lens surfaces, for the sensor camera's rear element (the first object of a name wins).
         let mut lens_surfaces: BTreeMap<String, LensSurface> = BTreeMap::new();
+        let mut light_textures = Vec::new();
         for (i, o) in parsed.objects.iter().enumerate() {
             let span = o.span();
             let obj = o.get_ref();
@@ -217,6 +258,12 @@ impl Loader<'_> {
             };
             let emission = match &obj.emission {
                 Some(e) => Some(self.colour(*e.get_ref(), &e.span(), &field("emission"), None)?),
+                // An emission texture alone emits its own values.
+                None if obj.emission_texture.is_some() => Some(Rgb::ONE),
+                None => None,
+            };
+            let emission_texture = match &obj.emission_texture {
+                Some(t) => Some(self.texture(t.get_ref(), Some(t.span()), &field("emission_texture"))?),
                 None => None,
             };
             let shapes = [
@@ -238,8 +285,11 @@ impl Loader<'_> {
                 ));
             }
             let id = objects.len() as u32;
+            let mut uvs: TriangleUvs = None;
             let mesh = if let Some(m) = &obj.mesh {
-                Some(self.mesh(m, &field("mesh"))?)
+                let (mesh, mesh_uvs) = self.mesh(m, &field("mesh"))?;
+                uvs = mesh_uvs;
+                Some(mesh)
             } else if let Some(q) = &obj.quad {
                 let s = q.span();
                 let q = q.get_ref();
@@ -255,6 +305,7 @@ impl Loader<'_> {
                         "edge1 and edge2 are parallel: the quad has no area",
                     ));
                 }
+                uvs = Some(quad_uvs().to_vec());
                 Some(Mesh::quad(c, e1, e2))
             } else if let Some(b) = &obj.box_shape {
                 let s = b.span();
@@ -269,9 +320,40 @@ impl Loader<'_> {
             } else {
                 None
             };
+            if uvs.is_none() {
+                // Textures need texture coordinates, which only quads and OBJ meshes with `vt` have.
+                let shape = if obj.box_shape.is_some() {
+                    "a box"
+                } else if obj.mesh.is_some() {
+                    "this OBJ mesh (it has no vt lines)"
+                } else if obj.sphere.is_some() {
+                    "a sphere"
+                } else {
+                    "a lens_surface"
+                };
+                if let Some(t) = &obj.emission_texture {
+                    return Err(self.error(
+                        Some(t.span()),
+                        field("emission_texture"),
+                        format!("{shape} has no texture coordinates; use a quad or an OBJ mesh with vt"),
+                    ));
+                }
+                if albedo_textures[material as usize].is_some() {
+                    return Err(self.error(
+                        Some(obj.material.span()),
+                        field("material"),
+                        format!(
+                            "material '{}' has an albedo_texture but {shape} has no texture coordinates; use a \
+                             quad or an OBJ mesh with vt",
+                            obj.material.get_ref()
+                        ),
+                    ));
+                }
+            }
             match mesh {
                 Some(mesh) => {
-                    for t in mesh.triangles {
+                    for (k, t) in mesh.triangles.into_iter().enumerate() {
+                        let uv = uvs.as_ref().map(|u| u[k]);
                         if let Some(le) = emission {
                             if le != Rgb::ZERO {
                                 let c = t.cross();
@@ -281,9 +363,16 @@ impl Loader<'_> {
                                     area: 0.5 * c.length(),
                                     normal: c.normalize(),
                                 });
+                                light_textures.push(match (&emission_texture, uv) {
+                                    (Some(texture), Some(uv)) => {
+                                        Some(EmissionTexture { texture: texture.clone(), vertices: t.v, uv })
+                                    }
+                                    _ => None,
+                                });
                             }
                         }
                         triangles.push((id, t));
+                        triangle_uvs.push(uv);
                     }
                 }
                 None => {
@@ -314,7 +403,7 @@ impl Loader<'_> {
         // After the objects: a sensor camera refers to one of them.
         let camera = self.camera(&parsed.camera, &lens_surfaces)?;
         let geometry = SceneGeometry::build(triangles, analytic);
-        let lights = Lights::new(lights, geometry.triangle_count());
+        let lights = Lights::with_textures(lights, light_textures, geometry.triangle_count());
         if !lights.any() {
             return Err(SceneError {
                 file: self.file.to_path_buf(),
@@ -328,6 +417,8 @@ impl Loader<'_> {
             path: self.file.to_path_buf(),
             camera,
             materials,
+            albedo_textures,
+            triangle_uvs,
             objects,
             geometry,
             lights,
@@ -519,34 +610,54 @@ impl Loader<'_> {
         Ok(Camera::sensor(position, look_at, up, sensor_width, *cam.width.get_ref(), *cam.height.get_ref(), rear))
     }
 
-    fn material(&self, name: &str, m: &Spanned<MaterialSection>) -> Result<Material, SceneError> {
+    /// A material and its albedo texture.
+    fn material(
+        &mut self,
+        name: &str,
+        m: &Spanned<MaterialSection>,
+    ) -> Result<(Material, Option<Arc<Texture>>), SceneError> {
         let s = m.span();
         let f = |x: &str| format!("materials.{name}.{x}");
-        Ok(match m.get_ref() {
-            MaterialSection::Diffuse { albedo } => {
-                Material::Diffuse { albedo: self.colour(*albedo, &s, &f("albedo"), Some(1.0))? }
-            }
-            MaterialSection::Mirror { reflectance } => {
-                Material::Mirror { reflectance: self.colour(*reflectance, &s, &f("reflectance"), Some(1.0))? }
-            }
-            MaterialSection::Dielectric { ior, ext_ior, anti_reflection } => Material::Dielectric {
-                ior: self.scalar(*ior, &s, &f("ior"), |v| v > 0.0, "a positive index of refraction")?,
-                ext_ior: self.scalar(*ext_ior, &s, &f("ext_ior"), |v| v > 0.0, "a positive index of refraction")?,
-                anti_reflection: *anti_reflection,
-            },
-            MaterialSection::Coating { reflectance, transmittance } => {
-                let r = self.colour(*reflectance, &s, &f("reflectance"), Some(1.0))?;
-                let t = self.colour(*transmittance, &s, &f("transmittance"), Some(1.0))?;
-                if (r + t).max_element() > 1.0 + 1e-6 {
-                    return Err(self.error(
-                        Some(s),
-                        f("transmittance"),
-                        "reflectance + transmittance must not exceed 1 in any channel",
-                    ));
+        Ok((
+            match m.get_ref() {
+                MaterialSection::Diffuse { albedo, albedo_texture } => {
+                    let texture = match albedo_texture {
+                        Some(t) => Some(self.texture(t, Some(s.clone()), &f("albedo_texture"))?),
+                        None => None,
+                    };
+                    let albedo = match (albedo, &texture) {
+                        (Some(a), _) => self.colour(*a, &s, &f("albedo"), Some(1.0))?,
+                        // Texture values are at most 1, so the product stays a valid albedo.
+                        (None, Some(_)) => Rgb::ONE,
+                        (None, None) => {
+                            return Err(self.error(Some(s), f("albedo"), "a diffuse material needs albedo = [r, g, b]"))
+                        }
+                    };
+                    return Ok((Material::Diffuse { albedo }, texture));
                 }
-                Material::Coating { reflectance: r, transmittance: t }
-            }
-        })
+                MaterialSection::Mirror { reflectance } => {
+                    Material::Mirror { reflectance: self.colour(*reflectance, &s, &f("reflectance"), Some(1.0))? }
+                }
+                MaterialSection::Dielectric { ior, ext_ior, anti_reflection } => Material::Dielectric {
+                    ior: self.scalar(*ior, &s, &f("ior"), |v| v > 0.0, "a positive index of refraction")?,
+                    ext_ior: self.scalar(*ext_ior, &s, &f("ext_ior"), |v| v > 0.0, "a positive index of refraction")?,
+                    anti_reflection: *anti_reflection,
+                },
+                MaterialSection::Coating { reflectance, transmittance } => {
+                    let r = self.colour(*reflectance, &s, &f("reflectance"), Some(1.0))?;
+                    let t = self.colour(*transmittance, &s, &f("transmittance"), Some(1.0))?;
+                    if (r + t).max_element() > 1.0 + 1e-6 {
+                        return Err(self.error(
+                            Some(s),
+                            f("transmittance"),
+                            "reflectance + transmittance must not exceed 1 in any channel",
+                        ));
+                    }
+                    Material::Coating { reflectance: r, transmittance: t }
+                }
+            },
+            None,
+        ))
     }
 
     fn analytic(&self, obj: &file::ObjectSection, field: &dyn Fn(&str) -> String) -> Result<Analytic, SceneError> {
@@ -625,24 +736,57 @@ impl Loader<'_> {
         }))
     }
 
-    fn mesh(&mut self, m: &Spanned<String>, field: &str) -> Result<Mesh, SceneError> {
+    /// Reads a file the scene references (`what`: "mesh" or "texture"), adds it to the hash and to the files a
+    /// job sends.
+    fn external_file(
+        &mut self,
+        name: &str,
+        span: Option<std::ops::Range<usize>>,
+        field: &str,
+        what: &str,
+    ) -> Result<(PathBuf, Cow<'a, [u8]>), SceneError> {
         let (path, bytes) = match &self.source {
             MeshSource::Folder(dir) => {
-                let path = dir.join(m.get_ref());
+                let path = dir.join(name);
                 let bytes = std::fs::read(&path).map_err(|e| {
-                    self.error(Some(m.span()), field, format!("cannot read mesh {}: {e}", path.display()))
+                    self.error(span.clone(), field, format!("cannot read {what} {}: {e}", path.display()))
                 })?;
-                (path, std::borrow::Cow::Owned(bytes))
+                (path, Cow::Owned(bytes))
             }
             MeshSource::Memory(files) => {
-                let bytes = files.get(m.get_ref()).ok_or_else(|| {
-                    self.error(Some(m.span()), field, format!("mesh {} was not sent with the job", m.get_ref()))
+                let files: &'a BTreeMap<String, Vec<u8>> = files;
+                let bytes = files.get(name).ok_or_else(|| {
+                    self.error(span.clone(), field, format!("{what} {name} was not sent with the job"))
                 })?;
-                (PathBuf::from(m.get_ref()), std::borrow::Cow::Borrowed(bytes.as_slice()))
+                (PathBuf::from(name), Cow::Borrowed(bytes.as_slice()))
             }
         };
         self.hasher.update(&bytes);
-        self.mesh_files.push((m.get_ref().clone(), format!("{:x}", Sha256::digest(&bytes))));
+        self.mesh_files.push((name.to_string(), format!("{:x}", Sha256::digest(&bytes))));
+        Ok((path, bytes))
+    }
+
+    /// Reads and decodes a PNG texture once per path.
+    fn texture(
+        &mut self,
+        name: &str,
+        span: Option<std::ops::Range<usize>>,
+        field: &str,
+    ) -> Result<Arc<Texture>, SceneError> {
+        if let Some(t) = self.textures.get(name) {
+            return Ok(t.clone());
+        }
+        let (path, bytes) = self.external_file(name, span.clone(), field, "texture")?;
+        let texture =
+            Texture::from_png(&bytes).map_err(|e| self.error(span, field, format!("{}: {e}", path.display())))?;
+        let texture = Arc::new(texture);
+        self.textures.insert(name.to_string(), texture.clone());
+        Ok(texture)
+    }
+
+    /// A mesh and, when every triangle has them (OBJ `vt`), its texture coordinates.
+    fn mesh(&mut self, m: &Spanned<String>, field: &str) -> Result<(Mesh, TriangleUvs), SceneError> {
+        let (path, bytes) = self.external_file(m.get_ref(), Some(m.span()), field, "mesh")?;
         let (models, _) = tobj::load_obj_buf(
             &mut std::io::BufReader::new(&bytes[..]),
             &tobj::LoadOptions { triangulate: true, single_index: true, ignore_points: true, ignore_lines: true },
@@ -650,9 +794,14 @@ impl Loader<'_> {
         )
         .map_err(|e| self.error(Some(m.span()), field, format!("cannot parse OBJ {}: {e}", path.display())))?;
         let mut mesh = Mesh::default();
+        let mut uvs = Some(Vec::new());
         for model in &models {
             let pos = &model.mesh.positions;
             let nrm = &model.mesh.normals;
+            let tex = &model.mesh.texcoords;
+            let vertices = pos.len() / 3;
+            // With single_index every vertex has a texture coordinate, or none has.
+            let model_uvs = tex.len() >= 2 * vertices && vertices > 0;
             let vertex = |i: u32| Vec3::new(pos[3 * i as usize], pos[3 * i as usize + 1], pos[3 * i as usize + 2]);
             let normal = |i: u32| Vec3::new(nrm[3 * i as usize], nrm[3 * i as usize + 1], nrm[3 * i as usize + 2]);
             for (k, tri) in model.mesh.indices.chunks_exact(3).enumerate() {
@@ -681,12 +830,24 @@ impl Loader<'_> {
                     }
                 }
                 mesh.triangles.push(t);
+                if let Some(list) = &mut uvs {
+                    if model_uvs {
+                        let uv = |i: u32| Vec2::new(tex[2 * i as usize], tex[2 * i as usize + 1]);
+                        let uv = [uv(tri[0]), uv(tri[1]), uv(tri[2])];
+                        if !uv.iter().all(|c| c.is_finite()) {
+                            return Err(bad("has a texture coordinate that is not a finite number"));
+                        }
+                        list.push(uv);
+                    } else {
+                        uvs = None;
+                    }
+                }
             }
         }
         if mesh.triangles.is_empty() {
             return Err(self.error(Some(m.span()), field, format!("{} contains no triangles", path.display())));
         }
-        Ok(mesh)
+        Ok((mesh, uvs))
     }
 
     fn light(&self, l: &Spanned<LightSection>, i: usize) -> Result<Light, SceneError> {
