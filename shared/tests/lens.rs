@@ -86,7 +86,7 @@ fn through_lens(scene: &Scene, mut ray: Ray) -> Option<Ray> {
             // Anything but the lens (it spans z from 0 to −0.032 m) or a ray turned back.
             return None;
         }
-        let material = *scene.material(&hit);
+        let material = scene.material(&hit);
         if !matches!(material, Material::Dielectric { .. }) {
             return None;
         }
