@@ -141,7 +141,7 @@ fn the_slide_reads_upright_and_unmirrored_and_fills_its_six_by_three_degree_fiel
     let scene = shipped("hud.toml");
     let cam = &scene.camera;
     let centre = Vec2::splat(0.5);
-    let ray = |x: u32, y: u32| cam.generate_ray(x, y, Vec2::splat(0.5), centre);
+    let ray = |x: u32, y: u32| cam.generate_ray(x, y, Vec2::splat(0.5), centre).ray;
     let pixels: Vec<(u32, u32)> = (0..cam.height)
         .flat_map(|y| (0..cam.width).map(move |x| (x, y)))
         .filter(|&(x, y)| screen_uv(&scene, ray(x, y)).is_some())
