@@ -94,6 +94,8 @@ fn configs(group_variants: bool) -> Vec<EngineConfig> {
     if group_variants {
         configs.push(EngineConfig::for_method(ParallelMethod::TwoLevel, 2, 2, cores.clone()).unwrap());
         configs.push(EngineConfig::for_method(ParallelMethod::TwoLevel, 4, 4, cores.clone()).unwrap());
+        // Where sync fails (Amdahl: many threads, one map, barriers), it must stay slow but exact.
+        configs.push(EngineConfig::for_method(ParallelMethod::Sync, 8, 8, cores.clone()).unwrap());
     }
     // Tiny tiles force many groups onto two cores.
     let mut many = EngineConfig::for_method(ParallelMethod::TwoLevel, 8, 1, cores).unwrap();
