@@ -32,3 +32,20 @@ pub fn scratch_dir(name: &str) -> PathBuf {
     std::fs::create_dir_all(&dir).expect("cannot create a scratch folder");
     dir
 }
+
+/// The shipped Cornell box at `size` × `size` pixels, copied with its meshes into `dir`: a scene the tests can
+/// resize without touching `scenes/`.
+pub fn cornell_at(dir: &Path, size: u32) -> PathBuf {
+    let root = repo_root().join("scenes");
+    let text = std::fs::read_to_string(root.join("cornell.toml")).expect("scenes/cornell.toml");
+    let text =
+        text.replace("width = 256", &format!("width = {size}")).replace("height = 256", &format!("height = {size}"));
+    std::fs::create_dir_all(dir.join("cornell")).expect("cannot create the scene folder");
+    for e in std::fs::read_dir(root.join("cornell")).expect("scenes/cornell/") {
+        let e = e.expect("a mesh of scenes/cornell/");
+        std::fs::copy(e.path(), dir.join("cornell").join(e.file_name())).expect("cannot copy a mesh");
+    }
+    let path = dir.join("cornell.toml");
+    std::fs::write(&path, text).expect("cannot write the scene");
+    path
+}

@@ -2,7 +2,7 @@
 //! single-process engine, a worker killed or frozen mid-run is reported and the run completes with the rest,
 //! and hostile connections to the coordinator are refused without disturbing the job.
 
-use end_to_end::{binary, repo_root, scratch_dir};
+use end_to_end::{binary, cornell_at, repo_root, scratch_dir};
 use photonfarm::image_io::exr_file::{find_layer, read_exr};
 use photonfarm::render::images::luminance_of;
 use std::path::{Path, PathBuf};
@@ -10,22 +10,6 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 const TWO_NODES: &str = "pack:1 numa:2 core:1 pu:1";
-
-/// The Cornell box at `size`×`size` pixels in its own folder (its meshes copied beside it).
-fn small_cornell(dir: &Path, size: u32) -> PathBuf {
-    let root = repo_root().join("scenes");
-    let text = std::fs::read_to_string(root.join("cornell.toml")).unwrap();
-    let text =
-        text.replace("width = 256", &format!("width = {size}")).replace("height = 256", &format!("height = {size}"));
-    std::fs::create_dir_all(dir.join("cornell")).unwrap();
-    for e in std::fs::read_dir(root.join("cornell")).unwrap() {
-        let e = e.unwrap();
-        std::fs::copy(e.path(), dir.join("cornell").join(e.file_name())).unwrap();
-    }
-    let path = dir.join("cornell.toml");
-    std::fs::write(&path, text).unwrap();
-    path
-}
 
 fn coordinator(scene: &Path, out: &Path, args: &[&str]) -> Command {
     let mut c = Command::new(binary("coordinator"));
@@ -75,7 +59,7 @@ fn assert_same_image(a: &Path, b: &Path, what: &str) {
 #[test]
 fn workers_on_this_machines_nodes_bind_their_memory_to_their_node() {
     let dir = scratch_dir("memory-binding");
-    let scene = small_cornell(&dir, 32);
+    let scene = cornell_at(&dir, 32);
     let out = dir.join("run");
     run_ok(coordinator(&scene, &out, &["--method", "three-level", "--phases", "8"]));
     let r = record(&out);
@@ -123,7 +107,7 @@ fn wait_for_workers(pid: u32, n: usize) -> Vec<u32> {
 #[test]
 fn three_level_and_combination_on_two_synthetic_nodes_converge_to_the_single_process_image() {
     let dir = scratch_dir("three-level");
-    let scene = small_cornell(&dir, 40);
+    let scene = cornell_at(&dir, 40);
     let (single, three) = (dir.join("single"), dir.join("three"));
     run_ok(coordinator(&scene, &single, &["--method", "pbpm", "--phases", "500", "--seed", "11"]));
     run_ok(coordinator(
@@ -160,7 +144,7 @@ fn three_level_and_combination_on_two_synthetic_nodes_converge_to_the_single_pro
 #[test]
 fn a_worker_killed_mid_run_is_reported_and_the_run_completes_with_the_others() {
     let dir = scratch_dir("kill-worker");
-    let scene = small_cornell(&dir, 40);
+    let scene = cornell_at(&dir, 40);
     let (single, out) = (dir.join("single"), dir.join("killed"));
     // Equal phase counts, so that both images carry the same radius bias.
     run_ok(coordinator(&scene, &single, &["--method", "pbpm", "--phases", "1500", "--seed", "21"]));
@@ -191,7 +175,7 @@ fn a_worker_killed_mid_run_is_reported_and_the_run_completes_with_the_others() {
 #[test]
 fn a_frozen_worker_is_dropped_after_the_heartbeat_timeout() {
     let dir = scratch_dir("frozen-worker");
-    let scene = small_cornell(&dir, 32);
+    let scene = cornell_at(&dir, 32);
     let out = dir.join("frozen");
     let mut c = coordinator(
         &scene,
@@ -248,7 +232,7 @@ fn a_frozen_worker_is_dropped_after_the_heartbeat_timeout() {
 #[test]
 fn a_coordinator_killed_mid_run_resumes_without_losing_or_recounting_a_checkpointed_phase() {
     let dir = scratch_dir("resume");
-    let scene = small_cornell(&dir, 40);
+    let scene = cornell_at(&dir, 40);
     let (single, out) = (dir.join("single"), dir.join("resumed"));
     let three = ["--method", "three-level", "--topology", TWO_NODES, "--group-size", "1", "--phases", "1200"];
     let mut c = coordinator(&scene, &out, &three);
@@ -290,7 +274,7 @@ fn a_coordinator_killed_mid_run_resumes_without_losing_or_recounting_a_checkpoin
 fn hostile_connections_are_refused_and_a_late_worker_joins_without_disturbing_the_job() {
     use std::io::Write;
     let dir = scratch_dir("hostile");
-    let scene = small_cornell(&dir, 40);
+    let scene = cornell_at(&dir, 40);
     let out = dir.join("out");
     let (secret, wrong) = (dir.join("secret"), dir.join("wrong"));
     std::fs::write(&secret, "the right secret, long enough").unwrap();
@@ -357,7 +341,7 @@ fn hostile_connections_are_refused_and_a_late_worker_joins_without_disturbing_th
 #[test]
 fn a_straggling_worker_contributes_less_and_the_image_stays_correct() {
     let dir = scratch_dir("straggler");
-    let scene = small_cornell(&dir, 40);
+    let scene = cornell_at(&dir, 40);
     let (single, out) = (dir.join("single"), dir.join("straggled"));
     let secret = dir.join("secret");
     std::fs::write(&secret, "a secret for the straggler test").unwrap();

@@ -1,7 +1,7 @@
 //! `coordinator render` as a user runs it: outputs written, the run record complete, bad input refused with
 //! a clear message, Ctrl-C still writing every completed phase.
 
-use end_to_end::{binary, repo_root, scratch_dir};
+use end_to_end::{binary, cornell_at, repo_root, scratch_dir};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -106,25 +106,11 @@ fn render_with_a_reference_reports_the_true_error() {
     assert!(r["history"].as_array().unwrap().iter().all(|h| h["true_unlit"].as_f64().is_some_and(|e| e > 0.0)));
 }
 
-/// The Cornell box at 512 × 512 in a scratch folder: large enough that async's per-thread buffers (about 160 MB
-/// per extra thread) dwarf the variation of the memory a process has in use after loading a scene.
-fn large_cornell(name: &str) -> std::path::PathBuf {
-    let dir = scratch_dir(name);
-    let root = repo_root().join("scenes");
-    let text = std::fs::read_to_string(root.join("cornell.toml")).unwrap();
-    std::fs::create_dir_all(dir.join("cornell")).unwrap();
-    for e in std::fs::read_dir(root.join("cornell")).unwrap() {
-        let e = e.unwrap();
-        std::fs::copy(e.path(), dir.join("cornell").join(e.file_name())).unwrap();
-    }
-    let path = dir.join("cornell.toml");
-    std::fs::write(&path, text.replace("width = 256", "width = 512").replace("height = 256", "height = 512")).unwrap();
-    path
-}
-
 #[test]
 fn a_memory_limit_makes_async_give_up_threads_and_other_methods_refuse_up_front() {
-    let scene = large_cornell("memory-limit");
+    // 512 × 512: async's per-thread buffers (about 160 MB per extra thread) dwarf the variation of the memory a
+    // process has in use after loading a scene.
+    let scene = cornell_at(&scratch_dir("memory-limit"), 512);
     let scene = scene.to_str().unwrap();
     // Async needs about 756 bytes per pixel at one thread and 1368 at two: 198 and 359 MB over what is in use.
     let out = scratch_dir("memory-limit-async");
