@@ -18,6 +18,7 @@ use photonfarm::pbpm::{
 use photonfarm::render::{Method, RenderSettings};
 use photonfarm::sampling::{Pass, Sampler};
 use photonfarm::scene::Scene;
+use photonfarm::spectrum::PhaseSpectrum;
 use std::hint::black_box;
 use std::path::Path;
 use std::time::Duration;
@@ -39,7 +40,15 @@ struct OwnedVertex {
 
 impl OwnedVertex {
     fn view(&self) -> LightVertex<'_> {
-        LightVertex { hit: &self.hit, wi: self.wi, flux: self.flux, m: self.m, all_specular: self.all_specular }
+        LightVertex {
+            hit: &self.hit,
+            wi: self.wi,
+            flux: self.flux,
+            m: self.m,
+            all_specular: self.all_specular,
+            spectral: false,
+            wavelength: None,
+        }
     }
 }
 
@@ -56,6 +65,7 @@ fn backward_photons(scene: &Scene, settings: &RenderSettings) -> Vec<BackwardPho
         backward_diffuse_depth: settings.backward_diffuse_depth,
         radius: settings.radius_schedule(scene),
         phase: PHASE,
+        spectrum: PhaseSpectrum::RGB,
     };
     let mut photons = Vec::new();
     let mut stats = BackwardStats::default();
@@ -74,7 +84,7 @@ fn light_vertices(scene: &Scene, settings: &RenderSettings) -> Vec<OwnedVertex> 
     let mut stats = ForwardStats::default();
     for i in 0..settings.light_paths_per_phase(scene.camera.pixel_count()) {
         let mut s = Sampler::new(settings.seed, Pass::Light, PHASE, i);
-        trace_light_path(scene, settings.max_depth, &mut s, &mut stats, &mut |v| {
+        trace_light_path(scene, settings.max_depth, &PhaseSpectrum::RGB, &mut s, &mut stats, &mut |v: &LightVertex| {
             vertices.push(OwnedVertex { hit: *v.hit, wi: v.wi, flux: v.flux, m: v.m, all_specular: v.all_specular })
         });
     }

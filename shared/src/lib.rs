@@ -14,4 +14,5 @@ pub mod protocol;
 pub mod render;
 pub mod sampling;
 pub mod scene;
+pub mod spectrum;
 pub mod texture;

@@ -4,6 +4,7 @@
 use crate::color::{luminance, Rgb};
 use crate::geometry::SurfaceHit;
 use crate::sampling::{cosine_hemisphere, Frame};
+use crate::spectrum::{RefractiveIndex, Wavelength};
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
 
@@ -17,8 +18,8 @@ pub enum Material {
     /// Smooth dielectric interface with Fresnel reflection and refraction; `ior` on the back side of the
     /// surface normal (inside), `ext_ior` on the front (outside). With `anti_reflection` the surface has an ideal
     /// anti-reflection coating: it refracts everything except under total internal reflection (a lens without
-    /// ghosts, to compare with the uncoated one).
-    Dielectric { ior: f32, ext_ior: f32, anti_reflection: bool },
+    /// ghosts, to compare with the uncoated one). Either index may vary with wavelength (dispersion).
+    Dielectric { ior: RefractiveIndex, ext_ior: RefractiveIndex, anti_reflection: bool },
     /// A thin partially reflecting coating (e.g. a head-up display combiner): specular reflection with
     /// `reflectance`, straight-through transmission with `transmittance`, the rest absorbed.
     Coating { reflectance: Rgb, transmittance: Rgb },
@@ -49,6 +50,29 @@ impl Material {
     /// True when scattering is a Dirac delta: such vertices are followed, never used for photons or NEE.
     pub fn is_delta(&self) -> bool {
         !matches!(self, Material::Diffuse { .. })
+    }
+
+    /// True when the material's behaviour depends on wavelength: a path that meets it becomes spectral.
+    pub fn is_dispersive(&self) -> bool {
+        matches!(self, Material::Dielectric { ior, ext_ior, .. } if ior.is_dispersive() || ext_ior.is_dispersive())
+    }
+
+    /// The material as a path at one wavelength sees it: colours read at the wavelength (the same value in
+    /// every channel), indices evaluated there.
+    pub fn at_wavelength(&self, w: &Wavelength) -> Material {
+        let v = |c: Rgb| Rgb::splat(w.value_of(c));
+        match *self {
+            Material::Diffuse { albedo } => Material::Diffuse { albedo: v(albedo) },
+            Material::Mirror { reflectance } => Material::Mirror { reflectance: v(reflectance) },
+            Material::Coating { reflectance, transmittance } => {
+                Material::Coating { reflectance: v(reflectance), transmittance: v(transmittance) }
+            }
+            Material::Dielectric { ior, ext_ior, anti_reflection } => Material::Dielectric {
+                ior: RefractiveIndex::constant(ior.at(w.nm)),
+                ext_ior: RefractiveIndex::constant(ext_ior.at(w.nm)),
+                anti_reflection,
+            },
+        }
     }
 
     /// The Lambertian albedo, for diffuse surfaces.
@@ -93,7 +117,8 @@ impl Material {
                 }
             }
             Material::Dielectric { ior, ext_ior, anti_reflection } => {
-                let (eta_o, eta_t) = if front { (ext_ior, ior) } else { (ior, ext_ior) };
+                // A dispersive index not yet resolved to a wavelength (an RGB path) acts at the d line.
+                let (eta_o, eta_t) = if front { (ext_ior.d, ior.d) } else { (ior.d, ext_ior.d) };
                 let cos_o = wo.dot(ns).clamp(-1.0, 1.0).abs();
                 let f = fresnel_dielectric(cos_o, eta_o, eta_t);
                 // A coating cannot undo total internal reflection (f = 1): there is no transmitted wave.
@@ -175,7 +200,11 @@ mod tests {
 
     #[test]
     fn refraction_obeys_snell_and_radiance_scales_by_eta_squared() {
-        let glass = Material::Dielectric { ior: 1.5, ext_ior: 1.0, anti_reflection: false };
+        let glass = Material::Dielectric {
+            ior: RefractiveIndex::constant(1.5),
+            ext_ior: RefractiveIndex::constant(1.0),
+            anti_reflection: false,
+        };
         let hit = flat_hit(Vec3::Z);
         let wo = Vec3::new(0.5, 0.0, 0.75f32.sqrt());
         // u.x = 0.999 selects transmission (F is small here).
@@ -191,7 +220,11 @@ mod tests {
 
     #[test]
     fn anti_reflection_coating_refracts_everything_but_total_internal_reflection() {
-        let coated = Material::Dielectric { ior: 1.5, ext_ior: 1.0, anti_reflection: true };
+        let coated = Material::Dielectric {
+            ior: RefractiveIndex::constant(1.5),
+            ext_ior: RefractiveIndex::constant(1.0),
+            anti_reflection: true,
+        };
         let hit = flat_hit(Vec3::Z);
         // u.x = 0 would pick reflection whenever F > 0.
         let s = coated.sample(&hit, Vec3::Z, Vec2::ZERO, Transport::Radiance).unwrap();

@@ -17,6 +17,8 @@ pub enum Pass {
     Camera = 1,
     Light = 2,
     Path = 3,
+    /// The wavelength of a phase of a spectral scene.
+    Wavelength = 4,
 }
 
 fn splitmix64(mut z: u64) -> u64 {

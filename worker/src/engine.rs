@@ -151,7 +151,12 @@ pub struct ParallelEngine<'s> {
 
 impl<'s> ParallelEngine<'s> {
     /// Starts the groups' threads (pinned) with empty sums.
-    pub fn new(scene: &'s Scene, settings: RenderSettings, config: EngineConfig) -> Result<Self, ConfigError> {
+    pub fn new(scene: &'s Scene, settings: RenderSettings, mut config: EngineConfig) -> Result<Self, ConfigError> {
+        // In a spectral scene each group phase has its own wavelength, and a light path at one wavelength cannot
+        // join camera paths at another: every group gathers only into its own map.
+        if scene.is_spectral() {
+            config.shared_maps = false;
+        }
         if !(1..=64).contains(&config.phases_per_deal) {
             return Err(ConfigError::Invalid(format!(
                 "phases per deal must be 1..=64, got {}",

@@ -8,6 +8,7 @@ use crate::geometry::{ray::offset_origin, SurfaceHit};
 use crate::material::diffuse_f;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
+use crate::spectrum::PathSpectrum;
 use glam::Vec3;
 
 /// The illumination components the image is split into (paper §2's layers 1–4).
@@ -55,13 +56,15 @@ pub struct DirectSample {
     pub bsdf_pdf: f32,
 }
 
-/// Samples direct light at a diffuse vertex with outgoing direction `wo` (paper eq. 5's light term).
-/// Returns None when the sample carries nothing (back side, occluded).
+/// Samples direct light at a diffuse vertex with outgoing direction `wo` (paper eq. 5's light term), in the
+/// path's colour terms (`albedo` already is). Returns None when the sample carries nothing (back side,
+/// occluded).
 pub fn sample_direct(
     scene: &Scene,
     hit: &SurfaceHit,
     wo: Vec3,
     albedo: Rgb,
+    path: &PathSpectrum,
     sampler: &mut Sampler,
 ) -> Option<DirectSample> {
     let u_select = sampler.next_f32();
@@ -78,7 +81,7 @@ pub fn sample_direct(
         return None;
     }
     Some(DirectSample {
-        value: f * ls.li * (cos / ls.pdf),
+        value: f * path.quantity(ls.li) * (cos / ls.pdf),
         light_pdf: ls.pdf,
         delta: ls.delta,
         bsdf_pdf: cos * std::f32::consts::FRAC_1_PI,

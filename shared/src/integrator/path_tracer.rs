@@ -8,6 +8,7 @@ use crate::geometry::{ray::offset_origin, Ray};
 use crate::material::Transport;
 use crate::sampling::{power_heuristic, Sampler};
 use crate::scene::Scene;
+use crate::spectrum::{PathSpectrum, PhaseSpectrum};
 use glam::Vec3;
 
 /// What the previous vertex of a camera path was, which decides how an emitter hit is counted.
@@ -38,10 +39,12 @@ fn layer_of(diffuse_vertices: u32, through_specular: bool) -> Layer {
 }
 
 /// Estimates the camera ray's weight times the radiance arriving along it (the pixel measurement), split into
-/// layers; `max_depth` counts path segments.
+/// layers; `max_depth` counts path segments. `spectrum` holds the wavelength the path takes if it meets
+/// dispersion (a path tracer can draw one per path).
 pub fn trace(
     scene: &Scene,
     max_depth: u32,
+    spectrum: &PhaseSpectrum,
     camera_ray: CameraRay,
     sampler: &mut Sampler,
     stats: &mut PathStats,
@@ -53,6 +56,7 @@ pub fn trace(
     }
     let mut ray = camera_ray.ray;
     let mut beta = Rgb::splat(weight);
+    let mut path = PathSpectrum::start(spectrum, &mut beta);
     let mut previous = Previous::Specular;
     let mut diffuse_vertices = 0u32;
     let mut segments = 0u32;
@@ -62,25 +66,28 @@ pub fn trace(
         segments += 1;
         let le = scene.lights.emitted(&hit, ray.direction);
         if le != Rgb::ZERO {
+            let le = path.quantity(le);
             match previous {
-                Previous::Specular => out[layer_of(diffuse_vertices, diffuse_vertices > 0) as usize] += beta * le,
+                Previous::Specular => {
+                    out[layer_of(diffuse_vertices, diffuse_vertices > 0) as usize] += path.to_image(beta * le)
+                }
                 Previous::Diffuse { p, pdf } => {
                     let w = power_heuristic(pdf, scene.lights.pdf_incident(p, &hit));
-                    out[layer_of(diffuse_vertices, false) as usize] += beta * le * w;
+                    out[layer_of(diffuse_vertices, false) as usize] += path.to_image(beta * le * w);
                 }
             }
         }
         if segments >= max_depth {
             break;
         }
-        let material = scene.material(&hit);
+        let material = path.material(scene.material(&hit), &mut beta);
         let wo = -ray.direction;
         if let Some(albedo) = material.diffuse_albedo() {
             diffuse_vertices += 1;
             stats.rays += 1;
-            if let Some(d) = sample_direct(scene, &hit, wo, albedo, sampler) {
+            if let Some(d) = sample_direct(scene, &hit, wo, albedo, &path, sampler) {
                 let w = if d.delta { 1.0 } else { power_heuristic(d.light_pdf, d.bsdf_pdf) };
-                out[layer_of(diffuse_vertices, false) as usize] += beta * d.value * w;
+                out[layer_of(diffuse_vertices, false) as usize] += path.to_image(beta * d.value * w);
             }
         }
         let Some(s) = material.sample(&hit, wo, sampler.next_2d(), Transport::Radiance) else { break };

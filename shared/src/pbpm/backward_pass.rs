@@ -11,6 +11,7 @@ use crate::integrator::{sample_direct, Layer, LayerValues};
 use crate::material::Transport;
 use crate::sampling::{power_heuristic, Sampler};
 use crate::scene::Scene;
+use crate::spectrum::{PathSpectrum, PhaseSpectrum};
 use glam::Vec3;
 
 /// What the backward pass needs to know besides the scene.
@@ -21,6 +22,8 @@ pub struct BackwardSettings {
     pub radius: RadiusSchedule,
     /// 1-based phase number, for the radius schedule.
     pub phase: u64,
+    /// The phase's wavelength, for paths that meet dispersion.
+    pub spectrum: PhaseSpectrum,
 }
 
 /// Counters of the backward pass.
@@ -51,6 +54,7 @@ pub fn trace_camera_path(
     }
     let mut ray = camera_ray.ray;
     let mut beta = Rgb::splat(weight);
+    let mut path = PathSpectrum::start(&settings.spectrum, &mut beta);
     let mut k = 0u32; // diffuse vertices so far
     let mut segments = 0u32;
     let mut path_length = 0.0f32;
@@ -64,11 +68,12 @@ pub fn trace_camera_path(
         path_length += hit.t;
         let le = scene.lights.emitted(&hit, ray.direction);
         if le != Rgb::ZERO {
+            let le = path.quantity(le);
             match (k, from_diffuse) {
-                (0, _) => out[Layer::VisibleLights as usize] += beta * le,
+                (0, _) => out[Layer::VisibleLights as usize] += path.to_image(beta * le),
                 (_, Some((p, pdf))) => {
                     let w = power_heuristic(pdf, scene.lights.pdf_incident(p, &hit));
-                    out[direct_layer(k) as usize] += beta * le * w;
+                    out[direct_layer(k) as usize] += path.to_image(beta * le * w);
                 }
                 // Emitter reached from a diffuse vertex through specular surfaces: a caustic, which the forward
                 // pass counts.
@@ -78,7 +83,7 @@ pub fn trace_camera_path(
         if segments >= settings.max_depth {
             break;
         }
-        let material = scene.material(&hit);
+        let material = path.material(scene.material(&hit), &mut beta);
         let wo = -ray.direction;
         let continues;
         if let Some(albedo) = material.diffuse_albedo() {
@@ -88,10 +93,10 @@ pub fn trace_camera_path(
             k += 1;
             continues = k < settings.backward_diffuse_depth;
             stats.rays += 1;
-            if let Some(d) = sample_direct(scene, &hit, wo, albedo, sampler) {
+            if let Some(d) = sample_direct(scene, &hit, wo, albedo, &path, sampler) {
                 // Without a BSDF continuation nothing else finds this light: next-event estimation takes it all.
                 let w = if d.delta || !continues { 1.0 } else { power_heuristic(d.light_pdf, d.bsdf_pdf) };
-                out[direct_layer(k) as usize] += beta * d.value * w;
+                out[direct_layer(k) as usize] += path.to_image(beta * d.value * w);
             }
             // A merge needs at least two light segments (y1 is next-event estimation's).
             if segments + 2 <= settings.max_depth {
@@ -108,6 +113,7 @@ pub fn trace_camera_path(
                         pixel,
                         k: k as u8,
                         segments: segments.min(255) as u8,
+                        spectral: path.is_spectral(),
                     });
                 }
             }

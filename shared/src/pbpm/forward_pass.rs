@@ -8,6 +8,7 @@ use crate::integrator::Layer;
 use crate::material::Transport;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
+use crate::spectrum::{join, PathSpectrum, PhaseSpectrum, Wavelength};
 use glam::Vec3;
 
 /// Counters of the forward pass.
@@ -51,6 +52,10 @@ pub struct LightVertex<'a> {
     pub m: u32,
     /// True when y1 … y_{m−1} are all specular.
     pub all_specular: bool,
+    /// The light path had turned spectral: `flux` holds its value at `wavelength` in every channel.
+    pub spectral: bool,
+    /// The phase's wavelength in a spectral scene.
+    pub wavelength: Option<Wavelength>,
 }
 
 /// Traces one light path and hands every diffuse vertex with m ≥ 2 to `visit`, which gathers it into one or
@@ -58,6 +63,7 @@ pub struct LightVertex<'a> {
 pub fn trace_light_path(
     scene: &Scene,
     max_depth: u32,
+    spectrum: &PhaseSpectrum,
     sampler: &mut Sampler,
     stats: &mut ForwardStats,
     visit: &mut impl FnMut(&LightVertex),
@@ -69,18 +75,27 @@ pub fn trace_light_path(
     let origin = if e.normal == Vec3::ZERO { e.origin } else { offset_origin(e.origin, e.normal, e.direction) };
     let mut ray = Ray::new(origin, e.direction);
     let mut beta = e.beta;
-    let beta0 = e.beta.max_element();
+    let mut path = PathSpectrum::start(spectrum, &mut beta);
+    let beta0 = beta.max_element();
     let mut all_specular = true;
     let mut m = 0u32;
     loop {
         stats.rays += 1;
         let Some(hit) = scene.geometry.intersect(&ray) else { break };
         m += 1;
-        let material = scene.material(&hit);
+        let material = path.material(scene.material(&hit), &mut beta);
         let wi = -ray.direction;
         if material.diffuse_albedo().is_some() {
             if m >= 2 {
-                visit(&LightVertex { hit: &hit, wi, flux: beta, m, all_specular });
+                visit(&LightVertex {
+                    hit: &hit,
+                    wi,
+                    flux: beta,
+                    m,
+                    all_specular,
+                    spectral: path.is_spectral(),
+                    wavelength: path.wavelength(),
+                });
             }
             all_specular = false;
         }
@@ -130,7 +145,8 @@ pub fn gather(
             _ => Layer::Indirect,
         };
         merges += 1;
-        sink.add(b.pixel, layer, b.weight * v.flux); // eq. 4
+        sink.add(b.pixel, layer, join(b.weight, b.spectral, v.flux, v.spectral, v.wavelength.as_ref()));
+        // eq. 4
     }
     merges
 }

@@ -20,4 +20,6 @@ pub struct BackwardPhoton {
     pub k: u8,
     /// Camera path segments from the eye to this vertex, for the joined path's `max_depth`.
     pub segments: u8,
+    /// The camera path had turned spectral: `weight` holds its value at the phase's wavelength in every channel.
+    pub spectral: bool,
 }

@@ -10,6 +10,7 @@ use crate::pbpm::{
 };
 use crate::sampling::{Pass, Sampler};
 use crate::scene::Scene;
+use crate::spectrum::PhaseSpectrum;
 use serde::{Deserialize, Serialize};
 
 /// Counts accumulated over a run.
@@ -122,11 +123,18 @@ impl<'s> Engine<'s> {
         let phase = self.totals.phases + 1;
         let cam = &self.scene.camera;
         let mut stats = path_tracer::PathStats::default();
+        let spectral = self.scene.is_spectral();
         for pixel in 0..cam.pixel_count() {
             let (x, y) = ((pixel % cam.width as usize) as u32, (pixel / cam.width as usize) as u32);
             let mut s = Sampler::new(self.settings.seed, Pass::Path, phase, pixel as u64);
             let ray = cam.generate_ray(x, y, s.next_2d(), s.next_2d());
-            let v = path_tracer::trace(self.scene, self.settings.max_depth, ray, &mut s, &mut stats);
+            // Paths of a path tracer never join: each draws its own wavelength.
+            let spectrum = if spectral {
+                self.settings.phase_spectrum(self.scene, phase << 32 | pixel as u64)
+            } else {
+                PhaseSpectrum::RGB
+            };
+            let v = path_tracer::trace(self.scene, self.settings.max_depth, &spectrum, ray, &mut s, &mut stats);
             self.sums.add_phase(pixel, &v, 1);
         }
         PhaseReport { phase, backward_rays: stats.rays, ..Default::default() }
@@ -141,6 +149,7 @@ impl<'s> Engine<'s> {
             backward_diffuse_depth: self.settings.backward_diffuse_depth,
             radius: self.settings.radius_schedule(scene),
             phase,
+            spectrum: self.settings.phase_spectrum(scene, phase),
         };
         // 1. Backward pass.
         self.map.clear();
@@ -171,7 +180,7 @@ impl<'s> Engine<'s> {
         let mut merges = 0;
         for i in 0..n {
             let mut s = Sampler::new(self.settings.seed, Pass::Light, phase, i);
-            trace_light_path(scene, max_depth, &mut s, &mut fstats, &mut |v| {
+            trace_light_path(scene, max_depth, &bs.spectrum, &mut s, &mut fstats, &mut |v| {
                 merges += gather(map, v, max_depth, bdd, &mut sink)
             });
         }

@@ -1,7 +1,9 @@
 //! Settings of one rendering run.
 
 use crate::pbpm::RadiusSchedule;
+use crate::sampling::{Pass, Sampler};
 use crate::scene::{Scene, SceneRenderSettings};
+use crate::spectrum::{PhaseSpectrum, Wavelength};
 use serde::{Deserialize, Serialize};
 
 /// The estimator a run uses.
@@ -59,6 +61,16 @@ impl RenderSettings {
     /// The photon radius schedule for this scene's camera.
     pub fn radius_schedule(&self, scene: &Scene) -> RadiusSchedule {
         RadiusSchedule { scale: self.radius_scale, alpha: self.radius_alpha, pixel_angle: scene.camera.pixel_angle() }
+    }
+
+    /// The wavelength of the phase (or path) identified by `key` in a spectral scene; RGB otherwise. Every
+    /// camera and light path of a phase shares it, so that their joins are at one wavelength.
+    pub fn phase_spectrum(&self, scene: &Scene, key: u64) -> PhaseSpectrum {
+        if !scene.is_spectral() {
+            return PhaseSpectrum::RGB;
+        }
+        let u = Sampler::new(self.seed, Pass::Wavelength, key, 0).next_f32();
+        PhaseSpectrum { wavelength: Some(Wavelength::sample(u)), from_start: false }
     }
 
     /// Light paths traced per phase for an image of `pixels` pixels.

@@ -79,6 +79,10 @@ pub enum MaterialSection {
         ext_ior: f32,
         #[serde(default)]
         anti_reflection: bool,
+        /// Abbe number V_d of the glass behind the surface: makes `ior` vary with wavelength (Cauchy).
+        abbe: Option<f32>,
+        /// Abbe number of the medium in front (a cemented surface between two glasses).
+        ext_abbe: Option<f32>,
     },
     Coating {
         reflectance: [f32; 3],

@@ -10,6 +10,7 @@ use crate::color::Rgb;
 use crate::geometry::{Analytic, Annulus, LensSurface, Mesh, MeshTriangle, SceneGeometry, Sphere, SurfaceHit};
 use crate::light::{EmissionTexture, Light, Lights};
 use crate::material::Material;
+use crate::spectrum::RefractiveIndex;
 use crate::texture::{barycentric, interpolate_uv, quad_uvs, Texture};
 use error::line_of;
 use file::{LightSection, MaterialSection, SceneFile};
@@ -102,6 +103,11 @@ impl Scene {
     /// The material at the surface hit, its albedo multiplied by the material's texture there if it has one
     /// (a copy, so that textured and plain materials look the same to the integrators).
     #[inline]
+    /// True when a material disperses light: the scene then renders spectrally (after dispersive events).
+    pub fn is_spectral(&self) -> bool {
+        self.materials.iter().any(Material::is_dispersive)
+    }
+
     pub fn material(&self, hit: &SurfaceHit) -> Material {
         let index = self.objects[hit.object as usize].material as usize;
         let material = self.materials[index];
@@ -187,6 +193,27 @@ impl<'a> Loader<'a> {
         } else {
             Err(self.error(Some(span.clone()), field, format!("must be {rule}, got {x}")))
         }
+    }
+
+    /// An index of refraction, dispersive when the glass has an Abbe number.
+    fn refractive_index(
+        &self,
+        n_d: f32,
+        abbe: Option<f32>,
+        span: &std::ops::Range<usize>,
+        field: &str,
+    ) -> Result<RefractiveIndex, SceneError> {
+        let Some(v) = abbe else { return Ok(RefractiveIndex::constant(n_d)) };
+        // Real glasses lie between about 15 (dense flints) and 100 (fluorite); outside that is a typo.
+        let v = self.scalar(v, span, field, |v| (5.0..=150.0).contains(&v), "an Abbe number between 5 and 150")?;
+        if n_d <= 1.0 {
+            return Err(self.error(
+                Some(span.clone()),
+                field,
+                format!("an Abbe number needs a glass index above 1 (dispersion of n − 1), got {n_d}"),
+            ));
+        }
+        Ok(RefractiveIndex::from_abbe(n_d, v))
     }
 
     fn colour(
@@ -638,11 +665,16 @@ impl<'a> Loader<'a> {
                 MaterialSection::Mirror { reflectance } => {
                     Material::Mirror { reflectance: self.colour(*reflectance, &s, &f("reflectance"), Some(1.0))? }
                 }
-                MaterialSection::Dielectric { ior, ext_ior, anti_reflection } => Material::Dielectric {
-                    ior: self.scalar(*ior, &s, &f("ior"), |v| v > 0.0, "a positive index of refraction")?,
-                    ext_ior: self.scalar(*ext_ior, &s, &f("ext_ior"), |v| v > 0.0, "a positive index of refraction")?,
-                    anti_reflection: *anti_reflection,
-                },
+                MaterialSection::Dielectric { ior, ext_ior, anti_reflection, abbe, ext_abbe } => {
+                    let ior = self.scalar(*ior, &s, &f("ior"), |v| v > 0.0, "a positive index of refraction")?;
+                    let ext_ior =
+                        self.scalar(*ext_ior, &s, &f("ext_ior"), |v| v > 0.0, "a positive index of refraction")?;
+                    Material::Dielectric {
+                        ior: self.refractive_index(ior, *abbe, &s, &f("abbe"))?,
+                        ext_ior: self.refractive_index(ext_ior, *ext_abbe, &s, &f("ext_abbe"))?,
+                        anti_reflection: *anti_reflection,
+                    }
+                }
                 MaterialSection::Coating { reflectance, transmittance } => {
                     let r = self.colour(*reflectance, &s, &f("reflectance"), Some(1.0))?;
                     let t = self.colour(*transmittance, &s, &f("transmittance"), Some(1.0))?;

@@ -1,0 +1,381 @@
+//! Spectral rendering for scenes with dispersion: the CIE 1931 observer, wavelength sampling, the way an RGB
+//! quantity is read at one wavelength, refractive indices that vary with wavelength (Cauchy, from an Abbe
+//! number), and the colour state of a path, which stays RGB until the path meets a dispersive surface.
+//!
+//! Colour convention: the equal-energy spectrum is white, i.e. a constant spectrum of value 1 has linear RGB
+//! (1, 1, 1), so that white and grey surfaces and lights look the same in RGB and in spectral rendering.
+
+use crate::color::Rgb;
+use crate::material::Material;
+use glam::{Mat3, Vec3};
+use std::sync::OnceLock;
+
+/// Shortest wavelength rendered (nm).
+pub const LAMBDA_MIN: f32 = 380.0;
+/// Longest wavelength rendered (nm).
+pub const LAMBDA_MAX: f32 = 780.0;
+
+/// The Fraunhofer lines that define a glass's Abbe number V_d = (n_d − 1) / (n_F − n_C), in µm.
+const LAMBDA_D: f32 = 0.587_56;
+const LAMBDA_F: f32 = 0.486_13;
+const LAMBDA_C: f32 = 0.656_27;
+
+/// A piecewise Gaussian with different widths left and right of its peak (Wyman, Sloan, Shirley 2013).
+fn lobe(lambda: f32, mu: f32, sigma_left: f32, sigma_right: f32) -> f32 {
+    let t = (lambda - mu) / if lambda < mu { sigma_left } else { sigma_right };
+    (-0.5 * t * t).exp()
+}
+
+/// CIE 1931 2° colour-matching functions x̄, ȳ, z̄ at `lambda` nm, by the multi-lobe fit of Wyman, Sloan and
+/// Shirley, "Simple Analytic Approximations to the CIE XYZ Color Matching Functions", JCGT 2(2), 2013.
+pub fn cie_xyz(lambda: f32) -> Vec3 {
+    let x = 1.056 * lobe(lambda, 599.8, 37.9, 31.0) + 0.362 * lobe(lambda, 442.0, 16.0, 26.7)
+        - 0.065 * lobe(lambda, 501.1, 20.4, 26.2);
+    let y = 0.821 * lobe(lambda, 568.8, 46.9, 40.5) + 0.286 * lobe(lambda, 530.9, 16.3, 31.1);
+    let z = 1.217 * lobe(lambda, 437.0, 11.8, 36.0) + 0.681 * lobe(lambda, 459.0, 26.0, 13.8);
+    Vec3::new(x, y, z)
+}
+
+/// CIE XYZ to linear Rec.709 (sRGB primaries, D65), IEC 61966-2-1.
+fn xyz_to_linear_rgb() -> Mat3 {
+    Mat3::from_cols(
+        Vec3::new(3.2406, -0.9689, 0.0557),
+        Vec3::new(-1.5372, 1.8758, -0.2040),
+        Vec3::new(-0.4986, 0.0415, 1.0570),
+    )
+}
+
+/// Three wavelength bands that an RGB reflectance or emission is spread over when read spectrally: blue,
+/// green, red. The edges keep the basis matrix close to diagonal (see `Tables`).
+const BAND_EDGES: [f32; 2] = [490.0, 585.0];
+
+fn band_of(lambda: f32) -> usize {
+    if lambda < BAND_EDGES[0] {
+        0
+    } else if lambda < BAND_EDGES[1] {
+        1
+    } else {
+        2
+    }
+}
+
+/// Integrals computed once: the white normalisation of the RGB matching functions and the inverse of the
+/// band basis.
+struct Tables {
+    /// Per-channel scale that maps the equal-energy spectrum to RGB (1, 1, 1).
+    white_scale: Vec3,
+    /// Row `b` gives the height of band `b`'s box for an RGB triple: heights = rows · rgb.
+    uplift_rows: [Vec3; 3],
+}
+
+/// Midpoint-rule step (nm) for the integrals over the visible range.
+const STEP: f32 = 0.5;
+
+fn tables() -> &'static Tables {
+    static TABLES: OnceLock<Tables> = OnceLock::new();
+    TABLES.get_or_init(|| {
+        let m = xyz_to_linear_rgb();
+        let steps = ((LAMBDA_MAX - LAMBDA_MIN) / STEP) as usize;
+        let mut white = Vec3::ZERO;
+        // Column b: RGB (before white scaling) of band b's unit box.
+        let mut band_rgb = [Vec3::ZERO; 3];
+        for i in 0..steps {
+            let lambda = LAMBDA_MIN + (i as f32 + 0.5) * STEP;
+            let rgb = m * cie_xyz(lambda) * STEP;
+            white += rgb;
+            band_rgb[band_of(lambda)] += rgb;
+        }
+        let white_scale = Vec3::ONE / white;
+        // basis[b] = RGB of band b's box: the matrix B with rgb = B · heights. Its columns sum to (1, 1, 1), so
+        // B⁻¹ maps grey g to heights (g, g, g): a grey stays a flat spectrum.
+        let basis = Mat3::from_cols(band_rgb[0] * white_scale, band_rgb[1] * white_scale, band_rgb[2] * white_scale);
+        let inverse = basis.inverse();
+        let rows = [inverse.row(0), inverse.row(1), inverse.row(2)];
+        Tables { white_scale, uplift_rows: rows }
+    })
+}
+
+/// Normalised RGB matching functions at `lambda`: ∫ rgb̄(λ) dλ over the visible range is (1, 1, 1).
+pub fn rgb_matching(lambda: f32) -> Rgb {
+    xyz_to_linear_rgb() * cie_xyz(lambda) * tables().white_scale
+}
+
+/// The sampling density's shape, sech²(a(λ − 538 nm)): close to the sum of the matching functions, so that
+/// every wavelength's contribution has similar luminance (Radziszewski, Boryczko, Alda 2009).
+const SECH_A: f32 = 0.0072;
+const SECH_CENTRE: f32 = 538.0;
+
+fn tanh_range() -> (f32, f32) {
+    ((SECH_A * (LAMBDA_MIN - SECH_CENTRE)).tanh(), (SECH_A * (LAMBDA_MAX - SECH_CENTRE)).tanh())
+}
+
+/// Density over [LAMBDA_MIN, LAMBDA_MAX] (per nm) with which `Wavelength::sample` draws `lambda`.
+pub fn wavelength_pdf(lambda: f32) -> f32 {
+    if !(LAMBDA_MIN..=LAMBDA_MAX).contains(&lambda) {
+        return 0.0;
+    }
+    let (t0, t1) = tanh_range();
+    let c = (SECH_A * (lambda - SECH_CENTRE)).cosh();
+    SECH_A / ((t1 - t0) * c * c)
+}
+
+/// One sampled wavelength and what turns a spectral value at it into an image contribution.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Wavelength {
+    /// Wavelength in nm.
+    pub nm: f32,
+    /// Density it was drawn with (per nm).
+    pub pdf: f32,
+    /// rgb̄(λ) / pdf: a spectral radiance value at λ times this is an unbiased estimate of its RGB.
+    to_rgb: Rgb,
+    /// Row of the band basis's inverse for λ's band.
+    uplift: Rgb,
+}
+
+impl Wavelength {
+    /// Draws a wavelength from the sech² density with one uniform number.
+    pub fn sample(u: f32) -> Self {
+        let (t0, t1) = tanh_range();
+        let t = t0 + u.clamp(0.0, 1.0) * (t1 - t0);
+        let nm = (SECH_CENTRE + t.atanh() / SECH_A).clamp(LAMBDA_MIN, LAMBDA_MAX);
+        Self::with_pdf(nm, wavelength_pdf(nm))
+    }
+
+    /// A wavelength taken with a given density (a test or a stratified sweep may fix it).
+    pub fn with_pdf(nm: f32, pdf: f32) -> Self {
+        let tables = tables();
+        Wavelength { nm, pdf, to_rgb: rgb_matching(nm) / pdf, uplift: tables.uplift_rows[band_of(nm)] }
+    }
+
+    /// The spectral value at this wavelength of an RGB reflectance, emission or throughput: the height of its
+    /// band in the three-band spectrum whose RGB is the triple (clamped at zero for colours outside the
+    /// bands' gamut). Grey g reads g at every wavelength.
+    #[inline]
+    pub fn value_of(&self, c: Rgb) -> f32 {
+        self.uplift.dot(c).max(0.0)
+    }
+
+    /// The image contribution (linear RGB) of spectral value `s` at this wavelength.
+    #[inline]
+    pub fn to_rgb(&self, s: f32) -> Rgb {
+        self.to_rgb * s
+    }
+}
+
+/// A refractive index that may vary with wavelength: Cauchy's two-term law n(λ) = A + B/λ², written with the
+/// index at the d line, n(λ) = n_d + B (1/λ² − 1/λ_d²).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RefractiveIndex {
+    /// Index at the helium d line, 587.56 nm.
+    pub d: f32,
+    /// Cauchy's B in µm² (zero: no dispersion).
+    pub b: f32,
+}
+
+impl RefractiveIndex {
+    /// A wavelength-independent index.
+    pub const fn constant(n: f32) -> Self {
+        RefractiveIndex { d: n, b: 0.0 }
+    }
+
+    /// The Cauchy index with n_d and Abbe number V_d: B = (n_d − 1) / (V_d (1/λ_F² − 1/λ_C²)).
+    pub fn from_abbe(n_d: f32, abbe: f32) -> Self {
+        let b = (n_d - 1.0) / (abbe * (1.0 / (LAMBDA_F * LAMBDA_F) - 1.0 / (LAMBDA_C * LAMBDA_C)));
+        RefractiveIndex { d: n_d, b }
+    }
+
+    /// True when the index varies with wavelength.
+    pub fn is_dispersive(&self) -> bool {
+        self.b != 0.0
+    }
+
+    /// The index at `nm` nanometres.
+    pub fn at(&self, nm: f32) -> f32 {
+        let um = nm * 1e-3;
+        self.d + self.b * (1.0 / (um * um) - 1.0 / (LAMBDA_D * LAMBDA_D))
+    }
+}
+
+/// How spectral a render is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PhaseSpectrum {
+    /// The wavelength the phase's paths adopt when they meet dispersion; None in an RGB scene.
+    pub wavelength: Option<Wavelength>,
+    /// Every path is spectral from its first vertex (spectral output asked for), not only after dispersion.
+    pub from_start: bool,
+}
+
+impl PhaseSpectrum {
+    /// An RGB phase: no path ever becomes spectral.
+    pub const RGB: PhaseSpectrum = PhaseSpectrum { wavelength: None, from_start: false };
+}
+
+/// The colour state of one path: RGB, or spectral at the phase's wavelength once the path met a dispersive
+/// surface (its throughput then holds the spectral value in all three channels).
+#[derive(Clone, Copy, Debug)]
+pub struct PathSpectrum {
+    wavelength: Option<Wavelength>,
+    spectral: bool,
+}
+
+impl PathSpectrum {
+    /// The state of a path starting with throughput `beta`, converted if the path is spectral from the start.
+    pub fn start(phase: &PhaseSpectrum, beta: &mut Rgb) -> Self {
+        let mut path = PathSpectrum { wavelength: phase.wavelength, spectral: false };
+        if phase.from_start {
+            if let Some(w) = phase.wavelength {
+                path.spectral = true;
+                *beta = Rgb::splat(w.value_of(*beta));
+            }
+        }
+        path
+    }
+
+    /// True once the path carries one wavelength.
+    #[inline]
+    pub fn is_spectral(&self) -> bool {
+        self.spectral
+    }
+
+    /// The phase's wavelength, if the scene is spectral.
+    #[inline]
+    pub fn wavelength(&self) -> Option<Wavelength> {
+        self.wavelength
+    }
+
+    /// The material a path scatters from: at a dispersive surface an RGB path turns spectral (its throughput
+    /// `beta` read at the wavelength); a spectral path sees every material at its wavelength.
+    #[inline]
+    pub fn material(&mut self, m: Material, beta: &mut Rgb) -> Material {
+        let Some(w) = self.wavelength else { return m };
+        if !self.spectral {
+            if !m.is_dispersive() {
+                return m;
+            }
+            self.spectral = true;
+            *beta = Rgb::splat(w.value_of(*beta));
+        }
+        m.at_wavelength(&w)
+    }
+
+    /// An RGB radiometric quantity met along the path (emitted radiance, incident light) in the path's terms.
+    #[inline]
+    pub fn quantity(&self, c: Rgb) -> Rgb {
+        match (self.spectral, self.wavelength) {
+            (true, Some(w)) => Rgb::splat(w.value_of(c)),
+            _ => c,
+        }
+    }
+
+    /// A contribution in the path's terms as linear RGB for the image.
+    #[inline]
+    pub fn to_image(&self, c: Rgb) -> Rgb {
+        match (self.spectral, self.wavelength) {
+            (true, Some(w)) => w.to_rgb(c.x),
+            _ => c,
+        }
+    }
+}
+
+/// Joins a camera-path weight and a light-path flux, each RGB or spectral (value in every channel), into an
+/// image contribution (paper eq. 4's product τ · ΔΦ).
+#[inline]
+pub fn join(
+    weight: Rgb,
+    weight_spectral: bool,
+    flux: Rgb,
+    flux_spectral: bool,
+    wavelength: Option<&Wavelength>,
+) -> Rgb {
+    match wavelength {
+        Some(w) if weight_spectral || flux_spectral => {
+            let a = if weight_spectral { weight.x } else { w.value_of(weight) };
+            let b = if flux_spectral { flux.x } else { w.value_of(flux) };
+            w.to_rgb(a * b)
+        }
+        _ => weight * flux,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn integrate(f: impl Fn(f32) -> Vec3) -> Vec3 {
+        let n = ((LAMBDA_MAX - LAMBDA_MIN) / STEP) as usize;
+        (0..n).map(|i| f(LAMBDA_MIN + (i as f32 + 0.5) * STEP) * STEP).sum()
+    }
+
+    #[test]
+    fn colour_matching_fit_has_the_cie_peak_and_areas() {
+        assert!((cie_xyz(555.0).y - 1.0).abs() < 0.01, "ȳ(555 nm) = {}", cie_xyz(555.0).y);
+        let area = integrate(cie_xyz);
+        // CIE 1931: ∫x̄ ≈ ∫ȳ ≈ ∫z̄ ≈ 106.86 nm (equal-energy white at x = y = 1/3).
+        for a in area.to_array() {
+            assert!((a - 106.86).abs() < 0.02 * 106.86, "areas {area}");
+        }
+    }
+
+    #[test]
+    fn equal_energy_spectrum_is_rgb_white() {
+        let white = integrate(rgb_matching);
+        assert!((white - Vec3::ONE).abs().max_element() < 1e-3, "{white}");
+    }
+
+    #[test]
+    fn sampled_wavelengths_estimate_the_white_spectrum_without_bias() {
+        // E[rgb̄(λ)/p(λ)] over the sampling density must be (1, 1, 1): stratified u makes this a quadrature.
+        let n = 20_000;
+        let mut sum = Rgb::ZERO;
+        for i in 0..n {
+            let w = Wavelength::sample((i as f32 + 0.5) / n as f32);
+            assert!((LAMBDA_MIN..=LAMBDA_MAX).contains(&w.nm) && w.pdf > 0.0);
+            sum += w.to_rgb(1.0);
+        }
+        let mean = sum / n as f32;
+        assert!((mean - Vec3::ONE).abs().max_element() < 2e-3, "{mean}");
+        // The density integrates to one.
+        let total: f32 = integrate(|l| Vec3::splat(wavelength_pdf(l))).x;
+        assert!((total - 1.0).abs() < 1e-3, "{total}");
+    }
+
+    #[test]
+    fn grey_reads_the_same_at_every_wavelength_and_colours_round_trip() {
+        for nm in [400.0, 480.0, 500.0, 560.0, 600.0, 700.0] {
+            let w = Wavelength::with_pdf(nm, 1.0);
+            assert!((w.value_of(Rgb::splat(0.37)) - 0.37).abs() < 1e-5, "{nm}");
+        }
+        // A colour inside the bands' gamut comes back as itself: Σ over wavelengths of value · rgb̄ / p.
+        for c in [Rgb::new(0.6, 0.4, 0.3), Rgb::new(0.3, 0.5, 0.4), Rgb::new(0.25, 0.3, 0.6)] {
+            let n = 20_000;
+            let mut sum = Rgb::ZERO;
+            for i in 0..n {
+                let w = Wavelength::sample((i as f32 + 0.5) / n as f32);
+                sum += w.to_rgb(w.value_of(c));
+            }
+            let back = sum / n as f32;
+            assert!((back - c).abs().max_element() < 5e-3, "{c} came back as {back}");
+        }
+    }
+
+    #[test]
+    fn abbe_number_gives_the_glass_its_f_and_c_line_indices() {
+        // Schott N-BK7: n_d 1.5168, V_d 64.17; catalogue n_F 1.52238, n_C 1.51432.
+        let bk7 = RefractiveIndex::from_abbe(1.5168, 64.17);
+        let (nf, nc) = (bk7.at(486.13), bk7.at(656.27));
+        assert!((bk7.at(587.56) - 1.5168).abs() < 1e-6);
+        assert!(((bk7.d - 1.0) / (nf - nc) - 64.17).abs() < 0.01);
+        assert!((nf - 1.52238).abs() < 3e-4 && (nc - 1.51432).abs() < 3e-4, "n_F {nf}, n_C {nc}");
+        assert!(!RefractiveIndex::constant(1.5).is_dispersive() && bk7.is_dispersive());
+    }
+
+    #[test]
+    fn rgb_joins_stay_rgb_and_spectral_joins_go_through_the_wavelength() {
+        let w = Wavelength::with_pdf(600.0, 0.01);
+        let (a, b) = (Rgb::new(0.5, 0.25, 0.125), Rgb::new(2.0, 4.0, 8.0));
+        assert_eq!(join(a, false, b, false, Some(&w)), a * b);
+        assert_eq!(join(a, false, b, false, None), a * b);
+        let s = join(Rgb::splat(0.5), true, b, false, Some(&w));
+        assert!((s - w.to_rgb(0.5 * w.value_of(b))).abs().max_element() < 1e-6);
+    }
+}
