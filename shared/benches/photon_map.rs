@@ -46,8 +46,8 @@ impl OwnedVertex {
             flux: self.flux,
             m: self.m,
             all_specular: self.all_specular,
-            spectral: false,
-            wavelength: None,
+            spectrum: 0,
+            phase: &PhaseSpectrum::RGB,
         }
     }
 }
@@ -84,9 +84,17 @@ fn light_vertices(scene: &Scene, settings: &RenderSettings) -> Vec<OwnedVertex> 
     let mut stats = ForwardStats::default();
     for i in 0..settings.light_paths_per_phase(scene.camera.pixel_count()) {
         let mut s = Sampler::new(settings.seed, Pass::Light, PHASE, i);
-        trace_light_path(scene, settings.max_depth, &PhaseSpectrum::RGB, &mut s, &mut stats, &mut |v: &LightVertex| {
-            vertices.push(OwnedVertex { hit: *v.hit, wi: v.wi, flux: v.flux, m: v.m, all_specular: v.all_specular })
-        });
+        trace_light_path(
+            scene,
+            settings.max_depth,
+            &PhaseSpectrum::RGB,
+            i,
+            &mut s,
+            &mut stats,
+            &mut |v: &LightVertex| {
+                vertices.push(OwnedVertex { hit: *v.hit, wi: v.wi, flux: v.flux, m: v.m, all_specular: v.all_specular })
+            },
+        );
     }
     vertices
 }

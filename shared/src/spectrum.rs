@@ -7,6 +7,7 @@
 
 use crate::color::Rgb;
 use crate::material::Material;
+use crate::sampling::Sampler;
 use glam::{Mat3, Vec3};
 use std::sync::OnceLock;
 
@@ -196,34 +197,65 @@ impl RefractiveIndex {
     }
 }
 
-/// How spectral a render is.
+/// Wavelengths drawn per phase. Camera paths (by pixel) and light paths (by index) are dealt into this many
+/// classes, each with its own wavelength, so that one phase does not colour a whole region alike.
+pub const PHASE_WAVELENGTHS: usize = 4;
+
+/// The wavelengths of one phase of a spectral scene, one per class.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PhaseSpectrum {
-    /// The wavelength the phase's paths adopt when they meet dispersion; None in an RGB scene.
-    pub wavelength: Option<Wavelength>,
+    /// The wavelength each class adopts when its paths meet dispersion; None in an RGB scene.
+    pub wavelengths: Option<[Wavelength; PHASE_WAVELENGTHS]>,
     /// Every path is spectral from its first vertex (spectral output asked for), not only after dispersion.
     pub from_start: bool,
 }
 
 impl PhaseSpectrum {
     /// An RGB phase: no path ever becomes spectral.
-    pub const RGB: PhaseSpectrum = PhaseSpectrum { wavelength: None, from_start: false };
+    pub const RGB: PhaseSpectrum = PhaseSpectrum { wavelengths: None, from_start: false };
+
+    /// Draws the phase's wavelengths, stratified: a random rotation deals the density's strata to the classes,
+    /// so each class's wavelength follows the whole density (phases stay independent, as δ assumes) while the
+    /// phase as a whole covers the spectrum evenly.
+    pub fn sample(sampler: &mut Sampler, from_start: bool) -> Self {
+        let k = PHASE_WAVELENGTHS;
+        let rotation = ((sampler.next_f32() * k as f32) as usize).min(k - 1);
+        let wavelengths = std::array::from_fn(|class| {
+            let stratum = (class + rotation) % k;
+            Wavelength::sample((stratum as f32 + sampler.next_f32()) / k as f32)
+        });
+        PhaseSpectrum { wavelengths: Some(wavelengths), from_start }
+    }
+
+    /// The class of a camera path (by pixel) or light path (by index).
+    #[inline]
+    pub fn class_of(item: u64) -> u8 {
+        (item % PHASE_WAVELENGTHS as u64) as u8
+    }
+
+    /// The wavelength of a class, in a spectral scene.
+    #[inline]
+    pub fn wavelength(&self, class: u8) -> Option<Wavelength> {
+        self.wavelengths.map(|w| w[class as usize % PHASE_WAVELENGTHS])
+    }
 }
 
-/// The colour state of one path: RGB, or spectral at the phase's wavelength once the path met a dispersive
+/// The colour state of one path: RGB, or spectral at its class's wavelength once the path met a dispersive
 /// surface (its throughput then holds the spectral value in all three channels).
 #[derive(Clone, Copy, Debug)]
 pub struct PathSpectrum {
     wavelength: Option<Wavelength>,
+    class: u8,
     spectral: bool,
 }
 
 impl PathSpectrum {
-    /// The state of a path starting with throughput `beta`, converted if the path is spectral from the start.
-    pub fn start(phase: &PhaseSpectrum, beta: &mut Rgb) -> Self {
-        let mut path = PathSpectrum { wavelength: phase.wavelength, spectral: false };
+    /// The state of a path of `class` starting with throughput `beta`, converted if the path is spectral from
+    /// the start.
+    pub fn start(phase: &PhaseSpectrum, class: u8, beta: &mut Rgb) -> Self {
+        let mut path = PathSpectrum { wavelength: phase.wavelength(class), class, spectral: false };
         if phase.from_start {
-            if let Some(w) = phase.wavelength {
+            if let Some(w) = path.wavelength {
                 path.spectral = true;
                 *beta = Rgb::splat(w.value_of(*beta));
             }
@@ -237,10 +269,14 @@ impl PathSpectrum {
         self.spectral
     }
 
-    /// The phase's wavelength, if the scene is spectral.
+    /// What a stored vertex records of the path's colour: 0 for RGB, 1 + class once spectral (see `join`).
     #[inline]
-    pub fn wavelength(&self) -> Option<Wavelength> {
-        self.wavelength
+    pub fn tag(&self) -> u8 {
+        if self.spectral {
+            self.class + 1
+        } else {
+            0
+        }
     }
 
     /// The material a path scatters from: at a dispersive surface an RGB path turns spectral (its throughput
@@ -277,23 +313,28 @@ impl PathSpectrum {
     }
 }
 
-/// Joins a camera-path weight and a light-path flux, each RGB or spectral (value in every channel), into an
-/// image contribution (paper eq. 4's product τ · ΔΦ).
+/// Joins a camera-path weight and a light-path flux into an image contribution (paper eq. 4's τ · ΔΦ). Each
+/// side is RGB (tag 0) or spectral at its class's wavelength (tag 1 + class). An RGB side is read at the
+/// other's wavelength. Two spectral sides join only within one class: a camera path meets 1/K of the light
+/// paths at its wavelength, so the join counts K times, which keeps the estimate unbiased.
 #[inline]
-pub fn join(
-    weight: Rgb,
-    weight_spectral: bool,
-    flux: Rgb,
-    flux_spectral: bool,
-    wavelength: Option<&Wavelength>,
-) -> Rgb {
-    match wavelength {
-        Some(w) if weight_spectral || flux_spectral => {
-            let a = if weight_spectral { weight.x } else { w.value_of(weight) };
-            let b = if flux_spectral { flux.x } else { w.value_of(flux) };
-            w.to_rgb(a * b)
-        }
-        _ => weight * flux,
+pub fn join(weight: Rgb, weight_tag: u8, flux: Rgb, flux_tag: u8, phase: &PhaseSpectrum) -> Rgb {
+    let at = |tag: u8| phase.wavelength(tag - 1);
+    match (weight_tag, flux_tag) {
+        (0, 0) => weight * flux,
+        (c, 0) => match at(c) {
+            Some(w) => w.to_rgb(weight.x * w.value_of(flux)),
+            None => weight * flux,
+        },
+        (0, c) => match at(c) {
+            Some(w) => w.to_rgb(w.value_of(weight) * flux.x),
+            None => weight * flux,
+        },
+        (a, b) if a == b => match at(a) {
+            Some(w) => w.to_rgb(weight.x * flux.x * PHASE_WAVELENGTHS as f32),
+            None => weight * flux,
+        },
+        _ => Rgb::ZERO,
     }
 }
 
@@ -370,12 +411,48 @@ mod tests {
     }
 
     #[test]
-    fn rgb_joins_stay_rgb_and_spectral_joins_go_through_the_wavelength() {
-        let w = Wavelength::with_pdf(600.0, 0.01);
+    fn rgb_joins_stay_rgb_and_spectral_joins_go_through_the_class_wavelength() {
+        let mut sampler = Sampler::new(1, crate::sampling::Pass::Wavelength, 1, 0);
+        let phase = PhaseSpectrum::sample(&mut sampler, false);
         let (a, b) = (Rgb::new(0.5, 0.25, 0.125), Rgb::new(2.0, 4.0, 8.0));
-        assert_eq!(join(a, false, b, false, Some(&w)), a * b);
-        assert_eq!(join(a, false, b, false, None), a * b);
-        let s = join(Rgb::splat(0.5), true, b, false, Some(&w));
+        assert_eq!(join(a, 0, b, 0, &phase), a * b);
+        assert_eq!(join(a, 0, b, 0, &PhaseSpectrum::RGB), a * b);
+        let w = phase.wavelength(2).unwrap();
+        let s = join(Rgb::splat(0.5), 3, b, 0, &phase);
         assert!((s - w.to_rgb(0.5 * w.value_of(b))).abs().max_element() < 1e-6);
+        // Two spectral sides: only within a class, counted K times.
+        assert_eq!(join(Rgb::splat(0.5), 3, Rgb::splat(2.0), 2, &phase), Rgb::ZERO);
+        let s = join(Rgb::splat(0.5), 3, Rgb::splat(2.0), 3, &phase);
+        assert!((s - w.to_rgb(PHASE_WAVELENGTHS as f32)).abs().max_element() < 1e-5);
+    }
+
+    #[test]
+    fn a_phase_covers_every_stratum_and_each_class_follows_the_whole_density() {
+        let k = PHASE_WAVELENGTHS;
+        let mut counts = vec![vec![0u32; k]; k];
+        let (t0, t1) = tanh_range();
+        let stratum = |nm: f32| {
+            let u = ((SECH_A * (nm - SECH_CENTRE)).tanh() - t0) / (t1 - t0);
+            ((u * k as f32) as usize).min(k - 1)
+        };
+        let phases = 4000;
+        for i in 0..phases {
+            let mut sampler = Sampler::new(3, crate::sampling::Pass::Wavelength, i, 0);
+            let phase = PhaseSpectrum::sample(&mut sampler, false);
+            let mut seen: Vec<usize> = (0..k).map(|c| stratum(phase.wavelength(c as u8).unwrap().nm)).collect();
+            for (c, &s) in seen.iter().enumerate() {
+                counts[c][s] += 1;
+            }
+            seen.sort();
+            assert_eq!(seen, (0..k).collect::<Vec<_>>(), "phase {i} misses a stratum");
+        }
+        // Each class lands in each stratum a quarter of the time (binomial, 5 σ).
+        let expected = phases as f64 / k as f64;
+        let sigma = (expected * (1.0 - 1.0 / k as f64)).sqrt();
+        for row in &counts {
+            for &n in row {
+                assert!((n as f64 - expected).abs() < 5.0 * sigma, "{counts:?}");
+            }
+        }
     }
 }

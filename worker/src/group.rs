@@ -198,7 +198,7 @@ impl Group {
         let (max_depth, bdd) = (settings.max_depth, settings.backward_diffuse_depth);
         let sharers = self.pixel_sharers as u64;
         let index = if sharers > 1 { self.index as u64 } else { 0 };
-        // One wavelength per group phase: its camera and light paths join only among themselves.
+        // Wavelengths per group phase: its camera and light paths join only among themselves.
         let spectrum = settings.phase_spectrum(scene, key);
 
         // 1. Backward pass over the mask, in parallel.
@@ -298,7 +298,7 @@ impl Group {
                         break;
                     }
                     let mut s = Sampler::new(settings.seed, Pass::Light, key, index);
-                    trace_light_path(scene, max_depth, &spectrum, &mut s, &mut fs, &mut |v| {
+                    trace_light_path(scene, max_depth, &spectrum, index, &mut s, &mut fs, &mut |v| {
                         merges[0] += gather(&own.photons, v, max_depth, bdd, &mut own.gathered.sink());
                         for (g, m) in guards.iter().zip(merges[1..].iter_mut()) {
                             *m += gather(&g.data().photons, v, max_depth, bdd, &mut g.data().gathered.sink());

@@ -122,3 +122,25 @@ fn every_method_converges_to_the_single_thread_image_on_caustic() {
         check(&sc, "caustic", &reference, c, 400);
     }
 }
+
+#[test]
+fn every_method_converges_to_the_single_thread_image_on_a_dispersive_caustic() {
+    // The caustic room's sphere made of dispersive glass: every group phase has its own wavelengths, so
+    // two-level groups must not gather into each other's maps, and each method must still be the same
+    // estimator, as strictly as in RGB.
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+    let text = std::fs::read_to_string(dir.join("caustic.toml"))
+        .unwrap()
+        .replace("width = 256", "width = 64")
+        .replace("height = 256", "height = 64")
+        .replace("ior = 1.5", "ior = 1.5\nabbe = 30.0");
+    let sc = Scene::from_toml(&text, std::path::Path::new("caustic.toml"), &dir).unwrap();
+    assert!(sc.is_spectral());
+    let reference = reference(&sc, 1600);
+    for c in configs(false) {
+        let engine = ParallelEngine::new(&sc, RenderSettings::for_scene(&sc, Method::Pbpm, 5), c.clone()).unwrap();
+        assert!(!engine.config().shared_maps, "{:?}: maps shared in a spectral scene", c.method);
+        drop(engine);
+        check(&sc, "dispersive caustic", &reference, c, 400);
+    }
+}

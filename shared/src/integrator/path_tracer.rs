@@ -56,7 +56,7 @@ pub fn trace(
     }
     let mut ray = camera_ray.ray;
     let mut beta = Rgb::splat(weight);
-    let mut path = PathSpectrum::start(spectrum, &mut beta);
+    let mut path = PathSpectrum::start(spectrum, 0, &mut beta);
     let mut previous = Previous::Specular;
     let mut diffuse_vertices = 0u32;
     let mut segments = 0u32;

@@ -22,7 +22,7 @@ pub struct BackwardSettings {
     pub radius: RadiusSchedule,
     /// 1-based phase number, for the radius schedule.
     pub phase: u64,
-    /// The phase's wavelength, for paths that meet dispersion.
+    /// The phase's wavelengths, for paths that meet dispersion.
     pub spectrum: PhaseSpectrum,
 }
 
@@ -54,7 +54,7 @@ pub fn trace_camera_path(
     }
     let mut ray = camera_ray.ray;
     let mut beta = Rgb::splat(weight);
-    let mut path = PathSpectrum::start(&settings.spectrum, &mut beta);
+    let mut path = PathSpectrum::start(&settings.spectrum, PhaseSpectrum::class_of(pixel as u64), &mut beta);
     let mut k = 0u32; // diffuse vertices so far
     let mut segments = 0u32;
     let mut path_length = 0.0f32;
@@ -113,7 +113,7 @@ pub fn trace_camera_path(
                         pixel,
                         k: k as u8,
                         segments: segments.min(255) as u8,
-                        spectral: path.is_spectral(),
+                        spectrum: path.tag(),
                     });
                 }
             }

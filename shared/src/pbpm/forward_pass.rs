@@ -8,7 +8,7 @@ use crate::integrator::Layer;
 use crate::material::Transport;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
-use crate::spectrum::{join, PathSpectrum, PhaseSpectrum, Wavelength};
+use crate::spectrum::{join, PathSpectrum, PhaseSpectrum};
 use glam::Vec3;
 
 /// Counters of the forward pass.
@@ -52,18 +52,20 @@ pub struct LightVertex<'a> {
     pub m: u32,
     /// True when y1 … y_{m−1} are all specular.
     pub all_specular: bool,
-    /// The light path had turned spectral: `flux` holds its value at `wavelength` in every channel.
-    pub spectral: bool,
-    /// The phase's wavelength in a spectral scene.
-    pub wavelength: Option<Wavelength>,
+    /// 0 for an RGB light path; 1 + its wavelength class once it turned spectral, and `flux` then holds its
+    /// value at that wavelength in every channel.
+    pub spectrum: u8,
+    /// The phase's wavelengths, for the join with a photon of another class.
+    pub phase: &'a PhaseSpectrum,
 }
 
-/// Traces one light path and hands every diffuse vertex with m ≥ 2 to `visit`, which gathers it into one or
-/// more photon maps.
+/// Traces light path number `index` of a phase and hands every diffuse vertex with m ≥ 2 to `visit`, which
+/// gathers it into one or more photon maps. The index deals the path its wavelength class.
 pub fn trace_light_path(
     scene: &Scene,
     max_depth: u32,
     spectrum: &PhaseSpectrum,
+    index: u64,
     sampler: &mut Sampler,
     stats: &mut ForwardStats,
     visit: &mut impl FnMut(&LightVertex),
@@ -75,7 +77,7 @@ pub fn trace_light_path(
     let origin = if e.normal == Vec3::ZERO { e.origin } else { offset_origin(e.origin, e.normal, e.direction) };
     let mut ray = Ray::new(origin, e.direction);
     let mut beta = e.beta;
-    let mut path = PathSpectrum::start(spectrum, &mut beta);
+    let mut path = PathSpectrum::start(spectrum, PhaseSpectrum::class_of(index), &mut beta);
     let beta0 = beta.max_element();
     let mut all_specular = true;
     let mut m = 0u32;
@@ -93,8 +95,8 @@ pub fn trace_light_path(
                     flux: beta,
                     m,
                     all_specular,
-                    spectral: path.is_spectral(),
-                    wavelength: path.wavelength(),
+                    spectrum: path.tag(),
+                    phase: spectrum,
                 });
             }
             all_specular = false;
@@ -145,7 +147,7 @@ pub fn gather(
             _ => Layer::Indirect,
         };
         merges += 1;
-        sink.add(b.pixel, layer, join(b.weight, b.spectral, v.flux, v.spectral, v.wavelength.as_ref()));
+        sink.add(b.pixel, layer, join(b.weight, b.spectrum, v.flux, v.spectrum, v.phase));
         // eq. 4
     }
     merges

@@ -20,6 +20,7 @@ pub struct BackwardPhoton {
     pub k: u8,
     /// Camera path segments from the eye to this vertex, for the joined path's `max_depth`.
     pub segments: u8,
-    /// The camera path had turned spectral: `weight` holds its value at the phase's wavelength in every channel.
-    pub spectral: bool,
+    /// 0 when the camera path is RGB; 1 + its wavelength class once it turned spectral, and `weight` then
+    /// holds its value at that wavelength in every channel.
+    pub spectrum: u8,
 }

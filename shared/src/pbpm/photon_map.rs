@@ -215,7 +215,7 @@ mod tests {
             pixel,
             k: 1,
             segments: 1,
-            spectral: false,
+            spectrum: 0,
         }
     }
 

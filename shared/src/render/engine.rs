@@ -180,7 +180,7 @@ impl<'s> Engine<'s> {
         let mut merges = 0;
         for i in 0..n {
             let mut s = Sampler::new(self.settings.seed, Pass::Light, phase, i);
-            trace_light_path(scene, max_depth, &bs.spectrum, &mut s, &mut fstats, &mut |v| {
+            trace_light_path(scene, max_depth, &bs.spectrum, i, &mut s, &mut fstats, &mut |v| {
                 merges += gather(map, v, max_depth, bdd, &mut sink)
             });
         }

@@ -3,7 +3,7 @@
 use crate::pbpm::RadiusSchedule;
 use crate::sampling::{Pass, Sampler};
 use crate::scene::{Scene, SceneRenderSettings};
-use crate::spectrum::{PhaseSpectrum, Wavelength};
+use crate::spectrum::PhaseSpectrum;
 use serde::{Deserialize, Serialize};
 
 /// The estimator a run uses.
@@ -63,14 +63,13 @@ impl RenderSettings {
         RadiusSchedule { scale: self.radius_scale, alpha: self.radius_alpha, pixel_angle: scene.camera.pixel_angle() }
     }
 
-    /// The wavelength of the phase (or path) identified by `key` in a spectral scene; RGB otherwise. Every
-    /// camera and light path of a phase shares it, so that their joins are at one wavelength.
+    /// The wavelengths of the phase (or path) identified by `key` in a spectral scene; RGB otherwise. The
+    /// camera and light paths of a phase share them, so that their joins are at one wavelength.
     pub fn phase_spectrum(&self, scene: &Scene, key: u64) -> PhaseSpectrum {
         if !scene.is_spectral() {
             return PhaseSpectrum::RGB;
         }
-        let u = Sampler::new(self.seed, Pass::Wavelength, key, 0).next_f32();
-        PhaseSpectrum { wavelength: Some(Wavelength::sample(u)), from_start: false }
+        PhaseSpectrum::sample(&mut Sampler::new(self.seed, Pass::Wavelength, key, 0), false)
     }
 
     /// Light paths traced per phase for an image of `pixels` pixels.
