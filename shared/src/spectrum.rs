@@ -11,6 +11,10 @@ use crate::sampling::Sampler;
 use glam::{Mat3, Vec3};
 use std::sync::OnceLock;
 
+/// Whether this build renders spectrally (the `spectral` feature). Without it every path stays RGB and the
+/// branches below fold away at compile time.
+pub const ENABLED: bool = cfg!(feature = "spectral");
+
 /// Shortest wavelength rendered (nm).
 pub const LAMBDA_MIN: f32 = 380.0;
 /// Longest wavelength rendered (nm).
@@ -253,7 +257,8 @@ impl PathSpectrum {
     /// The state of a path of `class` starting with throughput `beta`, converted if the path is spectral from
     /// the start.
     pub fn start(phase: &PhaseSpectrum, class: u8, beta: &mut Rgb) -> Self {
-        let mut path = PathSpectrum { wavelength: phase.wavelength(class), class, spectral: false };
+        let wavelength = if ENABLED { phase.wavelength(class) } else { None };
+        let mut path = PathSpectrum { wavelength, class, spectral: false };
         if phase.from_start {
             if let Some(w) = path.wavelength {
                 path.spectral = true;
@@ -266,13 +271,13 @@ impl PathSpectrum {
     /// True once the path carries one wavelength.
     #[inline]
     pub fn is_spectral(&self) -> bool {
-        self.spectral
+        ENABLED && self.spectral
     }
 
     /// What a stored vertex records of the path's colour: 0 for RGB, 1 + class once spectral (see `join`).
     #[inline]
     pub fn tag(&self) -> u8 {
-        if self.spectral {
+        if self.is_spectral() {
             self.class + 1
         } else {
             0
@@ -283,6 +288,9 @@ impl PathSpectrum {
     /// `beta` read at the wavelength); a spectral path sees every material at its wavelength.
     #[inline]
     pub fn material(&mut self, m: Material, beta: &mut Rgb) -> Material {
+        if !ENABLED {
+            return m;
+        }
         let Some(w) = self.wavelength else { return m };
         if !self.spectral {
             if !m.is_dispersive() {
@@ -297,7 +305,7 @@ impl PathSpectrum {
     /// An RGB radiometric quantity met along the path (emitted radiance, incident light) in the path's terms.
     #[inline]
     pub fn quantity(&self, c: Rgb) -> Rgb {
-        match (self.spectral, self.wavelength) {
+        match (self.is_spectral(), self.wavelength) {
             (true, Some(w)) => Rgb::splat(w.value_of(c)),
             _ => c,
         }
@@ -306,7 +314,7 @@ impl PathSpectrum {
     /// A contribution in the path's terms as linear RGB for the image.
     #[inline]
     pub fn to_image(&self, c: Rgb) -> Rgb {
-        match (self.spectral, self.wavelength) {
+        match (self.is_spectral(), self.wavelength) {
             (true, Some(w)) => w.to_rgb(c.x),
             _ => c,
         }
@@ -319,6 +327,9 @@ impl PathSpectrum {
 /// paths at its wavelength, so the join counts K times, which keeps the estimate unbiased.
 #[inline]
 pub fn join(weight: Rgb, weight_tag: u8, flux: Rgb, flux_tag: u8, phase: &PhaseSpectrum) -> Rgb {
+    if !ENABLED {
+        return weight * flux;
+    }
     let at = |tag: u8| phase.wavelength(tag - 1);
     match (weight_tag, flux_tag) {
         (0, 0) => weight * flux,
@@ -411,6 +422,7 @@ mod tests {
     }
 
     #[test]
+    #[cfg(feature = "spectral")]
     fn rgb_joins_stay_rgb_and_spectral_joins_go_through_the_class_wavelength() {
         let mut sampler = Sampler::new(1, crate::sampling::Pass::Wavelength, 1, 0);
         let phase = PhaseSpectrum::sample(&mut sampler, false);

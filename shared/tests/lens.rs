@@ -11,6 +11,7 @@ use photonfarm::integrator::Layer;
 use photonfarm::material::{Material, Transport};
 use photonfarm::render::{Engine, Method};
 use photonfarm::scene::Scene;
+use photonfarm::spectrum::Wavelength;
 use std::path::{Path, PathBuf};
 
 /// The prescription the scene cites (Kolb's dgauss.txt, from Smith, "Modern Lens Design", p. 312): per row the
@@ -29,6 +30,18 @@ const PRESCRIPTION: [(Option<f64>, f64, Option<f64>, f64); 11] = [
     (Some(874.130), 0.380, Some(1.717), 40.0),
     (Some(-79.460), 6.440, Some(1.0), 40.0),
 ];
+
+/// Abbe numbers V_d of the glasses by their index n_d (Kolb et al. Table 1's V-no column, as in the scene).
+const ABBE: [(f64, f64); 5] = [(1.670, 47.1), (1.699, 30.1), (1.603, 38.0), (1.658, 57.3), (1.717, 48.0)];
+
+/// A glass's index at `nm` by Cauchy's law through n_d and V_d, computed here from the table (air stays 1).
+fn index_at(n_d: f64, nm: f64) -> f64 {
+    let Some(&(_, v)) = ABBE.iter().find(|(n, _)| (n - n_d).abs() < 1e-9) else { return n_d };
+    let (d, f, c) = (0.58756f64, 0.48613f64, 0.65627f64);
+    let b = (n_d - 1.0) / (v * (1.0 / (f * f) - 1.0 / (c * c)));
+    let um = nm * 1e-3;
+    n_d + b * (1.0 / (um * um) - 1.0 / (d * d))
+}
 
 /// The scene's scale: the 100 mm design halved, in metres.
 const SCALE_TO_METRES: f64 = 0.5e-3;
@@ -63,12 +76,18 @@ fn lens_scene(resolution: Option<(u32, u32)>, anti_reflection: bool) -> Scene {
 /// Paraxial (y–nu) trace of the prescription, scaled to the scene: a ray parallel to the axis at height 1 gives
 /// the effective focal length −1/u' in the last medium (air), in metres.
 fn paraxial_focal_length() -> f64 {
+    paraxial_focal_length_at(587.56)
+}
+
+/// The paraxial focal length with every glass at its index for `nm`.
+fn paraxial_focal_length_at(nm: f64) -> f64 {
     let (mut y, mut u, mut n) = (1.0f64, 0.0f64, 1.0f64);
     for (i, &(radius, position, index, _)) in PRESCRIPTION.iter().enumerate() {
         if i > 0 {
             y += u * position * SCALE_TO_METRES;
         }
         let (Some(r), Some(n_after)) = (radius, index) else { continue };
+        let n_after = index_at(n_after, nm);
         // Refraction: n'u' = n u − y φ with the surface power φ = (n' − n)/R.
         let power = (n_after - n) / (r * SCALE_TO_METRES);
         u = (n * u - y * power) / n_after;
@@ -79,16 +98,24 @@ fn paraxial_focal_length() -> f64 {
 
 /// Follows a ray through the scene's lens by the geometry's intersections and the dielectric's refraction
 /// (reflection excluded), until it leaves the lens toward the sensor. None when a mount or the stop blocks it.
-fn through_lens(scene: &Scene, mut ray: Ray) -> Option<Ray> {
+fn through_lens(scene: &Scene, ray: Ray) -> Option<Ray> {
+    through_lens_at(scene, ray, None)
+}
+
+/// `through_lens` with the glasses at one wavelength (None: the d line, as an RGB path sees them).
+fn through_lens_at(scene: &Scene, mut ray: Ray, nm: Option<f32>) -> Option<Ray> {
     for _ in 0..64 {
         let Some(hit) = scene.geometry.intersect(&ray) else { return Some(ray) };
         if ray.direction.z >= 0.0 || hit.p.z > 0.01 || hit.p.z < -0.05 {
             // Anything but the lens (it spans z from 0 to −0.032 m) or a ray turned back.
             return None;
         }
-        let material = scene.material(&hit);
+        let mut material = scene.material(&hit);
         if !matches!(material, Material::Dielectric { .. }) {
             return None;
+        }
+        if let Some(nm) = nm {
+            material = material.at_wavelength(&Wavelength::with_pdf(nm, 1.0));
         }
         let wo = -ray.direction;
         // u.x just below 1 selects refraction wherever the Fresnel reflectance is below 1.
@@ -119,6 +146,31 @@ fn traced_focal_length_of_the_scene_lens_matches_the_paraxial_prescription_withi
     );
     assert!((expected * 1e3 - 50.36).abs() < 0.01, "the prescription itself: {expected}");
     assert!(rel.abs() < 0.01, "traced {traced} m vs paraxial {expected} m");
+}
+
+#[test]
+fn the_lens_chromatic_focal_shift_follows_its_glasses_dispersion() {
+    let scene = lens_scene(None, false);
+    assert!(scene.is_spectral(), "the lens's glasses carry Abbe numbers");
+    let h = 0.5e-3f32;
+    let traced_at = |nm: f32| {
+        let out = through_lens_at(&scene, Ray::new(Vec3::new(0.0, h, 0.5), -Vec3::Z), Some(nm)).expect("passes");
+        h as f64 * (-out.direction.z as f64) / (-out.direction.y as f64)
+    };
+    // The F (486.13 nm), d and C (656.27 nm) lines.
+    let mut traced = Vec::new();
+    for nm in [486.13f32, 587.56, 656.27] {
+        let (t, p) = (traced_at(nm), paraxial_focal_length_at(nm as f64));
+        println!("{nm} nm: focal length traced {:.4} mm, paraxial {:.4} mm", t * 1e3, p * 1e3);
+        assert!((t / p - 1.0).abs() < 1e-3, "at {nm} nm traced {t} m, paraxial {p} m");
+        traced.push(t);
+    }
+    // The chromatic focal shift f_C − f_F, traced against paraxial: the dispersion reaches every surface.
+    let shift = traced[2] - traced[0];
+    let expected = paraxial_focal_length_at(656.27) - paraxial_focal_length_at(486.13);
+    println!("focal shift C − F: traced {:.2} µm, paraxial {:.2} µm", shift * 1e6, expected * 1e6);
+    assert!(expected.abs() > 1e-6, "the prescription's glasses must disperse: {expected}");
+    assert!((shift / expected - 1.0).abs() < 0.05, "focal shift traced {shift} m, paraxial {expected} m");
 }
 
 #[test]

@@ -66,7 +66,7 @@ impl RenderSettings {
     /// The wavelengths of the phase (or path) identified by `key` in a spectral scene; RGB otherwise. The
     /// camera and light paths of a phase share them, so that their joins are at one wavelength.
     pub fn phase_spectrum(&self, scene: &Scene, key: u64) -> PhaseSpectrum {
-        if !scene.is_spectral() {
+        if !crate::spectrum::ENABLED || !scene.is_spectral() {
             return PhaseSpectrum::RGB;
         }
         PhaseSpectrum::sample(&mut Sampler::new(self.seed, Pass::Wavelength, key, 0), false)

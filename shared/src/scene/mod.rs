@@ -204,6 +204,14 @@ impl<'a> Loader<'a> {
         field: &str,
     ) -> Result<RefractiveIndex, SceneError> {
         let Some(v) = abbe else { return Ok(RefractiveIndex::constant(n_d)) };
+        if !crate::spectrum::ENABLED {
+            return Err(self.error(
+                Some(span.clone()),
+                field,
+                "this build renders RGB only (built without the `spectral` feature): a dispersive glass needs the \
+                 default build",
+            ));
+        }
         // Real glasses lie between about 15 (dense flints) and 100 (fluorite); outside that is a typo.
         let v = self.scalar(v, span, field, |v| (5.0..=150.0).contains(&v), "an Abbe number between 5 and 150")?;
         if n_d <= 1.0 {
