@@ -3,7 +3,7 @@
 
 use crate::atomic_image::GatherBuffer;
 use crate::map_slot::{Guard, MapSlot, OwnerToken};
-use photonfarm::accumulation::PixelSums;
+use photonfarm::accumulation::{AuxLayout, AuxSums, PixelSums};
 use photonfarm::color::Rgb;
 use photonfarm::integrator::{Layer, LayerValues};
 use photonfarm::pbpm::backward_pass::BackwardStats;
@@ -88,6 +88,8 @@ pub struct Group {
     phases_before: Vec<u32>,
     backward: Vec<LayerValues>,
     sums: Vec<PixelSums>,
+    /// The sums of the image's auxiliary layers, per mask pixel.
+    aux_sums: AuxSums,
     phases_this_deal: u64,
     /// Groups that render the same pixels in a deal (all of them without masks): the radius schedule counts
     /// their phases too, so that j tracks the pixel's total phase count as in a single-threaded run.
@@ -96,8 +98,13 @@ pub struct Group {
 }
 
 impl Group {
-    /// A group of `cores.len()` threads, thread t pinned to `cores[t]`.
-    pub fn new(index: usize, cores: Vec<usize>, token: OwnerToken) -> Result<Self, rayon::ThreadPoolBuildError> {
+    /// A group of `cores.len()` threads, thread t pinned to `cores[t]`, keeping the auxiliary layers of `aux`.
+    pub fn new(
+        index: usize,
+        cores: Vec<usize>,
+        token: OwnerToken,
+        aux: AuxLayout,
+    ) -> Result<Self, rayon::ThreadPoolBuildError> {
         let pinned = Arc::new(AtomicUsize::new(0));
         let pin_count = pinned.clone();
         let pool = rayon::ThreadPoolBuilder::new()
@@ -118,6 +125,7 @@ impl Group {
             phases_before: Vec::new(),
             backward: Vec::new(),
             sums: Vec::new(),
+            aux_sums: AuxSums::new(aux, 0),
             phases_this_deal: 0,
             pixel_sharers: 1,
             stats: GroupStats::default(),
@@ -139,12 +147,18 @@ impl Group {
         &self.sums
     }
 
+    /// The auxiliary layers' sums of the current deal, per mask pixel.
+    pub fn local_aux(&self) -> &AuxSums {
+        &self.aux_sums
+    }
+
     /// Bytes of the group's buffers, including its map slot.
     pub fn capacity_bytes(&mut self, slot: &MapSlot<GroupMap>) -> usize {
         let own = self.mask.capacity() * 4
             + self.phases_before.capacity() * 4
             + self.backward.capacity() * std::mem::size_of::<LayerValues>()
-            + self.sums.capacity() * std::mem::size_of::<PixelSums>();
+            + self.sums.capacity() * std::mem::size_of::<PixelSums>()
+            + self.aux_sums.capacity_bytes();
         // Asked between rounds, when every map is closed.
         let data = slot.data_mut(&mut self.token);
         own + data.photons.capacity_bytes() + data.gathered.capacity_bytes()
@@ -157,6 +171,7 @@ impl Group {
         self.backward.resize(mask.len(), [Rgb::ZERO; 4]);
         self.sums.clear();
         self.sums.resize(mask.len(), PixelSums::default());
+        self.aux_sums.reset(mask.len());
         self.mask = mask;
         self.phases_before = phases_before;
         self.phases_this_deal = 0;

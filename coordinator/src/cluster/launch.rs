@@ -225,6 +225,9 @@ pub fn launch(
         },
     };
     let initial = resume.map(|r| (r.sums, r.totals));
-    let cluster = Cluster::start(members, plan, children, scene.camera.width, scene.camera.height, settings, initial)?;
+    // No renderer fills an auxiliary layer yet.
+    let aux = photonfarm::accumulation::AuxLayout::default();
+    let cluster =
+        Cluster::start(members, plan, children, scene.camera.width, scene.camera.height, aux, settings, initial)?;
     Ok((cluster, layout, machine))
 }
