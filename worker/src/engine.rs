@@ -113,8 +113,8 @@ impl EngineConfig {
         // enters it in at most eight cells (its sphere spans at most two cells of three mean radii per axis),
         // each entry a u32 plus the build's u64 (cell, photon) pair, with a table of half a bucket per photon.
         let photon = 2 * std::mem::size_of::<photonfarm::pbpm::BackwardPhoton>() + 8 * (4 + 8) + 2;
-        // A group's auxiliary sums.
-        let aux_per_pixel = aux.sum_bytes_per_pixel();
+        // A group's auxiliary buffers: the camera pass's values, the gathered channels and the sums.
+        let aux_per_pixel = 2 * aux.phase_bytes_per_pixel() + aux.sum_bytes_per_pixel();
         let per_pixel = std::mem::size_of::<LayerValues>()
             + std::mem::size_of::<PixelSums>()
             + 8
@@ -166,8 +166,7 @@ impl<'s> ParallelEngine<'s> {
             return Err(ConfigError::Invalid("the tile size must be at least one pixel".into()));
         }
         let slots: Vec<MapSlot<GroupMap>> = (0..config.groups).map(|_| MapSlot::new(GroupMap::default())).collect();
-        // No renderer fills an auxiliary layer yet.
-        let aux = AuxLayout::default();
+        let aux = AuxLayout::for_scene(scene);
         // Groups own their slot's token; the slots live in a Vec that is never resized.
         let mut groups = Vec::with_capacity(config.groups);
         for (k, slot) in slots.iter().enumerate() {

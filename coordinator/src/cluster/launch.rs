@@ -225,8 +225,7 @@ pub fn launch(
         },
     };
     let initial = resume.map(|r| (r.sums, r.totals));
-    // No renderer fills an auxiliary layer yet.
-    let aux = photonfarm::accumulation::AuxLayout::default();
+    let aux = photonfarm::accumulation::AuxLayout::for_scene(scene);
     let cluster =
         Cluster::start(members, plan, children, scene.camera.width, scene.camera.height, aux, settings, initial)?;
     Ok((cluster, layout, machine))

@@ -4,6 +4,7 @@
 //! that needs none allocates none, and its sums, snapshots and memory stay as they were.
 
 use super::sanitize_slice;
+use crate::scene::Scene;
 use serde::{Deserialize, Serialize};
 
 /// One auxiliary layer: its name (the EXR layer's) and 1 (grey) or 3 (RGB) channels.
@@ -37,6 +38,16 @@ impl AuxLayout {
             assert!(layers[..i].iter().all(|o| o.name != l.name), "auxiliary layer {} appears twice", l.name);
         }
         AuxLayout { layers }
+    }
+
+    /// The layers `scene` can fill: the ghost layer when it can make ghosts (`ghost::scene_can_make_ghosts`),
+    /// nothing otherwise.
+    pub fn for_scene(scene: &Scene) -> Self {
+        let mut layers = Vec::new();
+        if crate::ghost::scene_can_make_ghosts(scene) {
+            layers.push(AuxLayer { name: crate::ghost::GHOST_LAYER.into(), channels: 3 });
+        }
+        AuxLayout::new(layers)
     }
 
     /// The layers, in storage order.

@@ -38,18 +38,21 @@ fn layer_of(diffuse_vertices: u32, through_specular: bool) -> Layer {
 }
 
 /// Estimates the camera ray's weight times the radiance arriving along it (the pixel measurement), split into
-/// layers; `max_depth` counts path segments.
+/// layers, with the part of it that is ghost light (`crate::ghost`, as the PBPM backward pass decides it);
+/// `max_depth` counts path segments.
 pub fn trace(
     scene: &Scene,
     max_depth: u32,
     camera_ray: CameraRay,
     sampler: &mut Sampler,
     stats: &mut PathStats,
-) -> LayerValues {
+) -> (LayerValues, Rgb) {
     let mut out: LayerValues = [Rgb::ZERO; 4];
+    // Some(light so far) once the path is a ghost path.
+    let mut ghost: Option<Rgb> = None;
     let weight = camera_ray.weight;
     if !(weight > 0.0 && weight.is_finite()) {
-        return out;
+        return (out, Rgb::ZERO);
     }
     let mut ray = camera_ray.ray;
     let mut beta = Rgb::splat(weight);
@@ -63,10 +66,12 @@ pub fn trace(
         let le = scene.lights.emitted(&hit, ray.direction);
         if le != Rgb::ZERO {
             match previous {
-                Previous::Specular => out[layer_of(diffuse_vertices, diffuse_vertices > 0) as usize] += beta * le,
+                Previous::Specular => {
+                    add(&mut out, &mut ghost, layer_of(diffuse_vertices, diffuse_vertices > 0), beta * le)
+                }
                 Previous::Diffuse { p, pdf } => {
                     let w = power_heuristic(pdf, scene.lights.pdf_incident(p, &hit));
-                    out[layer_of(diffuse_vertices, false) as usize] += beta * le * w;
+                    add(&mut out, &mut ghost, layer_of(diffuse_vertices, false), beta * le * w);
                 }
             }
         }
@@ -80,10 +85,14 @@ pub fn trace(
             stats.rays += 1;
             if let Some(d) = sample_direct(scene, &hit, wo, albedo, sampler) {
                 let w = if d.delta { 1.0 } else { power_heuristic(d.light_pdf, d.bsdf_pdf) };
-                out[layer_of(diffuse_vertices, false) as usize] += beta * d.value * w;
+                add(&mut out, &mut ghost, layer_of(diffuse_vertices, false), beta * d.value * w);
             }
         }
         let Some(s) = material.sample(&hit, wo, sampler.next_2d(), Transport::Radiance) else { break };
+        if diffuse_vertices == 0 && ghost.is_none() && crate::ghost::is_dielectric_reflection(&material, &hit, wo, s.wi)
+        {
+            ghost = Some(Rgb::ZERO);
+        }
         beta *= s.weight;
         previous = if s.delta { Previous::Specular } else { Previous::Diffuse { p: hit.p, pdf: s.pdf } };
         if segments >= 3 {
@@ -96,5 +105,14 @@ pub fn trace(
         }
         ray = Ray::new(offset_origin(hit.p, hit.ng, s.wi), s.wi);
     }
-    out
+    (out, ghost.unwrap_or(Rgb::ZERO))
+}
+
+/// Adds a contribution to its layer and, on a ghost path, to the ghost light.
+#[inline]
+fn add(out: &mut LayerValues, ghost: &mut Option<Rgb>, layer: Layer, value: Rgb) {
+    out[layer as usize] += value;
+    if let Some(g) = ghost {
+        *g += value;
+    }
 }

@@ -23,15 +23,16 @@ pub struct ForwardStats {
     pub capped: u64,
 }
 
-/// Where gathered light goes: (pixel, layer, τ · f · ΔΦ / (π r²)).
+/// Where gathered light goes: (pixel, layer, whether the photon's camera path is a ghost path so that the
+/// light is ghost light too, τ · f · ΔΦ / (π r²)).
 pub trait Gather {
-    fn add(&mut self, pixel: u32, layer: Layer, value: Rgb);
+    fn add(&mut self, pixel: u32, layer: Layer, ghost: bool, value: Rgb);
 }
 
-impl<F: FnMut(u32, Layer, Rgb)> Gather for F {
+impl<F: FnMut(u32, Layer, bool, Rgb)> Gather for F {
     #[inline]
-    fn add(&mut self, pixel: u32, layer: Layer, value: Rgb) {
-        self(pixel, layer, value)
+    fn add(&mut self, pixel: u32, layer: Layer, ghost: bool, value: Rgb) {
+        self(pixel, layer, ghost, value)
     }
 }
 
@@ -130,7 +131,7 @@ pub fn gather(
             _ => Layer::Indirect,
         };
         merges += 1;
-        sink.add(b.pixel, layer, b.weight * v.flux); // eq. 4
+        sink.add(b.pixel, layer, b.ghost, b.weight * v.flux); // eq. 4
     }
     merges
 }

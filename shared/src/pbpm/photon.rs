@@ -20,4 +20,15 @@ pub struct BackwardPhoton {
     pub k: u8,
     /// Camera path segments from the eye to this vertex, for the joined path's `max_depth`.
     pub segments: u8,
+    /// The camera path is a ghost path (`crate::ghost`): light gathered here is ghost light too. It fills
+    /// padding, so a photon stays 48 bytes.
+    pub ghost: bool,
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_ghost_bit_fits_in_the_photons_padding() {
+        assert_eq!(std::mem::size_of::<super::BackwardPhoton>(), 48);
+    }
 }

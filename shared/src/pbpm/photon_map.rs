@@ -207,7 +207,16 @@ mod tests {
     use crate::sampling::{Pass, Sampler};
 
     fn photon(p: Vec3, r: f32, pixel: u32) -> BackwardPhoton {
-        BackwardPhoton { position: p, normal: Vec3::Y, weight: Rgb::ONE, radius2: r * r, pixel, k: 1, segments: 1 }
+        BackwardPhoton {
+            position: p,
+            normal: Vec3::Y,
+            weight: Rgb::ONE,
+            radius2: r * r,
+            pixel,
+            k: 1,
+            segments: 1,
+            ghost: false,
+        }
     }
 
     #[test]
