@@ -330,7 +330,8 @@ fn fit_memory(
     let pixels = scene.camera.width as u64 * scene.camera.height as u64;
     let need = |t: usize| -> Result<u64> {
         let c = EngineConfig::for_method(method, t, args.group_size, cores.to_vec())?;
-        Ok(base + (c.bytes_per_pixel(settings.backward_diffuse_depth) * pixels as f64) as u64)
+        let aux = photonfarm::accumulation::AuxLayout::for_scene(scene);
+        Ok(base + (c.bytes_per_pixel(settings.backward_diffuse_depth, &aux) * pixels as f64) as u64)
     };
     let mb = |b: u64| format!("{:.0} MiB", b as f64 / (1u64 << 20) as f64);
     let asked = need(threads)?;

@@ -111,7 +111,9 @@ fn photon_map(c: &mut Criterion) {
     let (max_depth, bdd) = (settings.max_depth, settings.backward_diffuse_depth);
     // The engine's sink: per-pixel (indirect, caustic) sums.
     let mut gathered = vec![[Rgb::ZERO; 2]; scene.camera.pixel_count()];
-    let mut sink = |pixel: u32, layer: Layer, v: Rgb| gathered[pixel as usize][(layer == Layer::Caustic) as usize] += v;
+    let mut sink = |pixel: u32, layer: Layer, _ghost: bool, v: Rgb| {
+        gathered[pixel as usize][(layer == Layer::Caustic) as usize] += v
+    };
     let merges: u64 = vertices.iter().map(|v| gather(&map, &v.view(), max_depth, bdd, &mut sink)).sum();
     let candidates: usize = vertices.iter().map(|v| map.containing(v.hit.p).count()).sum();
     eprintln!(

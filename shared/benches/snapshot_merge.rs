@@ -6,7 +6,7 @@
 //! size is printed once per resolution.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use photonfarm::accumulation::{Accumulator, PixelSums};
+use photonfarm::accumulation::Accumulator;
 use photonfarm::color::Rgb;
 use photonfarm::protocol::snapshot::{apply_delta, encode_delta, Compression};
 use photonfarm::sampling::{Pass, Sampler};
@@ -33,7 +33,7 @@ fn snapshot_merge(c: &mut Criterion) {
         let mut current = base.clone();
         current.merge(&sums(w, h, 6, 2));
         for compression in [Compression::Fast, Compression::Small] {
-            let delta = encode_delta(&current.pixels, &base.pixels, compression);
+            let delta = encode_delta(&current, &base, compression);
             eprintln!(
                 "{w}×{h}, {compression:?}: a snapshot of 6 new phases per pixel is {:.2} MB ({:.1} bytes per pixel, \
                  {:.0} raw)",
@@ -43,11 +43,11 @@ fn snapshot_merge(c: &mut Criterion) {
             );
             let id = format!("{w}x{h}-{compression:?}").to_lowercase();
             group.bench_with_input(BenchmarkId::new("encode", id), &(), |b, _| {
-                b.iter(|| black_box(encode_delta(&current.pixels, &base.pixels, compression)))
+                b.iter(|| black_box(encode_delta(&current, &base, compression)))
             });
         }
-        let delta = encode_delta(&current.pixels, &base.pixels, Compression::Small);
-        let mut target = vec![PixelSums::default(); (w * h) as usize];
+        let delta = encode_delta(&current, &base, Compression::Small);
+        let mut target = Accumulator::new(w, h);
         group.bench_with_input(BenchmarkId::new("check_and_merge", format!("{w}x{h}")), &(), |b, _| {
             b.iter(|| black_box(apply_delta(&delta, &mut target).unwrap()))
         });

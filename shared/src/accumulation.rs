@@ -1,6 +1,10 @@
 //! Running sums over phases and the error estimate δ (paper eq. 6–7). Sums from independent workers add, so
 //! whoever merges them computes δ over the merged sums.
 
+pub mod auxiliary;
+
+pub use auxiliary::{AuxLayer, AuxLayout, AuxSums};
+
 use crate::color::{luminance, luminance_f64, Rgb};
 use crate::integrator::{Layer, LayerValues};
 use serde::{Deserialize, Serialize};
@@ -61,6 +65,8 @@ pub struct Accumulator {
     pub width: u32,
     pub height: u32,
     pub pixels: Vec<PixelSums>,
+    /// Sums of the auxiliary layers (overlays of the total, no SEM); empty unless the scene needs them.
+    pub aux: AuxSums,
 }
 
 /// δ over the image and over the pixels that do not see a light directly.
@@ -75,9 +81,15 @@ pub struct ErrorEstimate {
 }
 
 impl Accumulator {
-    /// Empty sums for an image.
+    /// Empty sums for an image, without auxiliary layers.
     pub fn new(width: u32, height: u32) -> Self {
-        Accumulator { width, height, pixels: vec![PixelSums::default(); width as usize * height as usize] }
+        Accumulator::with_aux(width, height, AuxLayout::default())
+    }
+
+    /// Empty sums for an image with the auxiliary layers of `aux`.
+    pub fn with_aux(width: u32, height: u32, aux: AuxLayout) -> Self {
+        let n = width as usize * height as usize;
+        Accumulator { width, height, pixels: vec![PixelSums::default(); n], aux: AuxSums::new(aux, n) }
     }
 
     /// Closes one phase at one pixel: adds the phase value L_ij of every layer and of the total.
@@ -86,11 +98,13 @@ impl Accumulator {
         self.pixels[pixel].add_phase(value, camera_rays);
     }
 
-    /// Adds sums kept for a subset of pixels (a group's mask: `local[i]` belongs to pixel `mask[i]`).
-    pub fn merge_local(&mut self, mask: &[u32], local: &[PixelSums]) {
+    /// Adds sums kept for a subset of pixels (a group's mask: `local[i]` and `local_aux`'s pixel i belong to
+    /// pixel `mask[i]`).
+    pub fn merge_local(&mut self, mask: &[u32], local: &[PixelSums], local_aux: &AuxSums) {
         for (&p, l) in mask.iter().zip(local) {
             self.pixels[p as usize].merge(l);
         }
+        self.aux.merge_local(mask, local_aux);
     }
 
     /// Adds another worker's sums for the same image.
@@ -99,6 +113,7 @@ impl Accumulator {
         for (a, b) in self.pixels.iter_mut().zip(&other.pixels) {
             a.merge(b);
         }
+        self.aux.merge(&other.aux);
     }
 
     /// Mean of one layer at a pixel.
@@ -107,6 +122,17 @@ impl Accumulator {
         let n = px.phases.max(1) as f64;
         let s = px.sum[layer as usize];
         [s[0] / n, s[1] / n, s[2] / n]
+    }
+
+    /// Mean of an auxiliary layer at a pixel (a one-channel layer as grey), None when the image has no such
+    /// layer.
+    pub fn aux_mean(&self, pixel: usize, name: &str) -> Option<[f64; 3]> {
+        let layout = self.aux.layout();
+        let offset = layout.offset(name)?;
+        let channels = layout.layers().iter().find(|l| l.name == name)?.channels as usize;
+        let n = self.pixels[pixel].phases.max(1) as f64;
+        let s = &self.aux.pixel(pixel)[offset..offset + channels];
+        Some(if channels == 3 { [s[0] / n, s[1] / n, s[2] / n] } else { [s[0] / n; 3] })
     }
 
     /// Mean of the total at a pixel.
@@ -160,9 +186,9 @@ impl Accumulator {
         }
     }
 
-    /// Bytes of the sums per pixel.
-    pub fn bytes_per_pixel() -> usize {
-        std::mem::size_of::<PixelSums>()
+    /// Bytes of the sums per pixel with the auxiliary layers of `aux`.
+    pub fn bytes_per_pixel(aux: &AuxLayout) -> usize {
+        std::mem::size_of::<PixelSums>() + aux.sum_bytes_per_pixel()
     }
 }
 
@@ -183,6 +209,18 @@ fn sanitize(v: Rgb) -> Rgb {
     } else {
         NON_FINITE_DROPPED.fetch_add(1, Ordering::Relaxed);
         Rgb::ZERO
+    }
+}
+
+/// True when every value of a pixel's auxiliary channels is finite; otherwise they are dropped together and
+/// counted like a fixed layer's value.
+#[inline]
+fn sanitize_slice(v: &[f32]) -> bool {
+    if v.iter().all(|x| x.is_finite()) {
+        true
+    } else {
+        NON_FINITE_DROPPED.fetch_add(1, Ordering::Relaxed);
+        false
     }
 }
 

@@ -5,6 +5,7 @@ pub mod accumulation;
 pub mod camera;
 pub mod color;
 pub mod geometry;
+pub mod ghost;
 pub mod image_io;
 pub mod integrator;
 pub mod light;

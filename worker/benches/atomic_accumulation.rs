@@ -36,14 +36,14 @@ fn adds(thread: u64) -> Vec<(u32, Layer, Rgb)> {
 
 fn buffer() -> GatherBuffer {
     let mut b = GatherBuffer::default();
-    b.reset(PIXELS);
+    b.reset(PIXELS, &photonfarm::accumulation::AuxLayout::default());
     b
 }
 
 fn add_all(buffer: &GatherBuffer, adds: &[(u32, Layer, Rgb)]) {
     let mut sink = buffer.sink();
     for &(pixel, layer, value) in adds {
-        sink.add(black_box(pixel), layer, value);
+        sink.add(black_box(pixel), layer, false, value);
     }
 }
 

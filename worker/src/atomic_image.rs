@@ -1,15 +1,22 @@
 //! The intermediate image light paths gather into: f32 luminance per local pixel, added with atomic
 //! compare-and-swap loops because threads of several groups may gather into the same map (paper §4.2).
 
+use photonfarm::accumulation::AuxLayout;
 use photonfarm::color::Rgb;
+use photonfarm::ghost::GHOST_LAYER;
 use photonfarm::integrator::Layer;
 use photonfarm::pbpm::Gather;
 use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 
-/// Gathered (indirect, caustic) RGB per local pixel of a group's mask.
+/// Gathered (indirect, caustic) RGB per local pixel of a group's mask, followed by the pixel's auxiliary
+/// channels (the ghost layer's gathered light) when the image has auxiliary layers.
 #[derive(Default)]
 pub struct GatherBuffer {
     values: Vec<AtomicU32>,
+    /// Values per pixel: 6, plus the auxiliary channels.
+    stride: usize,
+    /// Where the ghost layer's channels start among a pixel's values, when there is one.
+    ghost: Option<usize>,
     /// Merges counted by the gatherers, for the statistics and the stress test's bookkeeping.
     merges: AtomicU64,
 }
@@ -27,10 +34,13 @@ fn add_f32(a: &AtomicU32, v: f32) {
 }
 
 impl GatherBuffer {
-    /// Zeroes the buffer for `pixels` local pixels (owner only, while its map is closed).
-    pub fn reset(&mut self, pixels: usize) {
-        self.values.resize_with(pixels * 6, || AtomicU32::new(0));
-        self.values.truncate(pixels * 6);
+    /// Zeroes the buffer for `pixels` local pixels with the auxiliary channels of `aux` (owner only, while its
+    /// map is closed).
+    pub fn reset(&mut self, pixels: usize, aux: &AuxLayout) {
+        self.stride = 6 + aux.channels();
+        self.ghost = aux.offset(GHOST_LAYER).map(|o| 6 + o);
+        self.values.resize_with(pixels * self.stride, || AtomicU32::new(0));
+        self.values.truncate(pixels * self.stride);
         for v in &mut self.values {
             *v.get_mut() = 0;
         }
@@ -39,8 +49,13 @@ impl GatherBuffer {
 
     /// Gathered (indirect, caustic) of a local pixel.
     pub fn get(&self, local: usize) -> [Rgb; 2] {
-        let f = |k: usize| f32::from_bits(self.values[local * 6 + k].load(Ordering::Relaxed));
+        let f = |k: usize| f32::from_bits(self.values[local * self.stride + k].load(Ordering::Relaxed));
         [Rgb::new(f(0), f(1), f(2)), Rgb::new(f(3), f(4), f(5))]
+    }
+
+    /// Gathered auxiliary channel `channel` of a local pixel.
+    pub fn get_aux(&self, local: usize, channel: usize) -> f32 {
+        f32::from_bits(self.values[local * self.stride + 6 + channel].load(Ordering::Relaxed))
     }
 
     /// Merges recorded since the last reset.
@@ -73,11 +88,17 @@ pub struct AtomicSink<'a> {
 
 impl Gather for AtomicSink<'_> {
     #[inline]
-    fn add(&mut self, pixel: u32, layer: Layer, value: Rgb) {
-        let base = pixel as usize * 6 + if layer == Layer::Caustic { 3 } else { 0 };
+    fn add(&mut self, pixel: u32, layer: Layer, ghost: bool, value: Rgb) {
+        let pixel_base = pixel as usize * self.buffer.stride;
+        let base = pixel_base + if layer == Layer::Caustic { 3 } else { 0 };
         add_f32(&self.buffer.values[base], value.x);
         add_f32(&self.buffer.values[base + 1], value.y);
         add_f32(&self.buffer.values[base + 2], value.z);
+        if let (true, Some(g)) = (ghost, self.buffer.ghost) {
+            add_f32(&self.buffer.values[pixel_base + g], value.x);
+            add_f32(&self.buffer.values[pixel_base + g + 1], value.y);
+            add_f32(&self.buffer.values[pixel_base + g + 2], value.z);
+        }
     }
 }
 
@@ -88,13 +109,13 @@ mod tests {
     #[test]
     fn concurrent_atomic_adds_lose_nothing() {
         let mut b = GatherBuffer::default();
-        b.reset(2);
+        b.reset(2, &AuxLayout::default());
         std::thread::scope(|s| {
             for _ in 0..4 {
                 s.spawn(|| {
                     let mut sink = b.sink();
                     for _ in 0..10_000 {
-                        sink.add(1, Layer::Caustic, Rgb::new(1.0, 2.0, 0.5));
+                        sink.add(1, Layer::Caustic, true, Rgb::new(1.0, 2.0, 0.5));
                     }
                     b.add_merges(10_000);
                 });
@@ -103,5 +124,25 @@ mod tests {
         assert_eq!(b.get(1)[1], Rgb::new(40_000.0, 80_000.0, 20_000.0));
         assert_eq!(b.get(0), [Rgb::ZERO; 2]);
         assert_eq!(b.merges(), 40_000);
+        assert_eq!(b.capacity_bytes(), 2 * 6 * 4, "no ghost channels without a ghost layer");
+    }
+
+    #[test]
+    fn ghost_light_lands_in_its_layer_and_its_usual_layer_but_other_light_only_in_its_usual_layer() {
+        let ghost = AuxLayout::new(vec![
+            photonfarm::accumulation::AuxLayer { name: "band".into(), channels: 1 },
+            photonfarm::accumulation::AuxLayer { name: GHOST_LAYER.into(), channels: 3 },
+        ]);
+        let mut b = GatherBuffer::default();
+        b.reset(3, &ghost);
+        let mut sink = b.sink();
+        sink.add(2, Layer::Indirect, true, Rgb::new(1.0, 2.0, 3.0));
+        sink.add(2, Layer::Caustic, false, Rgb::splat(10.0));
+        sink.add(1, Layer::Caustic, true, Rgb::splat(0.5));
+        assert_eq!(b.get(2), [Rgb::new(1.0, 2.0, 3.0), Rgb::splat(10.0)]);
+        assert_eq!([0, 1, 2, 3].map(|c| b.get_aux(2, c)), [0.0, 1.0, 2.0, 3.0]);
+        assert_eq!([0, 1, 2, 3].map(|c| b.get_aux(1, c)), [0.0, 0.5, 0.5, 0.5]);
+        assert_eq!(b.get(0), [Rgb::ZERO; 2]);
+        assert_eq!([0, 1, 2, 3].map(|c| b.get_aux(0, c)), [0.0; 4]);
     }
 }

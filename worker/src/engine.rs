@@ -5,7 +5,7 @@
 use crate::group::{Group, GroupMap, GroupStats, RoundContext};
 use crate::map_slot::MapSlot;
 use crate::mask;
-use photonfarm::accumulation::Accumulator;
+use photonfarm::accumulation::{Accumulator, AuxLayout};
 use photonfarm::render::record::StageSeconds;
 use photonfarm::render::session::Progressive;
 use photonfarm::render::{RayTotals, RenderSettings};
@@ -100,10 +100,11 @@ impl EngineConfig {
         self.groups * self.threads_per_group
     }
 
-    /// Bytes per image pixel of an engine with this configuration: the merged sums, plus each group's per-pixel
-    /// buffers over the pixels it renders (its mask, or the whole image without masks) and its photons. Known
-    /// before anything is allocated, so `--memory-limit` can be checked up front.
-    pub fn bytes_per_pixel(&self, backward_diffuse_depth: u32) -> f64 {
+    /// Bytes per image pixel of an engine with this configuration and the auxiliary layers of `aux`: the merged
+    /// sums, plus each group's per-pixel buffers over the pixels it renders (its mask, or the whole image
+    /// without masks) and its photons. Known before anything is allocated, so `--memory-limit` can be checked
+    /// up front.
+    pub fn bytes_per_pixel(&self, backward_diffuse_depth: u32, aux: &AuxLayout) -> f64 {
         use photonfarm::accumulation::PixelSums;
         use photonfarm::integrator::LayerValues;
         // Masks partition the image among the groups; without masks every group covers all of it.
@@ -112,12 +113,15 @@ impl EngineConfig {
         // enters it in at most eight cells (its sphere spans at most two cells of three mean radii per axis),
         // each entry a u32 plus the build's u64 (cell, photon) pair, with a table of half a bucket per photon.
         let photon = 2 * std::mem::size_of::<photonfarm::pbpm::BackwardPhoton>() + 8 * (4 + 8) + 2;
+        // A group's auxiliary buffers: the camera pass's values, the gathered channels and the sums.
+        let aux_per_pixel = 2 * aux.phase_bytes_per_pixel() + aux.sum_bytes_per_pixel();
         let per_pixel = std::mem::size_of::<LayerValues>()
             + std::mem::size_of::<PixelSums>()
             + 8
             + 24
-            + backward_diffuse_depth as usize * photon;
-        (Accumulator::bytes_per_pixel() + coverage * per_pixel) as f64
+            + backward_diffuse_depth as usize * photon
+            + aux_per_pixel;
+        (Accumulator::bytes_per_pixel(aux) + coverage * per_pixel) as f64
     }
 
     /// The layout in words, e.g. "2 groups × 1 thread, 32-pixel tile masks, shared maps".
@@ -167,18 +171,19 @@ impl<'s> ParallelEngine<'s> {
             return Err(ConfigError::Invalid("the tile size must be at least one pixel".into()));
         }
         let slots: Vec<MapSlot<GroupMap>> = (0..config.groups).map(|_| MapSlot::new(GroupMap::default())).collect();
+        let aux = AuxLayout::for_scene(scene);
         // Groups own their slot's token; the slots live in a Vec that is never resized.
         let mut groups = Vec::with_capacity(config.groups);
         for (k, slot) in slots.iter().enumerate() {
             let cores = (0..config.threads_per_group)
                 .map(|t| config.cores[(k * config.threads_per_group + t) % config.cores.len()])
                 .collect();
-            groups.push(Group::new(k, cores, slot.take_owner())?);
+            groups.push(Group::new(k, cores, slot.take_owner(), aux.clone())?);
         }
         Ok(ParallelEngine {
             scene,
             settings,
-            sums: Accumulator::new(scene.camera.width, scene.camera.height),
+            sums: Accumulator::with_aux(scene.camera.width, scene.camera.height, aux),
             config,
             groups,
             slots,
@@ -206,7 +211,8 @@ impl<'s> ParallelEngine<'s> {
 
     /// Bytes of every buffer of the engine (sums, groups' buffers and maps), measured between rounds.
     pub fn capacity_bytes(&mut self) -> usize {
-        let sums = self.sums.pixels.capacity() * Accumulator::bytes_per_pixel();
+        let sums = self.sums.pixels.capacity() * std::mem::size_of::<photonfarm::accumulation::PixelSums>()
+            + self.sums.aux.capacity_bytes();
         sums + self.groups.iter_mut().zip(&self.slots).map(|(g, s)| g.capacity_bytes(s)).sum::<usize>()
     }
 
@@ -276,7 +282,7 @@ impl<'s> ParallelEngine<'s> {
             self.waiting_nanos += per_group * round_end.duration_since(end).as_nanos() as u64;
         }
         for g in &self.groups {
-            self.sums.merge_local(g.mask(), g.local_sums());
+            self.sums.merge_local(g.mask(), g.local_sums(), g.local_aux());
         }
         // The merge is between-rounds time; it is added when the next round starts.
         self.last_round_end = Some(round_end);
@@ -333,7 +339,7 @@ impl Progressive for ParallelEngine<'_> {
 
     fn bytes_per_pixel(&self) -> f64 {
         // A formula, not a measurement: exact capacities need the owner tokens (`capacity_bytes`, between rounds).
-        self.config.bytes_per_pixel(self.settings.backward_diffuse_depth)
+        self.config.bytes_per_pixel(self.settings.backward_diffuse_depth, self.sums.aux.layout())
     }
 
     fn threads(&self) -> usize {

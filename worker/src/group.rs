@@ -3,7 +3,7 @@
 
 use crate::atomic_image::GatherBuffer;
 use crate::map_slot::{Guard, MapSlot, OwnerToken};
-use photonfarm::accumulation::PixelSums;
+use photonfarm::accumulation::{auxiliary::add_phase_to, AuxLayout, AuxSums, PixelSums};
 use photonfarm::color::Rgb;
 use photonfarm::integrator::{Layer, LayerValues};
 use photonfarm::pbpm::backward_pass::BackwardStats;
@@ -13,6 +13,7 @@ use photonfarm::pbpm::{
 use photonfarm::render::RenderSettings;
 use photonfarm::sampling::{Pass, Sampler};
 use photonfarm::scene::Scene;
+use rayon::iter::Either;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::Arc;
@@ -88,6 +89,12 @@ pub struct Group {
     phases_before: Vec<u32>,
     backward: Vec<LayerValues>,
     sums: Vec<PixelSums>,
+    /// The image's auxiliary layers, where the ghost layer's channels start among them, the phase's auxiliary
+    /// values from the camera pass (channels per mask pixel; empty without auxiliary layers) and their sums.
+    aux: AuxLayout,
+    ghost: Option<usize>,
+    aux_backward: Vec<f32>,
+    aux_sums: AuxSums,
     phases_this_deal: u64,
     /// Groups that render the same pixels in a deal (all of them without masks): the radius schedule counts
     /// their phases too, so that j tracks the pixel's total phase count as in a single-threaded run.
@@ -96,8 +103,13 @@ pub struct Group {
 }
 
 impl Group {
-    /// A group of `cores.len()` threads, thread t pinned to `cores[t]`.
-    pub fn new(index: usize, cores: Vec<usize>, token: OwnerToken) -> Result<Self, rayon::ThreadPoolBuildError> {
+    /// A group of `cores.len()` threads, thread t pinned to `cores[t]`, keeping the auxiliary layers of `aux`.
+    pub fn new(
+        index: usize,
+        cores: Vec<usize>,
+        token: OwnerToken,
+        aux: AuxLayout,
+    ) -> Result<Self, rayon::ThreadPoolBuildError> {
         let pinned = Arc::new(AtomicUsize::new(0));
         let pin_count = pinned.clone();
         let pool = rayon::ThreadPoolBuilder::new()
@@ -118,6 +130,10 @@ impl Group {
             phases_before: Vec::new(),
             backward: Vec::new(),
             sums: Vec::new(),
+            ghost: aux.offset(photonfarm::ghost::GHOST_LAYER),
+            aux_backward: Vec::new(),
+            aux_sums: AuxSums::new(aux.clone(), 0),
+            aux,
             phases_this_deal: 0,
             pixel_sharers: 1,
             stats: GroupStats::default(),
@@ -139,12 +155,19 @@ impl Group {
         &self.sums
     }
 
+    /// The auxiliary layers' sums of the current deal, per mask pixel.
+    pub fn local_aux(&self) -> &AuxSums {
+        &self.aux_sums
+    }
+
     /// Bytes of the group's buffers, including its map slot.
     pub fn capacity_bytes(&mut self, slot: &MapSlot<GroupMap>) -> usize {
         let own = self.mask.capacity() * 4
             + self.phases_before.capacity() * 4
             + self.backward.capacity() * std::mem::size_of::<LayerValues>()
-            + self.sums.capacity() * std::mem::size_of::<PixelSums>();
+            + self.sums.capacity() * std::mem::size_of::<PixelSums>()
+            + self.aux_backward.capacity() * 4
+            + self.aux_sums.capacity_bytes();
         // Asked between rounds, when every map is closed.
         let data = slot.data_mut(&mut self.token);
         own + data.photons.capacity_bytes() + data.gathered.capacity_bytes()
@@ -157,6 +180,9 @@ impl Group {
         self.backward.resize(mask.len(), [Rgb::ZERO; 4]);
         self.sums.clear();
         self.sums.resize(mask.len(), PixelSums::default());
+        self.aux_backward.clear();
+        self.aux_backward.resize(mask.len() * self.aux.channels(), 0.0);
+        self.aux_sums.reset(mask.len());
         self.mask = mask;
         self.phases_before = phases_before;
         self.phases_this_deal = 0;
@@ -200,6 +226,7 @@ impl Group {
         let index = if sharers > 1 { self.index as u64 } else { 0 };
         // Wavelengths per group phase: its camera and light paths join only among themselves.
         let spectrum = settings.phase_spectrum(scene, key);
+        let (aux_channels, ghost_offset) = (self.aux.channels(), self.ghost);
 
         // 1. Backward pass over the mask, in parallel.
         let t0 = Instant::now();
@@ -208,10 +235,11 @@ impl Group {
             .par_iter()
             .zip(self.backward.par_iter_mut())
             .zip(self.sums.par_iter().zip(self.phases_before.par_iter()))
+            .zip(aux_slots(&mut self.aux_backward, aux_channels, self.mask.len()))
             .enumerate()
             .fold(
                 || (Vec::<BackwardPhoton>::new(), 0u64),
-                |(mut photons, rays), (local, ((&pixel, out), (sums, &before)))| {
+                |(mut photons, rays), (local, (((&pixel, out), (sums, &before)), aux))| {
                     let bs = BackwardSettings {
                         max_depth,
                         backward_diffuse_depth: bdd,
@@ -227,7 +255,15 @@ impl Group {
                     let mut s = Sampler::new(settings.seed, Pass::Camera, key, pixel as u64);
                     let ray = cam.generate_ray(x, y, s.next_2d(), s.next_2d());
                     let mut st = BackwardStats::default();
-                    *out = trace_camera_path(scene, &bs, local as u32, ray, &mut s, &mut st, &mut |b| photons.push(b));
+                    let (values, ghost) =
+                        trace_camera_path(scene, &bs, local as u32, ray, &mut s, &mut st, &mut |b| photons.push(b));
+                    *out = values;
+                    if let Some(aux) = aux {
+                        aux.fill(0.0);
+                        if let Some(o) = ghost_offset {
+                            aux[o..o + 3].copy_from_slice(&[ghost.x, ghost.y, ghost.z]);
+                        }
+                    }
                     (photons, rays + st.rays)
                 },
             )
@@ -256,7 +292,7 @@ impl Group {
             } else {
                 data.photons.build();
             }
-            data.gathered.reset(self.mask.len());
+            data.gathered.reset(self.mask.len(), &self.aux);
         }
         drop(photons);
         self.stats.nanos.build += nanos_since(t0);
@@ -355,7 +391,33 @@ impl Group {
             v[Layer::Caustic as usize] += g[1] * inv_n;
             sums.add_phase(&v, 1);
         });
+        if aux_channels > 0 {
+            self.aux_backward
+                .par_chunks_mut(aux_channels)
+                .zip(self.aux_sums.values_mut().par_chunks_mut(aux_channels))
+                .enumerate()
+                .for_each(|(i, (b, sums))| {
+                    for (c, v) in b.iter_mut().enumerate() {
+                        *v += gathered.get_aux(i, c) * inv_n;
+                    }
+                    add_phase_to(sums, b);
+                });
+        }
         self.stats.nanos.closing += nanos_since(t0);
         self.stats.phases += 1;
+    }
+}
+
+/// One slot of `channels` values of `buffer` per pixel (`pixels` of them), or None for every pixel when there
+/// are no channels: an image without auxiliary layers iterates as it did without them.
+fn aux_slots(
+    buffer: &mut [f32],
+    channels: usize,
+    pixels: usize,
+) -> impl IndexedParallelIterator<Item = Option<&mut [f32]>> {
+    if channels == 0 {
+        Either::Right((0..pixels).into_par_iter().map(|_| None))
+    } else {
+        Either::Left(buffer.par_chunks_mut(channels).map(Some))
     }
 }

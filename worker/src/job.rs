@@ -5,7 +5,6 @@
 use crate::engine::{EngineConfig, ParallelEngine};
 use crate::memory_binding::{self, MemoryBinding};
 use crate::topology;
-use photonfarm::accumulation::PixelSums;
 use photonfarm::protocol::snapshot::{encode_delta, Compression};
 use photonfarm::protocol::{Job, Snapshot, WorkerInfo};
 use photonfarm::render::session::Progressive;
@@ -127,7 +126,8 @@ pub fn run(
     if !emit(JobEvent::Started(info)) {
         return;
     }
-    let mut base = vec![PixelSums::default(); engine.sums().pixels.len()];
+    // The sums at the previous snapshot, auxiliary layers included.
+    let mut base = engine.sums().clone();
     let mut seq = 0;
     let mut last = Instant::now();
     loop {
@@ -145,7 +145,7 @@ pub fn run(
         let interval = Duration::from_millis(interval_ms.load(Ordering::Relaxed).max(1));
         if stopping || last.elapsed() >= interval {
             seq += 1;
-            let current = &engine.sums().pixels;
+            let current = engine.sums();
             let snapshot = Snapshot {
                 seq,
                 totals: engine.totals(),
@@ -155,7 +155,8 @@ pub fn run(
                 peak_memory_bytes: photonfarm::render::memory::peak_rss_bytes().unwrap_or(0),
                 non_finite_dropped: photonfarm::accumulation::non_finite_dropped(),
             };
-            base.copy_from_slice(current);
+            base.pixels.copy_from_slice(&current.pixels);
+            base.aux.values_mut().copy_from_slice(current.aux.values());
             last = Instant::now();
             if !emit(JobEvent::Snapshot(snapshot)) {
                 return;

@@ -225,6 +225,8 @@ pub fn launch(
         },
     };
     let initial = resume.map(|r| (r.sums, r.totals));
-    let cluster = Cluster::start(members, plan, children, scene.camera.width, scene.camera.height, settings, initial)?;
+    let aux = photonfarm::accumulation::AuxLayout::for_scene(scene);
+    let cluster =
+        Cluster::start(members, plan, children, scene.camera.width, scene.camera.height, aux, settings, initial)?;
     Ok((cluster, layout, machine))
 }

@@ -8,7 +8,7 @@ pub mod topology;
 
 use anyhow::{Context, Result};
 use network::{Control, Event, NetworkPlan, Planned};
-use photonfarm::accumulation::Accumulator;
+use photonfarm::accumulation::{Accumulator, AuxLayout};
 use photonfarm::protocol::snapshot::apply_delta;
 use photonfarm::render::record::WorkerRecord;
 use photonfarm::render::session::Progressive;
@@ -69,22 +69,29 @@ pub struct Member {
 }
 
 impl Cluster {
-    /// Starts the network thread over `plan` and takes ownership of the local worker processes.
+    /// Starts the network thread over `plan` and takes ownership of the local worker processes. `aux` is the
+    /// scene's auxiliary layers, which every worker's snapshots carry.
+    #[allow(clippy::too_many_arguments)]
     pub fn start(
         members: Vec<Member>,
         plan: NetworkPlan,
         children: Vec<Child>,
         width: u32,
         height: u32,
+        aux: AuxLayout,
         settings: RenderSettings,
         initial: Option<(Accumulator, RayTotals)>,
     ) -> Result<Self> {
         let (sums, base_totals) = match initial {
             Some((s, t)) => {
                 anyhow::ensure!((s.width, s.height) == (width, height), "the checkpoint is for another image size");
+                anyhow::ensure!(
+                    *s.aux.layout() == aux,
+                    "the checkpoint's auxiliary layers are not the ones this version gives the scene"
+                );
                 (s, t)
             }
-            None => (Accumulator::new(width, height), RayTotals::default()),
+            None => (Accumulator::with_aux(width, height, aux), RayTotals::default()),
         };
         let accepts_joins = plan.public.is_some();
         let (events_tx, events) = std::sync::mpsc::channel();
@@ -193,7 +200,7 @@ impl Cluster {
                     self.set_state(worker, WorkerState::Lost(reason));
                     return false;
                 }
-                match apply_delta(&snapshot.delta, &mut self.sums.pixels) {
+                match apply_delta(&snapshot.delta, &mut self.sums) {
                     Ok(summary) => {
                         let v = &mut self.workers[worker];
                         v.last_seq = snapshot.seq;
@@ -346,7 +353,7 @@ impl Progressive for Cluster {
 
     fn bytes_per_pixel(&self) -> f64 {
         // The coordinator's own sums; workers' memory is in their records.
-        Accumulator::bytes_per_pixel() as f64
+        Accumulator::bytes_per_pixel(self.sums.aux.layout()) as f64
     }
 
     fn threads(&self) -> usize {

@@ -39,8 +39,9 @@ fn layer_of(diffuse_vertices: u32, through_specular: bool) -> Layer {
 }
 
 /// Estimates the camera ray's weight times the radiance arriving along it (the pixel measurement), split into
-/// layers; `max_depth` counts path segments. `spectrum` holds the wavelength the path takes if it meets
-/// dispersion (a path tracer can draw one per path).
+/// layers, with the part of it that is ghost light (`crate::ghost`, as the PBPM backward pass decides it);
+/// `max_depth` counts path segments. `spectrum` holds the wavelength the path takes if it meets dispersion (a
+/// path tracer can draw one per path).
 pub fn trace(
     scene: &Scene,
     max_depth: u32,
@@ -48,11 +49,13 @@ pub fn trace(
     camera_ray: CameraRay,
     sampler: &mut Sampler,
     stats: &mut PathStats,
-) -> LayerValues {
+) -> (LayerValues, Rgb) {
     let mut out: LayerValues = [Rgb::ZERO; 4];
+    // Some(light so far) once the path is a ghost path.
+    let mut ghost: Option<Rgb> = None;
     let weight = camera_ray.weight;
     if !(weight > 0.0 && weight.is_finite()) {
-        return out;
+        return (out, Rgb::ZERO);
     }
     let mut ray = camera_ray.ray;
     let mut beta = Rgb::splat(weight);
@@ -68,12 +71,15 @@ pub fn trace(
         if le != Rgb::ZERO {
             let le = path.quantity(le);
             match previous {
-                Previous::Specular => {
-                    out[layer_of(diffuse_vertices, diffuse_vertices > 0) as usize] += path.to_image(beta * le)
-                }
+                Previous::Specular => add(
+                    &mut out,
+                    &mut ghost,
+                    layer_of(diffuse_vertices, diffuse_vertices > 0),
+                    path.to_image(beta * le),
+                ),
                 Previous::Diffuse { p, pdf } => {
                     let w = power_heuristic(pdf, scene.lights.pdf_incident(p, &hit));
-                    out[layer_of(diffuse_vertices, false) as usize] += path.to_image(beta * le * w);
+                    add(&mut out, &mut ghost, layer_of(diffuse_vertices, false), path.to_image(beta * le * w));
                 }
             }
         }
@@ -87,10 +93,14 @@ pub fn trace(
             stats.rays += 1;
             if let Some(d) = sample_direct(scene, &hit, wo, albedo, &path, sampler) {
                 let w = if d.delta { 1.0 } else { power_heuristic(d.light_pdf, d.bsdf_pdf) };
-                out[layer_of(diffuse_vertices, false) as usize] += path.to_image(beta * d.value * w);
+                add(&mut out, &mut ghost, layer_of(diffuse_vertices, false), path.to_image(beta * d.value * w));
             }
         }
         let Some(s) = material.sample(&hit, wo, sampler.next_2d(), Transport::Radiance) else { break };
+        if diffuse_vertices == 0 && ghost.is_none() && crate::ghost::is_dielectric_reflection(&material, &hit, wo, s.wi)
+        {
+            ghost = Some(Rgb::ZERO);
+        }
         beta *= s.weight;
         previous = if s.delta { Previous::Specular } else { Previous::Diffuse { p: hit.p, pdf: s.pdf } };
         if segments >= 3 {
@@ -103,5 +113,14 @@ pub fn trace(
         }
         ray = Ray::new(offset_origin(hit.p, hit.ng, s.wi), s.wi);
     }
-    out
+    (out, ghost.unwrap_or(Rgb::ZERO))
+}
+
+/// Adds a contribution to its layer and, on a ghost path, to the ghost light.
+#[inline]
+fn add(out: &mut LayerValues, ghost: &mut Option<Rgb>, layer: Layer, value: Rgb) {
+    out[layer as usize] += value;
+    if let Some(g) = ghost {
+        *g += value;
+    }
 }

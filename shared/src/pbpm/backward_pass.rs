@@ -35,9 +35,10 @@ pub struct BackwardStats {
     pub photons: u64,
 }
 
-/// Traces one camera path for `pixel`, returns its visible-light and next-event contributions per layer and
-/// hands every backward photon to `store`. The camera ray's weight starts the path throughput, so that it also
-/// reaches the photons' filter τ and with them the forward pass's gathered light.
+/// Traces one camera path for `pixel`, returns its visible-light and next-event contributions per layer with
+/// the part of them that is ghost light (`crate::ghost`), and hands every backward photon to `store`. The
+/// camera ray's weight starts the path throughput, so that it also reaches the photons' filter τ and with them
+/// the forward pass's gathered light.
 pub fn trace_camera_path(
     scene: &Scene,
     settings: &BackwardSettings,
@@ -46,11 +47,13 @@ pub fn trace_camera_path(
     sampler: &mut Sampler,
     stats: &mut BackwardStats,
     store: &mut impl FnMut(BackwardPhoton),
-) -> LayerValues {
+) -> (LayerValues, Rgb) {
     let mut out: LayerValues = [Rgb::ZERO; 4];
+    // Some(light so far) once the path is a ghost path.
+    let mut ghost: Option<Rgb> = None;
     let weight = camera_ray.weight;
     if !(weight > 0.0 && weight.is_finite()) {
-        return out;
+        return (out, Rgb::ZERO);
     }
     let mut ray = camera_ray.ray;
     let mut beta = Rgb::splat(weight);
@@ -70,10 +73,10 @@ pub fn trace_camera_path(
         if le != Rgb::ZERO {
             let le = path.quantity(le);
             match (k, from_diffuse) {
-                (0, _) => out[Layer::VisibleLights as usize] += path.to_image(beta * le),
+                (0, _) => add(&mut out, &mut ghost, Layer::VisibleLights, path.to_image(beta * le)),
                 (_, Some((p, pdf))) => {
                     let w = power_heuristic(pdf, scene.lights.pdf_incident(p, &hit));
-                    out[direct_layer(k) as usize] += path.to_image(beta * le * w);
+                    add(&mut out, &mut ghost, direct_layer(k), path.to_image(beta * le * w));
                 }
                 // Emitter reached from a diffuse vertex through specular surfaces: a caustic, which the forward
                 // pass counts.
@@ -96,7 +99,7 @@ pub fn trace_camera_path(
             if let Some(d) = sample_direct(scene, &hit, wo, albedo, &path, sampler) {
                 // Without a BSDF continuation nothing else finds this light: next-event estimation takes it all.
                 let w = if d.delta || !continues { 1.0 } else { power_heuristic(d.light_pdf, d.bsdf_pdf) };
-                out[direct_layer(k) as usize] += path.to_image(beta * d.value * w);
+                add(&mut out, &mut ghost, direct_layer(k), path.to_image(beta * d.value * w));
             }
             // A merge needs at least two light segments (y1 is next-event estimation's).
             if segments + 2 <= settings.max_depth {
@@ -114,6 +117,7 @@ pub fn trace_camera_path(
                         k: k as u8,
                         segments: segments.min(255) as u8,
                         spectrum: path.tag(),
+                        ghost: ghost.is_some(),
                     });
                 }
             }
@@ -122,6 +126,9 @@ pub fn trace_camera_path(
             }
         }
         let Some(s) = material.sample(&hit, wo, sampler.next_2d(), Transport::Radiance) else { break };
+        if k == 0 && ghost.is_none() && crate::ghost::is_dielectric_reflection(&material, &hit, wo, s.wi) {
+            ghost = Some(Rgb::ZERO);
+        }
         beta *= s.weight;
         from_diffuse = (!s.delta).then_some((hit.p, s.pdf));
         if segments >= 4 {
@@ -135,7 +142,16 @@ pub fn trace_camera_path(
         }
         ray = Ray::new(offset_origin(hit.p, hit.ng, s.wi), s.wi);
     }
-    out
+    (out, ghost.unwrap_or(Rgb::ZERO))
+}
+
+/// Adds a contribution to its layer and, on a ghost path, to the ghost light.
+#[inline]
+fn add(out: &mut LayerValues, ghost: &mut Option<Rgb>, layer: Layer, value: Rgb) {
+    out[layer as usize] += value;
+    if let Some(g) = ghost {
+        *g += value;
+    }
 }
 
 /// The layer of light that arrives at diffuse vertex k straight from an emitter.

@@ -24,15 +24,16 @@ pub struct ForwardStats {
     pub capped: u64,
 }
 
-/// Where gathered light goes: (pixel, layer, τ · f · ΔΦ / (π r²)).
+/// Where gathered light goes: (pixel, layer, whether the photon's camera path is a ghost path so that the
+/// light is ghost light too, τ · f · ΔΦ / (π r²)).
 pub trait Gather {
-    fn add(&mut self, pixel: u32, layer: Layer, value: Rgb);
+    fn add(&mut self, pixel: u32, layer: Layer, ghost: bool, value: Rgb);
 }
 
-impl<F: FnMut(u32, Layer, Rgb)> Gather for F {
+impl<F: FnMut(u32, Layer, bool, Rgb)> Gather for F {
     #[inline]
-    fn add(&mut self, pixel: u32, layer: Layer, value: Rgb) {
-        self(pixel, layer, value)
+    fn add(&mut self, pixel: u32, layer: Layer, ghost: bool, value: Rgb) {
+        self(pixel, layer, ghost, value)
     }
 }
 
@@ -147,7 +148,7 @@ pub fn gather(
             _ => Layer::Indirect,
         };
         merges += 1;
-        sink.add(b.pixel, layer, join(b.weight, b.spectrum, v.flux, v.spectrum, v.phase));
+        sink.add(b.pixel, layer, b.ghost, join(b.weight, b.spectrum, v.flux, v.spectrum, v.phase));
         // eq. 4
     }
     merges

@@ -23,4 +23,15 @@ pub struct BackwardPhoton {
     /// 0 when the camera path is RGB; 1 + its wavelength class once it turned spectral, and `weight` then
     /// holds its value at that wavelength in every channel.
     pub spectrum: u8,
+    /// The camera path is a ghost path (`crate::ghost`): light gathered here is ghost light too. With
+    /// `spectrum` it fills the padding, so a photon stays 48 bytes.
+    pub ghost: bool,
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_ghost_bit_fits_in_the_photons_padding() {
+        assert_eq!(std::mem::size_of::<super::BackwardPhoton>(), 48);
+    }
 }

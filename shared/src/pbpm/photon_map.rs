@@ -216,6 +216,7 @@ mod tests {
             k: 1,
             segments: 1,
             spectrum: 0,
+            ghost: false,
         }
     }
 

@@ -1,14 +1,34 @@
 //! Snapshot deltas: per-pixel sums added since the previous snapshot, exact (f64), laid out plane by plane with
 //! the bytes of each plane shuffled by significance so that zstd finds the repetition in exponents and counts.
+//! The auxiliary layers' channels follow as further planes; the header names them, so that sums of another
+//! layout are refused rather than misread.
 
 use super::ProtocolError;
-use crate::accumulation::PixelSums;
+use crate::accumulation::{Accumulator, AuxLayout, PixelSums};
 
-const MAGIC: &[u8; 4] = b"PFD1";
+const MAGIC: &[u8; 4] = b"PFD2";
 /// f64 planes: 12 layer sums (4 layers × RGB), then 5 squared-luminance sums.
 const F64_PLANES: usize = 17;
-/// Bytes per pixel before compression: two u32 counts and the f64 planes.
+/// Bytes per pixel before compression: two u32 counts and the f64 planes (auxiliary planes not included).
 const BYTES_PER_PIXEL: usize = 8 + 8 * F64_PLANES;
+
+/// The header's description of the auxiliary layers: their count, then per layer its channels, the length of
+/// its name and the name.
+fn layout_bytes(layout: &AuxLayout) -> Vec<u8> {
+    let mut out = vec![layout.layers().len() as u8];
+    for l in layout.layers() {
+        out.push(l.channels);
+        out.push(l.name.len() as u8);
+        out.extend_from_slice(l.name.as_bytes());
+    }
+    out
+}
+
+/// Layer names of a layout, for messages.
+fn layout_names(layout: &AuxLayout) -> String {
+    let names: Vec<&str> = layout.layers().iter().map(|l| l.name.as_str()).collect();
+    format!("[{}]", names.join(", "))
+}
 
 fn f64_plane(p: &PixelSums, k: usize) -> f64 {
     if k < 12 {
@@ -79,13 +99,17 @@ impl Compression {
 }
 
 /// The delta `current − base`, compressed. Pixels with no new phase cost almost nothing after compression.
-pub fn encode_delta(current: &[PixelSums], base: &[PixelSums], compression: Compression) -> Vec<u8> {
-    assert_eq!(current.len(), base.len(), "a delta needs two sums of the same image");
-    let n = current.len();
-    let mut raw = Vec::with_capacity(8 + BYTES_PER_PIXEL * n);
+pub fn encode_delta(current: &Accumulator, base: &Accumulator, compression: Compression) -> Vec<u8> {
+    assert_eq!(current.pixels.len(), base.pixels.len(), "a delta needs two sums of the same image");
+    assert_eq!(current.aux.layout(), base.aux.layout(), "a delta needs two sums of the same layers");
+    let layout = layout_bytes(current.aux.layout());
+    let aux_channels = current.aux.layout().channels();
+    let n = current.pixels.len();
+    let mut raw = Vec::with_capacity(8 + layout.len() + (BYTES_PER_PIXEL + 8 * aux_channels) * n);
     raw.extend_from_slice(MAGIC);
     raw.extend_from_slice(&(n as u32).to_le_bytes());
-    let pairs = current.iter().zip(base);
+    raw.extend_from_slice(&layout);
+    let pairs = current.pixels.iter().zip(&base.pixels);
     let counts: Vec<[u8; 4]> = pairs.clone().map(|(c, b)| (c.phases - b.phases).to_le_bytes()).collect();
     push_shuffled(&mut raw, &counts);
     let counts: Vec<[u8; 4]> = pairs.clone().map(|(c, b)| (c.camera_rays - b.camera_rays).to_le_bytes()).collect();
@@ -94,6 +118,12 @@ pub fn encode_delta(current: &[PixelSums], base: &[PixelSums], compression: Comp
     for k in 0..F64_PLANES {
         plane.clear();
         plane.extend(pairs.clone().map(|(c, b)| (f64_plane(c, k) - f64_plane(b, k)).to_le_bytes()));
+        push_shuffled(&mut raw, &plane);
+    }
+    let (c, b) = (current.aux.values(), base.aux.values());
+    for k in 0..aux_channels {
+        plane.clear();
+        plane.extend((0..n).map(|i| (c[i * aux_channels + k] - b[i * aux_channels + k]).to_le_bytes()));
         push_shuffled(&mut raw, &plane);
     }
     zstd::bulk::compress(&raw, compression.level()).expect("zstd compression of an in-memory buffer cannot fail")
@@ -108,22 +138,32 @@ pub struct DeltaSummary {
     pub raw_bytes: usize,
 }
 
-/// Adds a delta to `sums` after checking all of it: the image size, finite numbers, non-negative squares.
-/// A refused delta leaves `sums` unchanged.
-pub fn apply_delta(bytes: &[u8], sums: &mut [PixelSums]) -> Result<DeltaSummary, ProtocolError> {
-    let n = sums.len();
-    let expected = 8 + BYTES_PER_PIXEL * n;
+/// Adds a delta to `sums` after checking all of it: the image size, the auxiliary layers, finite numbers,
+/// non-negative squares. A refused delta leaves `sums` unchanged.
+pub fn apply_delta(bytes: &[u8], sums: &mut Accumulator) -> Result<DeltaSummary, ProtocolError> {
+    let n = sums.pixels.len();
+    let layout = layout_bytes(sums.aux.layout());
+    let aux_channels = sums.aux.layout().channels();
+    let expected = 8 + layout.len() + (BYTES_PER_PIXEL + 8 * aux_channels) * n;
     let raw = zstd::bulk::decompress(bytes, expected)
         .map_err(|e| ProtocolError::Snapshot(format!("cannot decompress: {e}")))?;
     if raw.len() != expected || &raw[..4] != MAGIC || raw[4..8] != (n as u32).to_le_bytes() {
         return Err(ProtocolError::Snapshot(format!(
-            "expected a delta of {n} pixels ({expected} bytes), got {} bytes",
+            "expected a delta of {n} pixels with the auxiliary layers {} ({expected} bytes), got {} bytes",
+            layout_names(sums.aux.layout()),
             raw.len()
         )));
     }
-    let body = &raw[8..];
+    if raw[8..8 + layout.len()] != layout[..] {
+        return Err(ProtocolError::Snapshot(format!(
+            "the delta's auxiliary layers are not the image's {}",
+            layout_names(sums.aux.layout())
+        )));
+    }
+    let body = &raw[8 + layout.len()..];
     let (phases, rest) = body.split_at(4 * n);
-    let (rays, planes) = rest.split_at(4 * n);
+    let (rays, rest) = rest.split_at(4 * n);
+    let (planes, aux_planes) = rest.split_at(8 * n * F64_PLANES);
     let values: Vec<Vec<f64>> = (0..F64_PLANES)
         .map(|k| unshuffle::<8>(&planes[8 * n * k..8 * n * (k + 1)], n).into_iter().map(f64::from_le_bytes).collect())
         .collect();
@@ -132,9 +172,25 @@ pub fn apply_delta(bytes: &[u8], sums: &mut [PixelSums]) -> Result<DeltaSummary,
             return Err(ProtocolError::Snapshot(format!("pixel {i} has an invalid sum ({v})")));
         }
     }
+    let aux_values: Vec<Vec<f64>> = (0..aux_channels)
+        .map(|k| {
+            unshuffle::<8>(&aux_planes[8 * n * k..8 * n * (k + 1)], n).into_iter().map(f64::from_le_bytes).collect()
+        })
+        .collect();
+    for plane in &aux_values {
+        if let Some((i, v)) = plane.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+            return Err(ProtocolError::Snapshot(format!("pixel {i} has an invalid auxiliary sum ({v})")));
+        }
+    }
     let (phases, rays) = (unshuffle::<4>(phases, n), unshuffle::<4>(rays, n));
+    let aux = sums.aux.values_mut();
+    for (k, plane) in aux_values.iter().enumerate() {
+        for (i, v) in plane.iter().enumerate() {
+            aux[i * aux_channels + k] += v;
+        }
+    }
     let mut pixel_phases = 0u64;
-    for (i, p) in sums.iter_mut().enumerate() {
+    for (i, p) in sums.pixels.iter_mut().enumerate() {
         let dp = u32::from_le_bytes(phases[i]);
         p.phases += dp;
         p.camera_rays += u32::from_le_bytes(rays[i]);
@@ -149,65 +205,116 @@ pub fn apply_delta(bytes: &[u8], sums: &mut [PixelSums]) -> Result<DeltaSummary,
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::accumulation::AuxLayer;
     use crate::color::Rgb;
 
-    fn sums(n: usize, phases: u32, seed: f32) -> Vec<PixelSums> {
-        (0..n)
-            .map(|i| {
-                let mut p = PixelSums::default();
-                for j in 0..phases {
-                    let v = Rgb::splat(seed + (i as f32 * 0.37 + j as f32 * 1.3).sin().abs());
-                    p.add_phase(&[v, v * 0.5, v * 0.25, Rgb::ZERO], 1);
-                }
-                p
-            })
-            .collect()
+    fn ghost_layout() -> AuxLayout {
+        AuxLayout::new(vec![AuxLayer { name: "ghost".into(), channels: 3 }])
     }
 
-    #[test]
-    fn deltas_add_up_to_the_sums_they_were_taken_from() {
-        let base = sums(100, 3, 0.1);
-        let mut current = base.clone();
-        for (c, extra) in current.iter_mut().zip(sums(100, 2, 0.7)) {
-            c.merge(&extra);
+    /// Sums of `phases` phases per pixel; with a layout, every auxiliary channel gets a part of each phase.
+    fn sums(n: usize, phases: u32, seed: f32, aux: &AuxLayout) -> Accumulator {
+        let mut a = Accumulator::with_aux(n as u32, 1, aux.clone());
+        for i in 0..n {
+            for j in 0..phases {
+                let v = Rgb::splat(seed + (i as f32 * 0.37 + j as f32 * 1.3).sin().abs());
+                a.add_phase(i, &[v, v * 0.5, v * 0.25, Rgb::ZERO], 1);
+                let part: Vec<f32> = (0..aux.channels()).map(|c| v.x * 0.1 * (c + 1) as f32).collect();
+                a.aux.add_phase(i, &part);
+            }
         }
+        a
+    }
+
+    fn check_round_trip(aux: &AuxLayout) {
+        let base = sums(100, 3, 0.1, aux);
+        let mut current = base.clone();
+        current.merge(&sums(100, 2, 0.7, aux));
         for compression in [Compression::Fast, Compression::Small] {
             let mut receiver = base.clone();
             let summary = apply_delta(&encode_delta(&current, &base, compression), &mut receiver).unwrap();
             assert_eq!(summary.pixel_phases, 200);
-            for (r, c) in receiver.iter().zip(&current) {
+            for (r, c) in receiver.pixels.iter().zip(&current.pixels) {
                 assert_eq!((r.phases, r.camera_rays), (c.phases, c.camera_rays));
                 for k in 0..F64_PLANES {
                     assert!((f64_plane(r, k) - f64_plane(c, k)).abs() <= 1e-12 * f64_plane(c, k).abs().max(1.0));
                 }
             }
+            assert_eq!(receiver.aux.values().len(), current.aux.values().len());
+            for (r, c) in receiver.aux.values().iter().zip(current.aux.values()) {
+                assert!((r - c).abs() <= 1e-12 * c.abs().max(1.0), "auxiliary sum {r} vs {c}");
+            }
         }
     }
 
     #[test]
+    fn deltas_add_up_to_the_sums_they_were_taken_from() {
+        check_round_trip(&AuxLayout::default());
+    }
+
+    #[test]
+    fn deltas_with_ghost_planes_add_up_to_the_sums_they_were_taken_from() {
+        assert!(sums(10, 2, 0.5, &ghost_layout()).aux.values().iter().all(|&v| v > 0.0), "the test sums are empty");
+        check_round_trip(&ghost_layout());
+        check_round_trip(&AuxLayout::new(vec![
+            AuxLayer { name: "ghost".into(), channels: 3 },
+            AuxLayer { name: "band_550".into(), channels: 1 },
+        ]));
+    }
+
+    #[test]
+    fn a_delta_of_other_auxiliary_layers_is_refused_and_changes_nothing() {
+        let ghost = sums(10, 1, 0.2, &ghost_layout());
+        let delta = encode_delta(&ghost, &Accumulator::with_aux(10, 1, ghost_layout()), Compression::Fast);
+        let mut plain = Accumulator::new(10, 1);
+        assert!(apply_delta(&delta, &mut plain).is_err(), "ghost planes into an image without them");
+        let bands = AuxLayout::new(vec![
+            AuxLayer { name: "band_450".into(), channels: 1 },
+            AuxLayer { name: "band_550".into(), channels: 1 },
+            AuxLayer { name: "band_650".into(), channels: 1 },
+        ]);
+        // As many channels as the ghost layer: only the names tell them apart.
+        let mut other = Accumulator::with_aux(10, 1, bands);
+        let e = apply_delta(&delta, &mut other).unwrap_err().to_string();
+        assert!(e.contains("auxiliary layers"), "{e}");
+        assert!(other.pixels.iter().all(|p| p.phases == 0) && other.aux.values().iter().all(|&v| v == 0.0));
+        let plain_delta = encode_delta(&Accumulator::new(10, 1), &Accumulator::new(10, 1), Compression::Fast);
+        let mut with_ghost = Accumulator::with_aux(10, 1, ghost_layout());
+        assert!(apply_delta(&plain_delta, &mut with_ghost).is_err(), "a delta without the ghost planes");
+    }
+
+    #[test]
     fn a_delta_for_another_image_size_or_with_garbage_is_refused_and_changes_nothing() {
-        let current = sums(10, 1, 0.2);
-        let delta = encode_delta(&current, &vec![PixelSums::default(); 10], Compression::Small);
-        let mut other = vec![PixelSums::default(); 11];
+        let none = AuxLayout::default();
+        let current = sums(10, 1, 0.2, &none);
+        let delta = encode_delta(&current, &Accumulator::new(10, 1), Compression::Small);
+        let mut other = Accumulator::new(11, 1);
         assert!(apply_delta(&delta, &mut other).is_err());
-        assert!(other.iter().all(|p| p.phases == 0));
+        assert!(other.pixels.iter().all(|p| p.phases == 0));
         assert!(apply_delta(b"not zstd at all", &mut other).is_err());
         // A NaN inside a valid frame.
         let mut bad = current.clone();
-        bad[3].sum[0][0] = f64::NAN;
-        let mut target = vec![PixelSums::default(); 10];
-        assert!(
-            apply_delta(&encode_delta(&bad, &vec![PixelSums::default(); 10], Compression::Fast), &mut target).is_err()
-        );
-        assert!(target.iter().all(|p| p.phases == 0));
+        bad.pixels[3].sum[0][0] = f64::NAN;
+        let mut target = Accumulator::new(10, 1);
+        assert!(apply_delta(&encode_delta(&bad, &Accumulator::new(10, 1), Compression::Fast), &mut target).is_err());
+        assert!(target.pixels.iter().all(|p| p.phases == 0));
+        // A NaN in a ghost plane.
+        let mut bad = sums(10, 1, 0.2, &ghost_layout());
+        bad.aux.values_mut()[7] = f64::NAN;
+        let zero = Accumulator::with_aux(10, 1, ghost_layout());
+        let mut target = zero.clone();
+        assert!(apply_delta(&encode_delta(&bad, &zero, Compression::Fast), &mut target).is_err());
+        assert_eq!(target, zero);
     }
 
     #[test]
     fn a_delta_without_new_phases_compresses_to_almost_nothing() {
-        let s = sums(4096, 2, 0.3);
-        for compression in [Compression::Fast, Compression::Small] {
-            let len = encode_delta(&s, &s, compression).len();
-            assert!(len < 4096, "{compression:?}: {len} bytes");
+        for aux in [AuxLayout::default(), ghost_layout()] {
+            let s = sums(4096, 2, 0.3, &aux);
+            for compression in [Compression::Fast, Compression::Small] {
+                let len = encode_delta(&s, &s, compression).len();
+                assert!(len < 4096, "{compression:?}: {len} bytes");
+            }
         }
     }
 }

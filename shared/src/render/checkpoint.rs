@@ -4,12 +4,13 @@
 use super::engine::RayTotals;
 use super::record::HistoryEntry;
 use super::settings::RenderSettings;
-use crate::accumulation::{Accumulator, PixelSums};
+use crate::accumulation::{Accumulator, AuxLayout};
 use crate::protocol::snapshot::{apply_delta, encode_delta, Compression};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
-const FORMAT: u32 = 1;
+/// 2: the sums' auxiliary layers (the ghost layer) are kept.
+const FORMAT: u32 = 2;
 
 /// Everything a resumed run continues from.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -26,6 +27,8 @@ pub struct Checkpoint {
     pub elapsed_s: f64,
     pub totals: RayTotals,
     pub history: Vec<HistoryEntry>,
+    /// The auxiliary layers of the sums.
+    pub aux: AuxLayout,
     /// The sums, as an exact delta from zero (see `protocol::snapshot`).
     sums: Vec<u8>,
 }
@@ -54,7 +57,7 @@ impl Checkpoint {
         totals: RayTotals,
         history: &[HistoryEntry],
     ) -> Self {
-        let zero = vec![PixelSums::default(); sums.pixels.len()];
+        let zero = Accumulator::with_aux(sums.width, sums.height, sums.aux.layout().clone());
         Checkpoint {
             format: FORMAT,
             scene_hash: scene_hash.into(),
@@ -66,14 +69,15 @@ impl Checkpoint {
             elapsed_s,
             totals,
             history: history.to_vec(),
-            sums: encode_delta(&sums.pixels, &zero, Compression::Small),
+            aux: sums.aux.layout().clone(),
+            sums: encode_delta(sums, &zero, Compression::Small),
         }
     }
 
     /// The sums it holds.
     pub fn sums(&self) -> Result<Accumulator, String> {
-        let mut a = Accumulator::new(self.width, self.height);
-        apply_delta(&self.sums, &mut a.pixels).map_err(|e| e.to_string())?;
+        let mut a = Accumulator::with_aux(self.width, self.height, self.aux.clone());
+        apply_delta(&self.sums, &mut a).map_err(|e| e.to_string())?;
         Ok(a)
     }
 
@@ -111,10 +115,12 @@ mod tests {
     use crate::render::Method;
 
     #[test]
-    fn a_checkpoint_gives_back_its_sums_exactly() {
-        let mut a = Accumulator::new(8, 4);
+    fn a_checkpoint_gives_back_its_sums_and_auxiliary_layers_exactly() {
+        let ghost = AuxLayout::new(vec![crate::accumulation::AuxLayer { name: "ghost".into(), channels: 3 }]);
+        let mut a = Accumulator::with_aux(8, 4, ghost);
         for i in 0..32 {
             a.add_phase(i, &[Rgb::splat(i as f32 * 0.1), Rgb::ONE, Rgb::ZERO, Rgb::splat(0.3)], 1);
+            a.aux.add_phase(i, &[0.01 * i as f32, 0.5, 0.25]);
         }
         let settings = RenderSettings {
             method: Method::Pbpm,
@@ -143,7 +149,7 @@ mod tests {
         c.save(&path).unwrap();
         let back = Checkpoint::load(&path).unwrap();
         assert_eq!(back, c);
-        assert_eq!(back.sums().unwrap().pixels, a.pixels);
+        assert_eq!(back.sums().unwrap(), a, "the sums and their ghost layer");
         std::fs::write(&path, b"garbage").unwrap();
         assert!(matches!(Checkpoint::load(&path), Err(CheckpointError::Format { .. })));
     }

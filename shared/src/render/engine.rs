@@ -1,7 +1,7 @@
 //! The single-threaded progressive engine: the reference every parallel method must agree with.
 
 use super::settings::{Method, RenderSettings};
-use crate::accumulation::Accumulator;
+use crate::accumulation::{Accumulator, AuxLayout};
 use crate::color::Rgb;
 use crate::integrator::{path_tracer, Layer, LayerValues};
 use crate::pbpm::{
@@ -60,6 +60,12 @@ pub struct Engine<'s> {
     phase_values: Vec<LayerValues>,
     /// Gathered (indirect, caustic) luminance of the phase, before division by the light-path count.
     gathered: Vec<[Rgb; 2]>,
+    /// The phase's auxiliary values per pixel (`sums.aux`'s layout), from the camera pass, and the auxiliary
+    /// light gathered (before division by the light-path count); both empty without auxiliary layers.
+    aux_phase: Vec<f32>,
+    aux_gathered: Vec<f32>,
+    /// Where the ghost layer's channels start among a pixel's auxiliary channels, when the scene has one.
+    ghost: Option<usize>,
     totals: RayTotals,
 }
 
@@ -70,13 +76,18 @@ impl<'s> Engine<'s> {
         let mut map = PhotonMap::new();
         // At most one photon per diffuse vertex of each camera path.
         map.reserve(pixels * settings.backward_diffuse_depth as usize);
+        let aux = AuxLayout::for_scene(scene);
+        let aux_channels = aux.channels();
         Engine {
             scene,
             settings,
-            sums: Accumulator::new(scene.camera.width, scene.camera.height),
+            ghost: aux.offset(crate::ghost::GHOST_LAYER),
+            sums: Accumulator::with_aux(scene.camera.width, scene.camera.height, aux),
             map,
             phase_values: vec![[Rgb::ZERO; 4]; pixels],
             gathered: vec![[Rgb::ZERO; 2]; pixels],
+            aux_phase: vec![0.0; pixels * aux_channels],
+            aux_gathered: vec![0.0; pixels * aux_channels],
             totals: RayTotals::default(),
         }
     }
@@ -102,7 +113,34 @@ impl<'s> Engine<'s> {
         let fixed = self.sums.pixels.capacity() * std::mem::size_of::<crate::accumulation::PixelSums>()
             + self.phase_values.capacity() * std::mem::size_of::<LayerValues>()
             + self.gathered.capacity() * std::mem::size_of::<[Rgb; 2]>();
-        (fixed + self.map.capacity_bytes()) as f64 / pixels as f64
+        let aux = self.sums.aux.capacity_bytes() + (self.aux_phase.capacity() + self.aux_gathered.capacity()) * 4;
+        (fixed + aux + self.map.capacity_bytes()) as f64 / pixels as f64
+    }
+
+    /// Starts a pixel's auxiliary values of the phase from its camera path: its ghost light in the ghost layer
+    /// (nothing without auxiliary layers).
+    #[inline]
+    fn start_aux(&mut self, pixel: usize, ghost: Rgb) {
+        let n = self.sums.aux.layout().channels();
+        self.aux_phase[pixel * n..(pixel + 1) * n].fill(0.0);
+        if let Some(o) = self.ghost {
+            let base = pixel * n + o;
+            self.aux_phase[base..base + 3].copy_from_slice(&[ghost.x, ghost.y, ghost.z]);
+        }
+    }
+
+    /// Closes a pixel's auxiliary values of the phase, adding the gathered ones divided by the light paths.
+    #[inline]
+    fn close_aux(&mut self, pixel: usize, inv_n: f32) {
+        let n = self.sums.aux.layout().channels();
+        if n == 0 {
+            return;
+        }
+        let range = pixel * n..(pixel + 1) * n;
+        for (v, g) in self.aux_phase[range.clone()].iter_mut().zip(&self.aux_gathered[range.clone()]) {
+            *v += g * inv_n;
+        }
+        self.sums.aux.add_phase(pixel, &self.aux_phase[range]);
     }
 
     /// Renders one more phase and closes it into the sums.
@@ -121,7 +159,8 @@ impl<'s> Engine<'s> {
 
     fn path_phase(&mut self) -> PhaseReport {
         let phase = self.totals.phases + 1;
-        let cam = &self.scene.camera;
+        let scene = self.scene;
+        let cam = &scene.camera;
         let mut stats = path_tracer::PathStats::default();
         let spectral = self.scene.is_spectral();
         for pixel in 0..cam.pixel_count() {
@@ -130,12 +169,15 @@ impl<'s> Engine<'s> {
             let ray = cam.generate_ray(x, y, s.next_2d(), s.next_2d());
             // Paths of a path tracer never join: each draws its own wavelength.
             let spectrum = if spectral {
-                self.settings.phase_spectrum(self.scene, phase << 32 | pixel as u64)
+                self.settings.phase_spectrum(scene, phase << 32 | pixel as u64)
             } else {
                 PhaseSpectrum::RGB
             };
-            let v = path_tracer::trace(self.scene, self.settings.max_depth, &spectrum, ray, &mut s, &mut stats);
+            let (v, ghost) = path_tracer::trace(scene, self.settings.max_depth, &spectrum, ray, &mut s, &mut stats);
             self.sums.add_phase(pixel, &v, 1);
+            self.start_aux(pixel, ghost);
+            // Nothing is gathered: the gathered buffer stays zero.
+            self.close_aux(pixel, 0.0);
         }
         PhaseReport { phase, backward_rays: stats.rays, ..Default::default() }
     }
@@ -159,8 +201,10 @@ impl<'s> Engine<'s> {
             let mut s = Sampler::new(self.settings.seed, Pass::Camera, phase, pixel as u64);
             let ray = cam.generate_ray(x, y, s.next_2d(), s.next_2d());
             let map = &mut self.map;
-            self.phase_values[pixel] =
+            let (v, ghost) =
                 trace_camera_path(scene, &bs, pixel as u32, ray, &mut s, &mut bstats, &mut |b| map.push(b));
+            self.phase_values[pixel] = v;
+            self.start_aux(pixel, ghost);
         }
         // 2. Backward photon map.
         self.map.build();
@@ -170,10 +214,19 @@ impl<'s> Engine<'s> {
         for g in self.gathered.iter_mut() {
             *g = [Rgb::ZERO; 2];
         }
+        self.aux_gathered.fill(0.0);
         let gathered = &mut self.gathered;
-        let mut sink = |pixel: u32, layer: Layer, v: Rgb| {
+        let (aux_gathered, aux_channels, ghost_offset) =
+            (&mut self.aux_gathered, self.sums.aux.layout().channels(), self.ghost);
+        let mut sink = |pixel: u32, layer: Layer, ghost: bool, v: Rgb| {
             let slot = if layer == Layer::Caustic { 1 } else { 0 };
             gathered[pixel as usize][slot] += v;
+            if let (true, Some(o)) = (ghost, ghost_offset) {
+                let base = pixel as usize * aux_channels + o;
+                for (a, c) in aux_gathered[base..base + 3].iter_mut().zip([v.x, v.y, v.z]) {
+                    *a += c;
+                }
+            }
         };
         let (max_depth, bdd) = (self.settings.max_depth, self.settings.backward_diffuse_depth);
         let map = &self.map;
@@ -193,6 +246,7 @@ impl<'s> Engine<'s> {
             v[Layer::Indirect as usize] += self.gathered[pixel][0] * inv_n;
             v[Layer::Caustic as usize] += self.gathered[pixel][1] * inv_n;
             self.sums.add_phase(pixel, &v, 1);
+            self.close_aux(pixel, inv_n);
         }
         self.totals.backward_photons += bstats.photons;
         self.totals.capped_light_paths += fstats.capped;

@@ -5,7 +5,8 @@ use crate::color::luminance_f64;
 use crate::image_io::exr_file::LayerImage;
 use crate::integrator::Layer;
 
-/// Layers written to the EXR: the four components, their total, and the total's standard error (grey).
+/// Layers written to the EXR: the four components, their total, the total's standard error (grey), and the
+/// auxiliary layers the image has (e.g. `ghost`; a one-channel layer as grey).
 pub fn layer_images(sums: &Accumulator) -> Vec<LayerImage> {
     let (w, h) = (sums.width as usize, sums.height as usize);
     let mut out: Vec<LayerImage> = Layer::ALL.iter().map(|l| LayerImage::new(l.name(), w, h)).collect();
@@ -24,6 +25,14 @@ pub fn layer_images(sums: &Accumulator) -> Vec<LayerImage> {
     }
     out.push(total);
     out.push(sem);
+    for layer in sums.aux.layout().layers() {
+        let mut image = LayerImage::new(layer.name.clone(), w, h);
+        for (i, px) in image.rgb.iter_mut().enumerate() {
+            let m = sums.aux_mean(i, &layer.name).expect("the layer is in the layout");
+            *px = [m[0] as f32, m[1] as f32, m[2] as f32];
+        }
+        out.push(image);
+    }
     out
 }
 
