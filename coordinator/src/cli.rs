@@ -212,6 +212,10 @@ pub struct RenderArgs {
     /// Override the number of light paths per phase, per pixel.
     #[arg(long)]
     pub light_paths_per_pixel: Option<f32>,
+    /// Also write N wavelength bands of equal width over 380–780 nm as grey EXR layers (band_380-430nm, …):
+    /// every path is then spectral from its first vertex, which costs an RGB scene colour noise.
+    #[arg(long, value_name = "N")]
+    pub spectral_output: Option<u32>,
     /// A reference EXR (layer "total", or a plain RGB EXR) to measure the true error against.
     #[arg(long, value_name = "EXR")]
     pub reference: Option<PathBuf>,

@@ -60,6 +60,18 @@ pub fn run(args: RenderArgs) -> Result<()> {
         }
         settings.light_paths_per_pixel = l;
     }
+    if let Some(n) = args.spectral_output {
+        if !photonfarm::spectrum::ENABLED {
+            bail!("--spectral-output needs spectral rendering, which this build leaves out (built without the `spectral` feature)");
+        }
+        if !(1..=photonfarm::spectrum::MAX_BANDS).contains(&n) {
+            bail!(
+                "--spectral-output must be between 1 and {} bands (1 nm each at most)",
+                photonfarm::spectrum::MAX_BANDS
+            );
+        }
+        settings.spectral_bands = n;
+    }
     let reference = match &args.reference {
         Some(p) => Some(Reference::load(p, scene.camera.width, scene.camera.height)?),
         None => None,
@@ -77,8 +89,9 @@ pub fn run(args: RenderArgs) -> Result<()> {
                 || args.backward_diffuse_depth.is_some()
                 || args.radius_scale.is_some()
                 || args.light_paths_per_pixel.is_some()
+                || args.spectral_output.is_some()
             {
-                bail!("a resumed run keeps the settings of its checkpoint: drop --max-depth, --backward-diffuse-depth, --radius-scale and --light-paths-per-pixel");
+                bail!("a resumed run keeps the settings of its checkpoint: drop --max-depth, --backward-diffuse-depth, --radius-scale, --light-paths-per-pixel and --spectral-output");
             }
             let c = Checkpoint::load(&from.join(CHECKPOINT))?;
             if c.scene_hash != scene.hash {
@@ -330,7 +343,7 @@ fn fit_memory(
     let pixels = scene.camera.width as u64 * scene.camera.height as u64;
     let need = |t: usize| -> Result<u64> {
         let c = EngineConfig::for_method(method, t, args.group_size, cores.to_vec())?;
-        let aux = photonfarm::accumulation::AuxLayout::for_scene(scene);
+        let aux = photonfarm::accumulation::AuxLayout::for_scene(scene, settings.spectral_bands);
         Ok(base + (c.bytes_per_pixel(settings.backward_diffuse_depth, &aux) * pixels as f64) as u64)
     };
     let mb = |b: u64| format!("{:.0} MiB", b as f64 / (1u64 << 20) as f64);

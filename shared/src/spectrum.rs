@@ -321,6 +321,33 @@ impl PathSpectrum {
     }
 }
 
+/// Most wavelength bands `--spectral-output` may ask for: 1 nm each.
+pub const MAX_BANDS: u32 = 400;
+
+/// The name of band `b` of `bands` (its EXR layer), e.g. "band_380-390nm".
+pub fn band_name(b: u32, bands: u32) -> String {
+    let width = (LAMBDA_MAX - LAMBDA_MIN) / bands as f32;
+    let (lo, hi) = (LAMBDA_MIN + b as f32 * width, LAMBDA_MIN + (b + 1) as f32 * width);
+    format!("band_{}-{}nm", lo.round() as u32, hi.round() as u32)
+}
+
+/// A pixel's spectral-output values for one phase, when its whole phase value `total` was carried at one
+/// wavelength `w` (every path spectral from the start): its spectral value at λ is total · v / (v · v) with
+/// v = rgb̄(λ)/p(λ), and the band holding λ gets that value over p(λ) Δλ — over phases an unbiased estimate of
+/// the spectrum averaged over the band (a flat spectrum of value 1 reads 1 in every band). Other bands get 0.
+pub fn band_values(total: Rgb, w: &Wavelength, out: &mut [f32]) {
+    out.fill(0.0);
+    let bands = out.len();
+    let v = w.to_rgb;
+    let vv = v.dot(v);
+    if bands == 0 || !(vv > 0.0) || !(w.pdf > 0.0) {
+        return;
+    }
+    let width = (LAMBDA_MAX - LAMBDA_MIN) / bands as f32;
+    let b = (((w.nm - LAMBDA_MIN) / width) as usize).min(bands - 1);
+    out[b] = total.dot(v) / vv / (w.pdf * width);
+}
+
 /// Joins a camera-path weight and a light-path flux into an image contribution (paper eq. 4's τ · ΔΦ). Each
 /// side is RGB (tag 0) or spectral at its class's wavelength (tag 1 + class). An RGB side is read at the
 /// other's wavelength. Two spectral sides join only within one class: a camera path meets 1/K of the light
@@ -436,6 +463,28 @@ mod tests {
         assert_eq!(join(Rgb::splat(0.5), 3, Rgb::splat(2.0), 2, &phase), Rgb::ZERO);
         let s = join(Rgb::splat(0.5), 3, Rgb::splat(2.0), 3, &phase);
         assert!((s - w.to_rgb(PHASE_WAVELENGTHS as f32)).abs().max_element() < 1e-5);
+    }
+
+    #[test]
+    fn spectral_output_bands_read_a_flat_spectrum_as_one_in_every_band() {
+        // A path that carried the flat spectrum 1 at λ: its image value is to_rgb(1). Averaged over the
+        // sampling density, every band must read 1.
+        let bands = 8;
+        let n = 40_000;
+        let mut sum = vec![0.0f64; bands];
+        let mut out = vec![0.0f32; bands];
+        for i in 0..n {
+            let w = Wavelength::sample((i as f32 + 0.5) / n as f32);
+            band_values(w.to_rgb(1.0), &w, &mut out);
+            for (s, v) in sum.iter_mut().zip(&out) {
+                *s += *v as f64;
+            }
+        }
+        for (b, s) in sum.iter().enumerate() {
+            assert!((s / n as f64 - 1.0).abs() < 2e-3, "band {} reads {}", band_name(b as u32, 8), s / n as f64);
+        }
+        assert_eq!(band_name(0, 8), "band_380-430nm");
+        assert_eq!(band_name(7, 8), "band_730-780nm");
     }
 
     #[test]

@@ -456,7 +456,7 @@ fn only_a_sensor_behind_glass_gets_ghost_planes_and_other_scenes_keep_their_byte
     // Pinhole cameras, with (caustic) and without (cornell) glass in the scene: no lens to reflect in.
     for name in ["cornell.toml", "caustic.toml"] {
         let scene = common::shipped(name);
-        assert_eq!(AuxLayout::for_scene(&scene), AuxLayout::default(), "{name}");
+        assert_eq!(AuxLayout::for_scene(&scene, 0), AuxLayout::default(), "{name}");
         let engine = Engine::new(&scene, common::settings(&scene, Method::Pbpm, 1));
         assert!(engine.sums().aux.values().is_empty(), "{name}");
         let expected = bytes_per_pixel_without_auxiliary_layers(&scene);

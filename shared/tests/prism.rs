@@ -180,3 +180,57 @@ fn rendered_spectrum_puts_each_colour_where_snell_sends_its_wavelengths() {
         (common::mean_sem(&centroids[0]).0, common::mean_sem(&centroids[1]).0, common::mean_sem(&centroids[2]).0);
     assert!(r > g && g > b, "spectrum order red {r}, green {g}, blue {b}");
 }
+
+#[test]
+fn spectral_output_bands_each_land_where_snell_sends_their_wavelengths() {
+    let scene = common::shipped("prism.toml");
+    let cam = &scene.camera;
+    let bands = 8u32;
+    let mut settings = common::settings(&scene, Method::Pbpm, 5);
+    settings.spectral_bands = bands;
+    let mut engine = Engine::new(&scene, settings);
+    for _ in 0..400 {
+        engine.run_phase();
+    }
+    let sums = engine.sums();
+    let pixel_y: Vec<Option<f64>> = (0..cam.pixel_count())
+        .map(|p| {
+            let (x, y) = (p as u32 % cam.width, p as u32 / cam.width);
+            let r = cam.generate_ray(x, y, Vec2::splat(0.5), Vec2::splat(0.5)).ray;
+            scene.geometry.intersect(&r).filter(|h| h.p.x > 0.45).map(|h| h.p.y as f64)
+        })
+        .collect();
+    let width = (LAMBDA_MAX - LAMBDA_MIN) / bands as f32;
+    let mut previous = f64::NEG_INFINITY;
+    for b in 0..bands {
+        let name = photonfarm::spectrum::band_name(b, bands);
+        let (mut m, mut w) = (0.0, 0.0);
+        for (p, y) in pixel_y.iter().enumerate() {
+            let v = sums.aux_mean(p, &name).expect("a layer per band")[0];
+            assert!(v.is_finite() && v >= 0.0, "{name}: pixel {p} reads {v}");
+            if let Some(y) = y {
+                m += v * y;
+                w += v;
+            }
+        }
+        let centroid = m / w;
+        let (lo, hi) = (LAMBDA_MIN + b as f32 * width, LAMBDA_MIN + (b + 1) as f32 * width);
+        let (y_lo, y_hi) =
+            (trace_central_ray(&scene, lo).screen.y as f64, trace_central_ray(&scene, hi).screen.y as f64);
+        println!(
+            "{name}: centroid {:.2} mm, Snell puts the band at {:.2} … {:.2} mm",
+            centroid * 1e3,
+            y_lo * 1e3,
+            y_hi * 1e3
+        );
+        // Within the band's own spread on the screen, and a pixel's footprint for the beam's width.
+        let slack = 4.4e-3;
+        assert!(
+            centroid < y_hi.max(y_lo) + slack && centroid > y_hi.min(y_lo) - slack,
+            "{name} lands at {centroid} m, outside {y_lo} … {y_hi} m"
+        );
+        // Longer wavelengths are deviated less: higher on the screen.
+        assert!(centroid > previous, "{name} is not above the band before it");
+        previous = centroid;
+    }
+}

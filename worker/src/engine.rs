@@ -158,7 +158,7 @@ impl<'s> ParallelEngine<'s> {
     pub fn new(scene: &'s Scene, settings: RenderSettings, mut config: EngineConfig) -> Result<Self, ConfigError> {
         // In a spectral scene each group phase has its own wavelength, and a light path at one wavelength cannot
         // join camera paths at another: every group gathers only into its own map.
-        if scene.is_spectral() {
+        if settings.is_spectral(scene) {
             config.shared_maps = false;
         }
         if !(1..=64).contains(&config.phases_per_deal) {
@@ -171,7 +171,7 @@ impl<'s> ParallelEngine<'s> {
             return Err(ConfigError::Invalid("the tile size must be at least one pixel".into()));
         }
         let slots: Vec<MapSlot<GroupMap>> = (0..config.groups).map(|_| MapSlot::new(GroupMap::default())).collect();
-        let aux = AuxLayout::for_scene(scene);
+        let aux = AuxLayout::for_scene(scene, settings.spectral_bands);
         // Groups own their slot's token; the slots live in a Vec that is never resized.
         let mut groups = Vec::with_capacity(config.groups);
         for (k, slot) in slots.iter().enumerate() {

@@ -13,6 +13,7 @@ use photonfarm::pbpm::{
 use photonfarm::render::RenderSettings;
 use photonfarm::sampling::{Pass, Sampler};
 use photonfarm::scene::Scene;
+use photonfarm::spectrum::{band_values, PhaseSpectrum};
 use rayon::iter::Either;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
@@ -392,6 +393,7 @@ impl Group {
             sums.add_phase(&v, 1);
         });
         if aux_channels > 0 {
+            let (bands, backward) = (self.aux.bands(), &self.backward);
             self.aux_backward
                 .par_chunks_mut(aux_channels)
                 .zip(self.aux_sums.values_mut().par_chunks_mut(aux_channels))
@@ -399,6 +401,15 @@ impl Group {
                 .for_each(|(i, (b, sums))| {
                     for (c, v) in b.iter_mut().enumerate() {
                         *v += gathered.get_aux(i, c) * inv_n;
+                    }
+                    // Spectral output: the pixel's phase total was carried at its class's wavelength (the
+                    // backward pass dealt classes by mask index).
+                    if let (Some((offset, n)), Some(w)) =
+                        (bands, spectrum.wavelength(PhaseSpectrum::class_of(i as u64)))
+                    {
+                        let g = gathered.get(i);
+                        let total = backward[i].iter().sum::<Rgb>() + (g[0] + g[1]) * inv_n;
+                        band_values(total, &w, &mut b[offset..offset + n]);
                     }
                     add_phase_to(sums, b);
                 });

@@ -154,11 +154,11 @@ fn the_memory_estimate_adds_exactly_the_ghost_planes_and_covers_what_an_engine_w
         let config = EngineConfig::for_method(method, 2, 1, vec![0, 1]).unwrap();
         let before = estimate_without_auxiliary_layers(&config, bdd);
         // No ghost planes: the estimate is what it was.
-        assert_eq!(config.bytes_per_pixel(bdd, &AuxLayout::for_scene(&cornell)), before, "{method:?}");
+        assert_eq!(config.bytes_per_pixel(bdd, &AuxLayout::for_scene(&cornell, 0)), before, "{method:?}");
         // Ghost planes: 3 f64 sums in the merged image, and per pixel a group covers 3 f64 sums and two f32
         // buffers (camera pass, gathered light).
         let coverage = if config.masks { 1 } else { config.groups } as f64;
-        let estimate = config.bytes_per_pixel(bdd, &AuxLayout::for_scene(&lens));
+        let estimate = config.bytes_per_pixel(bdd, &AuxLayout::for_scene(&lens, 0));
         assert_eq!(estimate, before + 3.0 * (8.0 + coverage * (8.0 + 4.0 + 4.0)), "{method:?}");
         let mut engine = ParallelEngine::new(&lens, settings, config).unwrap();
         engine.run_round(&AtomicBool::new(false), None);

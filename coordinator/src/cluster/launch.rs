@@ -225,7 +225,7 @@ pub fn launch(
         },
     };
     let initial = resume.map(|r| (r.sums, r.totals));
-    let aux = photonfarm::accumulation::AuxLayout::for_scene(scene);
+    let aux = photonfarm::accumulation::AuxLayout::for_scene(scene, settings.spectral_bands);
     let cluster =
         Cluster::start(members, plan, children, scene.camera.width, scene.camera.height, aux, settings, initial)?;
     Ok((cluster, layout, machine))

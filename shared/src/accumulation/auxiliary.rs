@@ -40,14 +40,25 @@ impl AuxLayout {
         AuxLayout { layers }
     }
 
-    /// The layers `scene` can fill: the ghost layer when it can make ghosts (`ghost::scene_can_make_ghosts`),
-    /// nothing otherwise.
-    pub fn for_scene(scene: &Scene) -> Self {
+    /// The layers a render of `scene` fills: the ghost layer when the scene can make ghosts
+    /// (`ghost::scene_can_make_ghosts`), then `spectral_bands` wavelength bands (`--spectral-output`, one grey
+    /// channel each); nothing otherwise.
+    pub fn for_scene(scene: &Scene, spectral_bands: u32) -> Self {
         let mut layers = Vec::new();
         if crate::ghost::scene_can_make_ghosts(scene) {
             layers.push(AuxLayer { name: crate::ghost::GHOST_LAYER.into(), channels: 3 });
         }
+        for b in 0..spectral_bands {
+            layers.push(AuxLayer { name: crate::spectrum::band_name(b, spectral_bands), channels: 1 });
+        }
         AuxLayout::new(layers)
+    }
+
+    /// Where the first spectral-output band's channel starts, and how many bands there are.
+    pub fn bands(&self) -> Option<(usize, usize)> {
+        let first = self.layers.iter().position(|l| l.name.starts_with("band_"))?;
+        let offset = self.layers[..first].iter().map(|l| l.channels as usize).sum();
+        Some((offset, self.layers.len() - first))
     }
 
     /// The layers, in storage order.

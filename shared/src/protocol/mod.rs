@@ -13,7 +13,7 @@ pub use connection::{Connection, MessageReader, MessageWriter};
 pub use message::{EngineSpec, FileRef, Job, Message, Role, Snapshot, WorkerInfo};
 
 /// Bumped whenever a message changes shape; peers with another version are refused in the handshake.
-pub const PROTOCOL_VERSION: u32 = 3;
+pub const PROTOCOL_VERSION: u32 = 4;
 
 /// Why a peer or a frame was refused, or the link failed.
 #[derive(Debug, thiserror::Error)]

@@ -9,8 +9,8 @@ use crate::protocol::snapshot::{apply_delta, encode_delta, Compression};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
-/// 2: the sums' auxiliary layers (the ghost layer) are kept.
-const FORMAT: u32 = 2;
+/// 2: the sums' auxiliary layers (the ghost layer) are kept. 3: the settings hold the spectral-output bands.
+const FORMAT: u32 = 3;
 
 /// Everything a resumed run continues from.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -130,6 +130,7 @@ mod tests {
             radius_scale: 3.0,
             radius_alpha: 2.0 / 3.0,
             light_paths_per_pixel: 1.0,
+            spectral_bands: 0,
         };
         // History with and without a true error: bincode cannot skip a field, so every one must round-trip.
         let history = [

@@ -10,7 +10,7 @@ use crate::pbpm::{
 };
 use crate::sampling::{Pass, Sampler};
 use crate::scene::Scene;
-use crate::spectrum::PhaseSpectrum;
+use crate::spectrum::{band_values, PhaseSpectrum, Wavelength};
 use serde::{Deserialize, Serialize};
 
 /// Counts accumulated over a run.
@@ -76,7 +76,7 @@ impl<'s> Engine<'s> {
         let mut map = PhotonMap::new();
         // At most one photon per diffuse vertex of each camera path.
         map.reserve(pixels * settings.backward_diffuse_depth as usize);
-        let aux = AuxLayout::for_scene(scene);
+        let aux = AuxLayout::for_scene(scene, settings.spectral_bands);
         let aux_channels = aux.channels();
         Engine {
             scene,
@@ -129,9 +129,10 @@ impl<'s> Engine<'s> {
         }
     }
 
-    /// Closes a pixel's auxiliary values of the phase, adding the gathered ones divided by the light paths.
+    /// Closes a pixel's auxiliary values of the phase, adding the gathered ones divided by the light paths, and
+    /// its spectral-output bands from its phase total at its wavelength.
     #[inline]
-    fn close_aux(&mut self, pixel: usize, inv_n: f32) {
+    fn close_aux(&mut self, pixel: usize, inv_n: f32, total: Rgb, wavelength: Option<Wavelength>) {
         let n = self.sums.aux.layout().channels();
         if n == 0 {
             return;
@@ -139,6 +140,10 @@ impl<'s> Engine<'s> {
         let range = pixel * n..(pixel + 1) * n;
         for (v, g) in self.aux_phase[range.clone()].iter_mut().zip(&self.aux_gathered[range.clone()]) {
             *v += g * inv_n;
+        }
+        if let (Some((offset, bands)), Some(w)) = (self.sums.aux.layout().bands(), wavelength) {
+            let start = pixel * n + offset;
+            band_values(total, &w, &mut self.aux_phase[start..start + bands]);
         }
         self.sums.aux.add_phase(pixel, &self.aux_phase[range]);
     }
@@ -162,7 +167,7 @@ impl<'s> Engine<'s> {
         let scene = self.scene;
         let cam = &scene.camera;
         let mut stats = path_tracer::PathStats::default();
-        let spectral = self.scene.is_spectral();
+        let spectral = self.settings.is_spectral(scene);
         for pixel in 0..cam.pixel_count() {
             let (x, y) = ((pixel % cam.width as usize) as u32, (pixel / cam.width as usize) as u32);
             let mut s = Sampler::new(self.settings.seed, Pass::Path, phase, pixel as u64);
@@ -177,7 +182,7 @@ impl<'s> Engine<'s> {
             self.sums.add_phase(pixel, &v, 1);
             self.start_aux(pixel, ghost);
             // Nothing is gathered: the gathered buffer stays zero.
-            self.close_aux(pixel, 0.0);
+            self.close_aux(pixel, 0.0, v.iter().sum(), spectrum.wavelength(0));
         }
         PhaseReport { phase, backward_rays: stats.rays, ..Default::default() }
     }
@@ -246,7 +251,8 @@ impl<'s> Engine<'s> {
             v[Layer::Indirect as usize] += self.gathered[pixel][0] * inv_n;
             v[Layer::Caustic as usize] += self.gathered[pixel][1] * inv_n;
             self.sums.add_phase(pixel, &v, 1);
-            self.close_aux(pixel, inv_n);
+            let w = bs.spectrum.wavelength(PhaseSpectrum::class_of(pixel as u64));
+            self.close_aux(pixel, inv_n, v.iter().sum(), w);
         }
         self.totals.backward_photons += bstats.photons;
         self.totals.capped_light_paths += fstats.capped;

@@ -40,6 +40,9 @@ pub struct RenderSettings {
     pub radius_alpha: f32,
     /// Light paths per phase, per pixel.
     pub light_paths_per_pixel: f32,
+    /// Wavelength bands written as layers (`--spectral-output`); 0 for none. Any band makes every path spectral
+    /// from its first vertex.
+    pub spectral_bands: u32,
 }
 
 impl RenderSettings {
@@ -55,6 +58,7 @@ impl RenderSettings {
             radius_scale,
             radius_alpha: 2.0 / 3.0,
             light_paths_per_pixel,
+            spectral_bands: 0,
         }
     }
 
@@ -66,10 +70,15 @@ impl RenderSettings {
     /// The wavelengths of the phase (or path) identified by `key` in a spectral scene; RGB otherwise. The
     /// camera and light paths of a phase share them, so that their joins are at one wavelength.
     pub fn phase_spectrum(&self, scene: &Scene, key: u64) -> PhaseSpectrum {
-        if !crate::spectrum::ENABLED || !scene.is_spectral() {
+        if !self.is_spectral(scene) {
             return PhaseSpectrum::RGB;
         }
-        PhaseSpectrum::sample(&mut Sampler::new(self.seed, Pass::Wavelength, key, 0), false)
+        PhaseSpectrum::sample(&mut Sampler::new(self.seed, Pass::Wavelength, key, 0), self.spectral_bands > 0)
+    }
+
+    /// True when the run renders spectrally: the scene disperses, or spectral output is asked for.
+    pub fn is_spectral(&self, scene: &Scene) -> bool {
+        crate::spectrum::ENABLED && (self.spectral_bands > 0 || scene.is_spectral())
     }
 
     /// Light paths traced per phase for an image of `pixels` pixels.
