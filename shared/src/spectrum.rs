@@ -340,7 +340,8 @@ pub fn band_values(total: Rgb, w: &Wavelength, out: &mut [f32]) {
     let bands = out.len();
     let v = w.to_rgb;
     let vv = v.dot(v);
-    if bands == 0 || !(vv > 0.0) || !(w.pdf > 0.0) {
+    let usable = vv > 0.0 && w.pdf > 0.0;
+    if bands == 0 || !usable {
         return;
     }
     let width = (LAMBDA_MAX - LAMBDA_MIN) / bands as f32;
