@@ -245,19 +245,20 @@ impl PhaseSpectrum {
 }
 
 /// The colour state of one path: RGB, or spectral at its class's wavelength once the path met a dispersive
-/// surface (its throughput then holds the spectral value in all three channels).
+/// surface (its throughput then holds the spectral value in all three channels). `S` is false in the
+/// integrators' instantiation for RGB phases, where every method below folds to the RGB case at compile time.
 #[derive(Clone, Copy, Debug)]
-pub struct PathSpectrum {
+pub struct PathSpectrum<const S: bool> {
     wavelength: Option<Wavelength>,
     class: u8,
     spectral: bool,
 }
 
-impl PathSpectrum {
+impl<const S: bool> PathSpectrum<S> {
     /// The state of a path of `class` starting with throughput `beta`, converted if the path is spectral from
     /// the start.
     pub fn start(phase: &PhaseSpectrum, class: u8, beta: &mut Rgb) -> Self {
-        let wavelength = if ENABLED { phase.wavelength(class) } else { None };
+        let wavelength = if S && ENABLED { phase.wavelength(class) } else { None };
         let mut path = PathSpectrum { wavelength, class, spectral: false };
         if phase.from_start {
             if let Some(w) = path.wavelength {
@@ -271,7 +272,7 @@ impl PathSpectrum {
     /// True once the path carries one wavelength.
     #[inline]
     pub fn is_spectral(&self) -> bool {
-        ENABLED && self.spectral
+        S && ENABLED && self.spectral
     }
 
     /// What a stored vertex records of the path's colour: 0 for RGB, 1 + class once spectral (see `join`).
@@ -288,7 +289,7 @@ impl PathSpectrum {
     /// `beta` read at the wavelength); a spectral path sees every material at its wavelength.
     #[inline]
     pub fn material(&mut self, m: Material, beta: &mut Rgb) -> Material {
-        if !ENABLED {
+        if !(S && ENABLED) {
             return m;
         }
         let Some(w) = self.wavelength else { return m };

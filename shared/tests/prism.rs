@@ -68,6 +68,18 @@ fn trace_central_ray(scene: &Scene, nm: f32) -> Traced {
     Traced { entry_normal, incoming: BEAM.normalize(), outgoing: ray.direction, screen, transmitted }
 }
 
+/// Where on the screen (height y) each pixel centre looks; None for pixels that miss it.
+fn screen_heights(scene: &Scene) -> Vec<Option<f64>> {
+    let cam = &scene.camera;
+    (0..cam.pixel_count())
+        .map(|p| {
+            let (x, y) = (p as u32 % cam.width, p as u32 / cam.width);
+            let r = cam.generate_ray(x, y, Vec2::splat(0.5), Vec2::splat(0.5)).ray;
+            scene.geometry.intersect(&r).filter(|h| h.p.x > 0.45).map(|h| h.p.y as f64)
+        })
+        .collect()
+}
+
 fn angle_deg(a: Vec3, b: Vec3) -> f64 {
     (a.normalize().dot(b.normalize()) as f64).clamp(-1.0, 1.0).acos().to_degrees()
 }
@@ -103,14 +115,7 @@ fn prism_deviation_per_wavelength_matches_snell_with_the_glass_dispersion() {
 fn rendered_spectrum_puts_each_colour_where_snell_sends_its_wavelengths() {
     let scene = common::shipped("prism.toml");
     let cam = &scene.camera;
-    // Where on the screen (height y) each pixel centre looks.
-    let pixel_y: Vec<Option<f64>> = (0..cam.pixel_count())
-        .map(|p| {
-            let (x, y) = (p as u32 % cam.width, p as u32 / cam.width);
-            let r = cam.generate_ray(x, y, Vec2::splat(0.5), Vec2::splat(0.5)).ray;
-            scene.geometry.intersect(&r).filter(|h| h.p.x > 0.45).map(|h| h.p.y as f64)
-        })
-        .collect();
+    let pixel_y = screen_heights(&scene);
 
     // Prediction: each channel's centroid is the spectrum's height averaged with that channel's matching
     // function and the prism's transmission (the light is equal-energy white, the screen grey).
@@ -184,7 +189,6 @@ fn rendered_spectrum_puts_each_colour_where_snell_sends_its_wavelengths() {
 #[test]
 fn spectral_output_bands_each_land_where_snell_sends_their_wavelengths() {
     let scene = common::shipped("prism.toml");
-    let cam = &scene.camera;
     let bands = 8u32;
     let mut settings = common::settings(&scene, Method::Pbpm, 5);
     settings.spectral_bands = bands;
@@ -193,13 +197,7 @@ fn spectral_output_bands_each_land_where_snell_sends_their_wavelengths() {
         engine.run_phase();
     }
     let sums = engine.sums();
-    let pixel_y: Vec<Option<f64>> = (0..cam.pixel_count())
-        .map(|p| {
-            let (x, y) = (p as u32 % cam.width, p as u32 / cam.width);
-            let r = cam.generate_ray(x, y, Vec2::splat(0.5), Vec2::splat(0.5)).ray;
-            scene.geometry.intersect(&r).filter(|h| h.p.x > 0.45).map(|h| h.p.y as f64)
-        })
-        .collect();
+    let pixel_y = screen_heights(&scene);
     let width = (LAMBDA_MAX - LAMBDA_MIN) / bands as f32;
     let mut previous = f64::NEG_INFINITY;
     for b in 0..bands {

@@ -1,7 +1,7 @@
 //! Helpers for the end-to-end tests in `tests/tests/`: they start the real programs, built by cargo.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Command, Output};
 use std::sync::OnceLock;
 
 /// The repository's root folder.
@@ -48,4 +48,18 @@ pub fn cornell_at(dir: &Path, size: u32) -> PathBuf {
     let path = dir.join("cornell.toml");
     std::fs::write(&path, text).expect("cannot write the scene");
     path
+}
+
+/// Runs `coordinator render SCENE --out OUT --quiet ARGS…` from the repository root and returns its output.
+pub fn render_output(scene: &Path, out: &Path, args: &[&str]) -> Output {
+    Command::new(binary("coordinator"))
+        .arg("render")
+        .arg(scene)
+        .arg("--out")
+        .arg(out)
+        .arg("--quiet")
+        .args(args)
+        .current_dir(repo_root())
+        .output()
+        .expect("cannot start the coordinator")
 }

@@ -2,26 +2,16 @@
 //! synthetic two-node topology, snapshots merged by the coordinator) writes a non-zero `ghost` layer into its
 //! EXR, a resumed run carries the ghost sums over from its checkpoint, and a scene without a lens gets none.
 
-use end_to_end::{binary, cornell_at, repo_root, scratch_dir};
+use end_to_end::{cornell_at, render_output, repo_root, scratch_dir};
 use photonfarm::image_io::exr_file::{find_layer, read_exr};
 use photonfarm::render::checkpoint::Checkpoint;
 use photonfarm::render::images::luminance_of;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 const TWO_NODES: &str = "pack:1 numa:2 core:1 pu:1";
 
 fn render(scene: &Path, out: &Path, args: &[&str]) {
-    let o = Command::new(binary("coordinator"))
-        .arg("render")
-        .arg(scene)
-        .arg("--out")
-        .arg(out)
-        .arg("--quiet")
-        .args(args)
-        .current_dir(repo_root())
-        .output()
-        .unwrap();
+    let o = render_output(scene, out, args);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }
 

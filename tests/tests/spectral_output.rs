@@ -2,23 +2,8 @@
 //! two-node topology, band sums carried in snapshots) writes N grey band layers into its EXR, and bad band
 //! counts are refused with a reason.
 
-use end_to_end::{binary, cornell_at, repo_root, scratch_dir};
+use end_to_end::{cornell_at, render_output as render, scratch_dir};
 use photonfarm::image_io::exr_file::{find_layer, read_exr};
-use std::path::Path;
-use std::process::{Command, Output};
-
-fn render(scene: &Path, out: &Path, args: &[&str]) -> Output {
-    Command::new(binary("coordinator"))
-        .arg("render")
-        .arg(scene)
-        .arg("--out")
-        .arg(out)
-        .arg("--quiet")
-        .args(args)
-        .current_dir(repo_root())
-        .output()
-        .unwrap()
-}
 
 #[test]
 fn a_three_level_render_with_spectral_output_writes_one_layer_per_band() {

@@ -30,15 +30,7 @@ fn fill_lit_lens() -> Scene {
 
 /// Σ over pixels of the luminance of the ghost layer's sums and of the total's sums.
 fn image_sums(sums: &Accumulator) -> (f64, f64) {
-    let offset = sums.aux.layout().offset(GHOST_LAYER).expect("the scene has a ghost layer");
-    let mut ghost = 0.0;
-    let mut total = 0.0;
-    for p in 0..sums.pixels.len() {
-        let g = &sums.aux.pixel(p)[offset..offset + 3];
-        ghost += luminance_f64([g[0], g[1], g[2]]);
-        total += sums.pixels[p].sum.iter().map(|l| luminance_f64(*l)).sum::<f64>();
-    }
-    (ghost, total)
+    photonfarm::ghost::luminance_sums(sums).expect("the scene has a ghost layer")
 }
 
 /// The ghost fraction of the image's light, Σ ghost / Σ total, with its standard error from the increments of

@@ -59,12 +59,12 @@ pub struct DirectSample {
 /// Samples direct light at a diffuse vertex with outgoing direction `wo` (paper eq. 5's light term), in the
 /// path's colour terms (`albedo` already is). Returns None when the sample carries nothing (back side,
 /// occluded).
-pub fn sample_direct(
+pub fn sample_direct<const S: bool>(
     scene: &Scene,
     hit: &SurfaceHit,
     wo: Vec3,
     albedo: Rgb,
-    path: &PathSpectrum,
+    path: &PathSpectrum<S>,
     sampler: &mut Sampler,
 ) -> Option<DirectSample> {
     let u_select = sampler.next_f32();

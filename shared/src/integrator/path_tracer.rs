@@ -50,6 +50,23 @@ pub fn trace(
     sampler: &mut Sampler,
     stats: &mut PathStats,
 ) -> (LayerValues, Rgb) {
+    // RGB paths run the instantiation without spectral branches: RGB scenes keep their speed.
+    if spectrum.wavelengths.is_some() {
+        trace_in::<true>(scene, max_depth, spectrum, camera_ray, sampler, stats)
+    } else {
+        trace_in::<false>(scene, max_depth, spectrum, camera_ray, sampler, stats)
+    }
+}
+
+#[inline(always)]
+fn trace_in<const S: bool>(
+    scene: &Scene,
+    max_depth: u32,
+    spectrum: &PhaseSpectrum,
+    camera_ray: CameraRay,
+    sampler: &mut Sampler,
+    stats: &mut PathStats,
+) -> (LayerValues, Rgb) {
     let mut out: LayerValues = [Rgb::ZERO; 4];
     // Some(light so far) once the path is a ghost path.
     let mut ghost: Option<Rgb> = None;
@@ -59,7 +76,7 @@ pub fn trace(
     }
     let mut ray = camera_ray.ray;
     let mut beta = Rgb::splat(weight);
-    let mut path = PathSpectrum::start(spectrum, 0, &mut beta);
+    let mut path = PathSpectrum::<S>::start(spectrum, 0, &mut beta);
     let mut previous = Previous::Specular;
     let mut diffuse_vertices = 0u32;
     let mut segments = 0u32;

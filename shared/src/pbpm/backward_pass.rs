@@ -48,6 +48,24 @@ pub fn trace_camera_path(
     stats: &mut BackwardStats,
     store: &mut impl FnMut(BackwardPhoton),
 ) -> (LayerValues, Rgb) {
+    // An RGB phase runs the instantiation without spectral branches: RGB scenes keep their speed.
+    if settings.spectrum.wavelengths.is_some() {
+        camera_path::<true>(scene, settings, pixel, camera_ray, sampler, stats, store)
+    } else {
+        camera_path::<false>(scene, settings, pixel, camera_ray, sampler, stats, store)
+    }
+}
+
+#[inline(always)]
+fn camera_path<const S: bool>(
+    scene: &Scene,
+    settings: &BackwardSettings,
+    pixel: u32,
+    camera_ray: CameraRay,
+    sampler: &mut Sampler,
+    stats: &mut BackwardStats,
+    store: &mut impl FnMut(BackwardPhoton),
+) -> (LayerValues, Rgb) {
     let mut out: LayerValues = [Rgb::ZERO; 4];
     // Some(light so far) once the path is a ghost path.
     let mut ghost: Option<Rgb> = None;
@@ -57,7 +75,7 @@ pub fn trace_camera_path(
     }
     let mut ray = camera_ray.ray;
     let mut beta = Rgb::splat(weight);
-    let mut path = PathSpectrum::start(&settings.spectrum, PhaseSpectrum::class_of(pixel as u64), &mut beta);
+    let mut path = PathSpectrum::<S>::start(&settings.spectrum, PhaseSpectrum::class_of(pixel as u64), &mut beta);
     let mut k = 0u32; // diffuse vertices so far
     let mut segments = 0u32;
     let mut path_length = 0.0f32;

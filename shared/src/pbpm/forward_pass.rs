@@ -71,6 +71,24 @@ pub fn trace_light_path(
     stats: &mut ForwardStats,
     visit: &mut impl FnMut(&LightVertex),
 ) {
+    // An RGB phase runs the instantiation without spectral branches: RGB scenes keep their speed.
+    if spectrum.wavelengths.is_some() {
+        light_path::<true>(scene, max_depth, spectrum, index, sampler, stats, visit)
+    } else {
+        light_path::<false>(scene, max_depth, spectrum, index, sampler, stats, visit)
+    }
+}
+
+#[inline(always)]
+fn light_path<const S: bool>(
+    scene: &Scene,
+    max_depth: u32,
+    spectrum: &PhaseSpectrum,
+    index: u64,
+    sampler: &mut Sampler,
+    stats: &mut ForwardStats,
+    visit: &mut impl FnMut(&LightVertex),
+) {
     stats.light_paths += 1;
     let u_select = sampler.next_f32();
     let (u_pos, u_dir) = (sampler.next_2d(), sampler.next_2d());
@@ -78,7 +96,7 @@ pub fn trace_light_path(
     let origin = if e.normal == Vec3::ZERO { e.origin } else { offset_origin(e.origin, e.normal, e.direction) };
     let mut ray = Ray::new(origin, e.direction);
     let mut beta = e.beta;
-    let mut path = PathSpectrum::start(spectrum, PhaseSpectrum::class_of(index), &mut beta);
+    let mut path = PathSpectrum::<S>::start(spectrum, PhaseSpectrum::class_of(index), &mut beta);
     let beta0 = beta.max_element();
     let mut all_specular = true;
     let mut m = 0u32;
@@ -132,6 +150,21 @@ pub fn gather(
     backward_diffuse_depth: u32,
     sink: &mut impl Gather,
 ) -> u64 {
+    if v.phase.wavelengths.is_some() {
+        gather_in::<true>(map, v, max_depth, backward_diffuse_depth, sink)
+    } else {
+        gather_in::<false>(map, v, max_depth, backward_diffuse_depth, sink)
+    }
+}
+
+#[inline(always)]
+fn gather_in<const S: bool>(
+    map: &PhotonMap,
+    v: &LightVertex,
+    max_depth: u32,
+    backward_diffuse_depth: u32,
+    sink: &mut impl Gather,
+) -> u64 {
     let mut merges = 0;
     for b in map.containing(v.hit.p) {
         if v.wi.dot(b.normal) <= 0.0
@@ -148,8 +181,9 @@ pub fn gather(
             _ => Layer::Indirect,
         };
         merges += 1;
-        sink.add(b.pixel, layer, b.ghost, join(b.weight, b.spectrum, v.flux, v.spectrum, v.phase));
         // eq. 4
+        let value = if S { join(b.weight, b.spectrum, v.flux, v.spectrum, v.phase) } else { b.weight * v.flux };
+        sink.add(b.pixel, layer, b.ghost, value);
     }
     merges
 }
