@@ -189,8 +189,8 @@ impl Group {
         self.phases_this_deal = 0;
     }
 
-    /// Runs phases until the round's stop flag is set or it has finished `phases_per_deal` phases; then it
-    /// reports on `done`, the signal for the main thread to stop every other group.
+    /// Runs phases until the round's stop flag is set; reports on `done` when it has finished
+    /// `phases_per_deal` phases, the signal for the main thread to stop every group.
     pub fn run_round(&mut self, ctx: &RoundContext, phases_per_deal: u64, done: &std::sync::mpsc::Sender<usize>) {
         if self.mask.is_empty() {
             // More groups than tiles: nothing to render this deal.
@@ -206,10 +206,6 @@ impl Group {
                 self.phases_this_deal += 1;
                 if self.phases_this_deal == phases_per_deal {
                     let _ = done.send(self.index);
-                    // This group's round is complete. Starting another phase would only see it cut short by
-                    // the stop that follows: a phase with a sixteenth of its light paths, counted as a whole
-                    // one (one group: one such phase in every K + 1).
-                    break;
                 }
             }
         });
