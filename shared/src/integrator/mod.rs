@@ -43,6 +43,15 @@ impl Layer {
 /// One pixel's estimate split into layers.
 pub type LayerValues = [Rgb; 4];
 
+/// Adds a camera path's contribution to its layer and, on a ghost path (`crate::ghost`), to the ghost light.
+#[inline]
+pub(crate) fn add_contribution(out: &mut LayerValues, ghost: &mut Option<Rgb>, layer: Layer, value: Rgb) {
+    out[layer as usize] += value;
+    if let Some(g) = ghost {
+        *g += value;
+    }
+}
+
 /// A next-event estimate at a diffuse vertex, before MIS weighting and before the path throughput.
 #[derive(Clone, Copy, Debug)]
 pub struct DirectSample {

@@ -1,7 +1,7 @@
 //! The reference path tracer: unidirectional, next-event estimation with MIS (power heuristic), Russian
 //! roulette. It splits its estimate into the same layers as PBPM so that every layer can be compared.
 
-use super::{sample_direct, Layer, LayerValues};
+use super::{add_contribution, sample_direct, Layer, LayerValues};
 use crate::camera::CameraRay;
 use crate::color::Rgb;
 use crate::geometry::{ray::offset_origin, Ray};
@@ -88,7 +88,7 @@ fn trace_in<const S: bool>(
         if le != Rgb::ZERO {
             let le = path.quantity(le);
             match previous {
-                Previous::Specular => add(
+                Previous::Specular => add_contribution(
                     &mut out,
                     &mut ghost,
                     layer_of(diffuse_vertices, diffuse_vertices > 0),
@@ -96,7 +96,12 @@ fn trace_in<const S: bool>(
                 ),
                 Previous::Diffuse { p, pdf } => {
                     let w = power_heuristic(pdf, scene.lights.pdf_incident(p, &hit));
-                    add(&mut out, &mut ghost, layer_of(diffuse_vertices, false), path.to_image(beta * le * w));
+                    add_contribution(
+                        &mut out,
+                        &mut ghost,
+                        layer_of(diffuse_vertices, false),
+                        path.to_image(beta * le * w),
+                    );
                 }
             }
         }
@@ -110,7 +115,12 @@ fn trace_in<const S: bool>(
             stats.rays += 1;
             if let Some(d) = sample_direct(scene, &hit, wo, albedo, &path, sampler) {
                 let w = if d.delta { 1.0 } else { power_heuristic(d.light_pdf, d.bsdf_pdf) };
-                add(&mut out, &mut ghost, layer_of(diffuse_vertices, false), path.to_image(beta * d.value * w));
+                add_contribution(
+                    &mut out,
+                    &mut ghost,
+                    layer_of(diffuse_vertices, false),
+                    path.to_image(beta * d.value * w),
+                );
             }
         }
         let Some(s) = material.sample(&hit, wo, sampler.next_2d(), Transport::Radiance) else { break };
@@ -131,13 +141,4 @@ fn trace_in<const S: bool>(
         ray = Ray::new(offset_origin(hit.p, hit.ng, s.wi), s.wi);
     }
     (out, ghost.unwrap_or(Rgb::ZERO))
-}
-
-/// Adds a contribution to its layer and, on a ghost path, to the ghost light.
-#[inline]
-fn add(out: &mut LayerValues, ghost: &mut Option<Rgb>, layer: Layer, value: Rgb) {
-    out[layer as usize] += value;
-    if let Some(g) = ghost {
-        *g += value;
-    }
 }

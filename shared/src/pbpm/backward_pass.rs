@@ -7,7 +7,7 @@ use super::radius::RadiusSchedule;
 use crate::camera::CameraRay;
 use crate::color::Rgb;
 use crate::geometry::{ray::offset_origin, Ray};
-use crate::integrator::{sample_direct, Layer, LayerValues};
+use crate::integrator::{add_contribution, sample_direct, Layer, LayerValues};
 use crate::material::Transport;
 use crate::sampling::{power_heuristic, Sampler};
 use crate::scene::Scene;
@@ -91,10 +91,10 @@ fn camera_path<const S: bool>(
         if le != Rgb::ZERO {
             let le = path.quantity(le);
             match (k, from_diffuse) {
-                (0, _) => add(&mut out, &mut ghost, Layer::VisibleLights, path.to_image(beta * le)),
+                (0, _) => add_contribution(&mut out, &mut ghost, Layer::VisibleLights, path.to_image(beta * le)),
                 (_, Some((p, pdf))) => {
                     let w = power_heuristic(pdf, scene.lights.pdf_incident(p, &hit));
-                    add(&mut out, &mut ghost, direct_layer(k), path.to_image(beta * le * w));
+                    add_contribution(&mut out, &mut ghost, direct_layer(k), path.to_image(beta * le * w));
                 }
                 // Emitter reached from a diffuse vertex through specular surfaces: a caustic, which the forward
                 // pass counts.
@@ -117,7 +117,7 @@ fn camera_path<const S: bool>(
             if let Some(d) = sample_direct(scene, &hit, wo, albedo, &path, sampler) {
                 // Without a BSDF continuation nothing else finds this light: next-event estimation takes it all.
                 let w = if d.delta || !continues { 1.0 } else { power_heuristic(d.light_pdf, d.bsdf_pdf) };
-                add(&mut out, &mut ghost, direct_layer(k), path.to_image(beta * d.value * w));
+                add_contribution(&mut out, &mut ghost, direct_layer(k), path.to_image(beta * d.value * w));
             }
             // A merge needs at least two light segments (y1 is next-event estimation's).
             if segments + 2 <= settings.max_depth {
@@ -161,15 +161,6 @@ fn camera_path<const S: bool>(
         ray = Ray::new(offset_origin(hit.p, hit.ng, s.wi), s.wi);
     }
     (out, ghost.unwrap_or(Rgb::ZERO))
-}
-
-/// Adds a contribution to its layer and, on a ghost path, to the ghost light.
-#[inline]
-fn add(out: &mut LayerValues, ghost: &mut Option<Rgb>, layer: Layer, value: Rgb) {
-    out[layer as usize] += value;
-    if let Some(g) = ghost {
-        *g += value;
-    }
 }
 
 /// The layer of light that arrives at diffuse vertex k straight from an emitter.
