@@ -112,7 +112,7 @@ fn a_memory_limit_makes_async_give_up_threads_and_other_methods_refuse_up_front(
     // process has in use after loading a scene.
     let scene = cornell_at(&scratch_dir("memory-limit"), 512);
     let scene = scene.to_str().unwrap();
-    // Async needs about 756 bytes per pixel at one thread and 1368 at two: 198 and 359 MB over what is in use.
+    // Async needs about 948 bytes per pixel at one thread and 1752 at two: 249 and 459 MB over what is in use.
     let out = scratch_dir("memory-limit-async");
     let result = render(
         &[scene, "--method", "async", "--threads", "2", "--phases", "2", "--memory-limit", "300M", "--quiet"],

@@ -109,10 +109,11 @@ impl EngineConfig {
         use photonfarm::integrator::LayerValues;
         // Masks partition the image among the groups; without masks every group covers all of it.
         let coverage = if self.masks { 1 } else { self.groups };
-        // A photon is held twice during a phase (the backward pass's list, then the map's copy), and the grid
-        // enters it in at most eight cells (its sphere spans at most two cells of three mean radii per axis),
-        // each entry a u32 plus the build's u64 (cell, photon) pair, with a table of half a bucket per photon.
-        let photon = 2 * std::mem::size_of::<photonfarm::pbpm::BackwardPhoton>() + 8 * (4 + 8) + 2;
+        // A photon is held twice (the backward pass's list, then the map's copy), and the grid enters it in at
+        // most eight cells (its sphere spans at most two cells of three mean radii per axis), each entry a u32
+        // plus the build's u64 (cell, photon) pair, in buffers that grow by doubling as the count varies from
+        // phase to phase, with a table of half a bucket per photon.
+        let photon = 2 * std::mem::size_of::<photonfarm::pbpm::BackwardPhoton>() + 2 * 8 * (4 + 8) + 2;
         // A group's auxiliary buffers: the camera pass's values, the gathered channels and the sums.
         let aux_per_pixel = 2 * aux.phase_bytes_per_pixel() + aux.sum_bytes_per_pixel();
         let per_pixel = std::mem::size_of::<LayerValues>()

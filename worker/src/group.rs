@@ -16,12 +16,15 @@ use photonfarm::scene::Scene;
 use photonfarm::spectrum::{band_values, PhaseSpectrum};
 use rayon::iter::Either;
 use rayon::prelude::*;
-use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 
 /// Light paths traced per acquisition of the other groups' maps.
 const BATCH: u64 = 16;
+
+/// Mask pixels per photon list of the backward pass: a unit of work for the group's threads.
+const PHOTON_CHUNK: usize = 1024;
 
 /// The map data a group shares through its slot: the photon map and the luminance gathered into it.
 #[derive(Default)]
@@ -59,6 +62,31 @@ pub struct StageNanos {
     pub closing: u64,
 }
 
+/// What one thread's share of a forward pass counted.
+#[derive(Default)]
+struct ForwardTally {
+    stats: ForwardStats,
+    traced: u64,
+    own_merges: u64,
+    foreign: u64,
+}
+
+impl ForwardTally {
+    fn add(self, other: Self) -> Self {
+        ForwardTally {
+            stats: ForwardStats {
+                light_paths: self.stats.light_paths + other.stats.light_paths,
+                rays: self.stats.rays + other.stats.rays,
+                merges: self.stats.merges + other.stats.merges,
+                capped: self.stats.capped + other.stats.capped,
+            },
+            traced: self.traced + other.traced,
+            own_merges: self.own_merges + other.own_merges,
+            foreign: self.foreign + other.foreign,
+        }
+    }
+}
+
 fn nanos_since(t: Instant) -> u64 {
     t.elapsed().as_nanos() as u64
 }
@@ -89,6 +117,8 @@ pub struct Group {
     /// Phases each pixel of the mask had before this deal (the radius schedule's j).
     phases_before: Vec<u32>,
     backward: Vec<LayerValues>,
+    /// The backward pass's photons, one list per `PHOTON_CHUNK` mask pixels, copied into the map each phase.
+    photon_lists: Vec<Vec<BackwardPhoton>>,
     sums: Vec<PixelSums>,
     /// The image's auxiliary layers, where the ghost layer's channels start among them, the phase's auxiliary
     /// values from the camera pass (channels per mask pixel; empty without auxiliary layers) and their sums.
@@ -130,6 +160,7 @@ impl Group {
             mask: Vec::new(),
             phases_before: Vec::new(),
             backward: Vec::new(),
+            photon_lists: Vec::new(),
             sums: Vec::new(),
             ghost: aux.offset(photonfarm::ghost::GHOST_LAYER),
             aux_backward: Vec::new(),
@@ -166,6 +197,7 @@ impl Group {
         let own = self.mask.capacity() * 4
             + self.phases_before.capacity() * 4
             + self.backward.capacity() * std::mem::size_of::<LayerValues>()
+            + self.photon_lists.iter().map(Vec::capacity).sum::<usize>() * std::mem::size_of::<BackwardPhoton>()
             + self.sums.capacity() * std::mem::size_of::<PixelSums>()
             + self.aux_backward.capacity() * 4
             + self.aux_sums.capacity_bytes();
@@ -229,24 +261,33 @@ impl Group {
         let spectrum = settings.phase_spectrum(scene, key);
         let (aux_channels, ghost_offset) = (self.aux.channels(), self.ghost);
 
-        // 1. Backward pass over the mask, in parallel.
+        // 1. Backward pass over the mask, in parallel, each chunk of the mask into its own photon list, so that
+        // the lists keep their buffers from phase to phase and the photons their pixel order.
         let t0 = Instant::now();
-        let (photons, backward_rays) = self
+        self.photon_lists.resize_with(self.mask.len().div_ceil(PHOTON_CHUNK), Vec::new);
+        let (phases_before, sums) = (&self.phases_before, &self.sums);
+        let backward_rays: u64 = self
             .mask
-            .par_iter()
-            .zip(self.backward.par_iter_mut())
-            .zip(self.sums.par_iter().zip(self.phases_before.par_iter()))
-            .zip(aux_slots(&mut self.aux_backward, aux_channels, self.mask.len()))
+            .par_chunks(PHOTON_CHUNK)
+            .zip(self.backward.par_chunks_mut(PHOTON_CHUNK))
+            .zip(self.photon_lists.par_iter_mut())
+            .zip(aux_chunks(&mut self.aux_backward, aux_channels, PHOTON_CHUNK, self.mask.len()))
             .enumerate()
-            .fold(
-                || (Vec::<BackwardPhoton>::new(), 0u64),
-                |(mut photons, rays), (local, (((&pixel, out), (sums, &before)), aux))| {
+            .map(|(chunk, (((pixels, values), photons), mut aux))| {
+                photons.clear();
+                // A camera path stores at most one photon per diffuse vertex it continues from: at full size
+                // from the first phase, a list never grows, and holds what `--memory-limit` assumed.
+                photons.reserve_exact(pixels.len() * bdd as usize);
+                let mut st = BackwardStats::default();
+                for (i, (&pixel, out)) in pixels.iter().zip(values.iter_mut()).enumerate() {
+                    let local = chunk * PHOTON_CHUNK + i;
                     let bs = BackwardSettings {
                         max_depth,
                         backward_diffuse_depth: bdd,
                         radius,
                         // Phases of this pixel by every group so far, assuming sharers progress alike.
-                        phase: (before as u64 + sums.phases as u64 * sharers + index) * ctx.process_sharers
+                        phase: (phases_before[local] as u64 + sums[local].phases as u64 * sharers + index)
+                            * ctx.process_sharers
                             + ctx.process_index
                             + ctx.phase_offset
                             + 1,
@@ -255,28 +296,22 @@ impl Group {
                     let (x, y) = (pixel % cam.width, pixel / cam.width);
                     let mut s = Sampler::new(settings.seed, Pass::Camera, key, pixel as u64);
                     let ray = cam.generate_ray(x, y, s.next_2d(), s.next_2d());
-                    let mut st = BackwardStats::default();
-                    let (values, ghost) =
+                    let (v, ghost) =
                         trace_camera_path(scene, &bs, local as u32, ray, &mut s, &mut st, &mut |b| photons.push(b));
-                    *out = values;
-                    if let Some(aux) = aux {
+                    *out = v;
+                    if let Some(aux) = aux.as_deref_mut() {
+                        let aux = &mut aux[i * aux_channels..(i + 1) * aux_channels];
                         aux.fill(0.0);
                         if let Some(o) = ghost_offset {
                             aux[o..o + 3].copy_from_slice(&[ghost.x, ghost.y, ghost.z]);
                         }
                     }
-                    (photons, rays + st.rays)
-                },
-            )
-            .reduce(
-                || (Vec::new(), 0),
-                |(mut a, ra), (mut b, rb)| {
-                    a.append(&mut b);
-                    (a, ra + rb)
-                },
-            );
+                }
+                st.rays
+            })
+            .sum();
         self.stats.backward_rays += backward_rays;
-        self.stats.backward_photons += photons.len() as u64;
+        self.stats.backward_photons += self.photon_lists.iter().map(|l| l.len() as u64).sum::<u64>();
 
         // 2. Build the map while it is closed.
         self.stats.nanos.backward += nanos_since(t0);
@@ -284,99 +319,94 @@ impl Group {
         let slot = &ctx.slots[self.index];
         {
             let data = slot.data_mut(&mut self.token);
-            data.photons.clear();
-            data.photons.extend(&photons);
-            // The parallel build costs a one-thread group 20–40% more than the sequential one (the
-            // photon_map micro-benchmark): it splits the work into chunks and copies them back together.
-            if self.pool.current_num_threads() > 1 {
-                data.photons.build_parallel();
-            } else {
-                data.photons.build();
-            }
+            data.photons.copy_from_lists(&self.photon_lists);
+            data.photons.build_parallel();
             data.gathered.reset(self.mask.len(), &self.aux);
         }
-        drop(photons);
         self.stats.nanos.build += nanos_since(t0);
 
         // 3. Forward pass with the map open to every group.
         let t0 = Instant::now();
         slot.open(&self.token);
         let required = settings.light_paths_per_phase(self.mask.len());
-        // A stop is honoured once a sixteenth of the paths are traced, so no phase is closed on a handful.
+        // A stop is honoured from path index `minimum` on, so no phase is closed on a handful of paths.
         let minimum = (required / 16).max(1);
-        let traced = AtomicU64::new(0);
-        let forward_rays = AtomicU64::new(0);
-        let capped = AtomicU64::new(0);
-        let foreign = AtomicU64::new(0);
         let own = slot.owner_data(&self.token);
         // Light paths are traced in batches: foreign maps are acquired once per batch and each batch's paths
         // are counted in them at once, so the counters' cache lines move between cores once per batch, not per
-        // path. `guards` and `merges` are per-thread scratch, reused from batch to batch.
-        let trace_batch =
-            |first: u64, count: u64, closing: bool, guards: &mut Vec<Guard<'c, GroupMap>>, merges: &mut Vec<u64>| {
-                // While closing, the owner takes no other map: two closing owners never wait on each other.
-                guards.clear();
-                if ctx.shared_maps && !closing {
-                    guards.extend(
-                        ctx.slots
-                            .iter()
-                            .enumerate()
-                            .filter(|&(k, _)| k != self.index)
-                            .filter_map(|(_, sl)| sl.try_acquire()),
-                    );
+        // path. The group's own tallies stay with each thread's fold until the pass ends, and `guards` and
+        // `merges` are per-thread scratch, reused from batch to batch.
+        let trace_batch = |first: u64,
+                           count: u64,
+                           closing: bool,
+                           guards: &mut Vec<Guard<'c, GroupMap>>,
+                           merges: &mut Vec<u64>,
+                           tally: &mut ForwardTally| {
+            // While closing, the owner takes no other map: two closing owners never wait on each other.
+            guards.clear();
+            if ctx.shared_maps && !closing {
+                guards.extend(
+                    ctx.slots
+                        .iter()
+                        .enumerate()
+                        .filter(|&(k, _)| k != self.index)
+                        .filter_map(|(_, sl)| sl.try_acquire()),
+                );
+            }
+            merges.clear();
+            merges.resize(guards.len() + 1, 0);
+            let mut done = 0;
+            for index in first..first + count {
+                if !closing && index >= minimum && ctx.stop.load(Ordering::Relaxed) {
+                    break;
                 }
-                merges.clear();
-                merges.resize(guards.len() + 1, 0);
-                let mut fs = ForwardStats::default();
-                let mut done = 0;
-                for index in first..first + count {
-                    if !closing && ctx.stop.load(Ordering::Relaxed) && traced.load(Ordering::Relaxed) + done >= minimum
-                    {
-                        break;
+                let mut s = Sampler::new(settings.seed, Pass::Light, key, index);
+                trace_light_path(scene, max_depth, &spectrum, index, &mut s, &mut tally.stats, &mut |v| {
+                    merges[0] += gather(&own.photons, v, max_depth, bdd, &mut own.gathered.sink());
+                    for (g, m) in guards.iter().zip(merges[1..].iter_mut()) {
+                        *m += gather(&g.data().photons, v, max_depth, bdd, &mut g.data().gathered.sink());
                     }
-                    let mut s = Sampler::new(settings.seed, Pass::Light, key, index);
-                    trace_light_path(scene, max_depth, &spectrum, index, &mut s, &mut fs, &mut |v| {
-                        merges[0] += gather(&own.photons, v, max_depth, bdd, &mut own.gathered.sink());
-                        for (g, m) in guards.iter().zip(merges[1..].iter_mut()) {
-                            *m += gather(&g.data().photons, v, max_depth, bdd, &mut g.data().gathered.sink());
-                        }
-                    });
-                    done += 1;
-                }
-                own.gathered.add_merges(merges[0]);
-                for (g, &m) in guards.iter().zip(&merges[1..]) {
-                    g.data().gathered.add_merges(m);
-                    g.count_light_paths(done);
-                }
-                foreign.fetch_add(guards.len() as u64 * done, Ordering::Relaxed);
-                forward_rays.fetch_add(fs.rays, Ordering::Relaxed);
-                capped.fetch_add(fs.capped, Ordering::Relaxed);
-                traced.fetch_add(done, Ordering::Relaxed);
-                guards.clear();
-            };
+                });
+                done += 1;
+            }
+            for (g, &m) in guards.iter().zip(&merges[1..]) {
+                g.data().gathered.add_merges(m);
+                g.count_light_paths(done);
+            }
+            tally.own_merges += merges[0];
+            tally.foreign += guards.len() as u64 * done;
+            tally.traced += done;
+            guards.clear();
+        };
         let batches = required.div_ceil(BATCH);
-        (0..batches as usize).into_par_iter().for_each_init(
-            || (Vec::new(), Vec::new()),
-            |(guards, merges), b| {
-                let first = b as u64 * BATCH;
-                trace_batch(first, BATCH.min(required - first), false, guards, merges);
-            },
-        );
+        let mut tally = (0..batches as usize)
+            .into_par_iter()
+            .fold(
+                || (Vec::new(), Vec::new(), ForwardTally::default()),
+                |(mut guards, mut merges, mut tally), b| {
+                    let first = b as u64 * BATCH;
+                    trace_batch(first, BATCH.min(required - first), false, &mut guards, &mut merges, &mut tally);
+                    (guards, merges, tally)
+                },
+            )
+            .map(|(_, _, tally)| tally)
+            .reduce(ForwardTally::default, ForwardTally::add);
         self.stats.nanos.forward += nanos_since(t0);
         let t0 = Instant::now();
         // Keep tracing useful paths until no other group is inside the map (paper Fig. 9).
         let mut extra = required;
         let (mut guards, mut merges) = (Vec::new(), Vec::new());
         while !slot.try_close(&self.token) {
-            trace_batch(extra, 1, true, &mut guards, &mut merges);
+            trace_batch(extra, 1, true, &mut guards, &mut merges, &mut tally);
             extra += 1;
         }
-        let traced = traced.into_inner();
+        own.gathered.add_merges(tally.own_merges);
+        let traced = tally.traced;
         slot.count_owner_paths(&self.token, traced);
         self.stats.light_paths += traced;
-        self.stats.forward_rays += forward_rays.into_inner();
-        self.stats.capped_light_paths += capped.into_inner();
-        self.stats.foreign_acquisitions += foreign.into_inner();
+        self.stats.forward_rays += tally.stats.rays;
+        self.stats.capped_light_paths += tally.stats.capped;
+        self.stats.foreign_acquisitions += tally.foreign;
 
         // 4. Close the phase: gathered luminance normalised by every light path traced against the map.
         let counted = slot.light_paths();
@@ -419,16 +449,17 @@ impl Group {
     }
 }
 
-/// One slot of `channels` values of `buffer` per pixel (`pixels` of them), or None for every pixel when there
-/// are no channels: an image without auxiliary layers iterates as it did without them.
-fn aux_slots(
+/// The auxiliary values of each chunk of `chunk` pixels (`pixels` of them, `channels` values each), or None for
+/// every chunk when there are no channels: an image without auxiliary layers iterates as it did without them.
+fn aux_chunks(
     buffer: &mut [f32],
     channels: usize,
+    chunk: usize,
     pixels: usize,
 ) -> impl IndexedParallelIterator<Item = Option<&mut [f32]>> {
     if channels == 0 {
-        Either::Right((0..pixels).into_par_iter().map(|_| None))
+        Either::Right((0..pixels.div_ceil(chunk)).into_par_iter().map(|_| None))
     } else {
-        Either::Left(buffer.par_chunks_mut(channels).map(Some))
+        Either::Left(buffer.par_chunks_mut(chunk * channels).map(Some))
     }
 }

@@ -124,10 +124,10 @@ fn ghost_light_gathered_also_into_other_groups_maps_gives_the_single_threaded_gh
 
 /// `EngineConfig::bytes_per_pixel` as it was before auxiliary layers: the merged sums, and per pixel a group
 /// covers its phase values, sums, mask and phase count entries, gathered light, and its photons (held twice,
-/// eight grid entries each, half a hash bucket).
+/// eight grid entries each in buffers with room to double, half a hash bucket).
 fn estimate_without_auxiliary_layers(config: &EngineConfig, backward_diffuse_depth: u32) -> f64 {
     let coverage = if config.masks { 1 } else { config.groups };
-    let photon = 2 * std::mem::size_of::<photonfarm::pbpm::BackwardPhoton>() + 8 * (4 + 8) + 2;
+    let photon = 2 * std::mem::size_of::<photonfarm::pbpm::BackwardPhoton>() + 2 * 8 * (4 + 8) + 2;
     let per_pixel = std::mem::size_of::<photonfarm::integrator::LayerValues>()
         + std::mem::size_of::<PixelSums>()
         + 8

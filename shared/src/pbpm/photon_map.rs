@@ -10,21 +10,63 @@ use rayon::prelude::*;
 #[derive(Default)]
 pub struct PhotonMap {
     photons: Vec<BackwardPhoton>,
-    inv_cell: f32,
-    mask: u32,
+    grid: Grid,
+    /// The grid is over the current photons. `starts` and `entries` keep their length from phase to phase, so
+    /// that a build writes them once instead of zeroing them first.
+    built: bool,
     /// starts[h]..starts[h+1] are the entries of bucket h.
     starts: Vec<u32>,
     entries: Vec<u32>,
-    /// Build scratch: (bucket << 32 | photon) for every cell a photon overlaps.
-    pairs: Vec<u64>,
+    /// Build scratch: (bucket << 32 | photon) for every cell a photon overlaps, one list per part of the photons
+    /// and range of the buckets, `pairs[part * parts + range]`, so that each build step splits among threads
+    /// without locks.
+    pairs: Vec<Vec<u64>>,
 }
 
-#[inline]
-fn bucket(ix: i32, iy: i32, iz: i32, mask: u32) -> usize {
-    let h = (ix as u32).wrapping_mul(73_856_093)
-        ^ (iy as u32).wrapping_mul(19_349_663)
-        ^ (iz as u32).wrapping_mul(83_492_791);
-    (h & mask) as usize
+/// The grid's cell size and hash table size.
+#[derive(Clone, Copy, Default)]
+struct Grid {
+    inv_cell: f32,
+    mask: u32,
+}
+
+impl Grid {
+    #[inline]
+    fn bucket(&self, [ix, iy, iz]: [i32; 3]) -> usize {
+        let h = (ix as u32).wrapping_mul(73_856_093)
+            ^ (iy as u32).wrapping_mul(19_349_663)
+            ^ (iz as u32).wrapping_mul(83_492_791);
+        (h & self.mask) as usize
+    }
+
+    /// The integer cell of a point: floor without a libm call, which the baseline x86-64 target does not inline
+    /// and which showed up in profiles of the forward pass.
+    #[inline]
+    fn cell(&self, p: Vec3) -> [i32; 3] {
+        let q = p * self.inv_cell;
+        let floor = |x: f32| {
+            let i = x as i32;
+            i - ((i as f32) > x) as i32
+        };
+        [floor(q.x), floor(q.y), floor(q.z)]
+    }
+
+    /// Buckets of the cells a photon's sphere overlaps, each once: a photon whose cells collide in one bucket
+    /// must be entered there once, or it would be gathered twice.
+    fn buckets_of(&self, p: &BackwardPhoton, out: &mut Vec<usize>) {
+        let r = Vec3::splat(p.radius2.sqrt());
+        let (lo, hi) = (self.cell(p.position - r), self.cell(p.position + r));
+        out.clear();
+        for z in lo[2]..=hi[2] {
+            for y in lo[1]..=hi[1] {
+                for x in lo[0]..=hi[0] {
+                    out.push(self.bucket([x, y, z]));
+                }
+            }
+        }
+        out.sort_unstable();
+        out.dedup();
+    }
 }
 
 impl PhotonMap {
@@ -36,9 +78,7 @@ impl PhotonMap {
     /// Forgets the photons of the previous phase (the grid is rebuilt by `build`).
     pub fn clear(&mut self) {
         self.photons.clear();
-        self.entries.clear();
-        self.starts.clear();
-        self.pairs.clear();
+        self.built = false;
     }
 
     /// Reserves room for `n` photons, so that a phase never grows the buffer (memory stays flat).
@@ -48,149 +88,169 @@ impl PhotonMap {
 
     /// Adds a photon; call `build` before gathering.
     pub fn push(&mut self, photon: BackwardPhoton) {
+        self.built = false;
         self.photons.push(photon);
     }
 
     /// Adds many photons.
     pub fn extend(&mut self, photons: &[BackwardPhoton]) {
+        self.built = false;
         self.photons.extend_from_slice(photons);
+    }
+
+    /// Replaces the photons by the lists' photons, in list order, copying the lists with the threads of the
+    /// current rayon pool; call `build_parallel` before gathering. The buffer is sized once for as many photons
+    /// as the lists have room for, so that it never grows by doubling past them.
+    pub fn copy_from_lists(&mut self, lists: &[Vec<BackwardPhoton>]) {
+        self.built = false;
+        let total = lists.iter().map(Vec::len).sum();
+        let room = lists.iter().map(Vec::capacity).sum::<usize>().max(total);
+        if self.photons.capacity() < room {
+            self.photons.reserve_exact(room - self.photons.len());
+        }
+        // Every slot is overwritten below: only a buffer longer than last phase's has new slots to fill first.
+        match lists.iter().find_map(|l| l.first()) {
+            Some(&any) => self.photons.resize(total, any),
+            None => self.photons.clear(),
+        }
+        let mut rest = &mut self.photons[..];
+        let mut targets = Vec::with_capacity(lists.len());
+        for list in lists {
+            let (target, tail) = rest.split_at_mut(list.len());
+            targets.push((target, list));
+            rest = tail;
+        }
+        targets.into_par_iter().for_each(|(target, list)| target.copy_from_slice(list));
     }
 
     /// Bytes held by the map's buffers.
     pub fn capacity_bytes(&self) -> usize {
         self.photons.capacity() * std::mem::size_of::<BackwardPhoton>()
             + (self.starts.capacity() + self.entries.capacity()) * 4
-            + self.pairs.capacity() * 8
-    }
-
-    fn cell_range(&self, p: Vec3, r: f32) -> ([i32; 3], [i32; 3]) {
-        (self.cell((p - Vec3::splat(r)) * self.inv_cell), self.cell((p + Vec3::splat(r)) * self.inv_cell))
-    }
-
-    /// The integer cell of a point already scaled by `inv_cell`: floor without a libm call, which the baseline
-    /// x86-64 target does not inline and which showed up in profiles of the forward pass.
-    #[inline]
-    fn cell(&self, q: Vec3) -> [i32; 3] {
-        let floor = |x: f32| {
-            let i = x as i32;
-            i - ((i as f32) > x) as i32
-        };
-        [floor(q.x), floor(q.y), floor(q.z)]
+            + self.pairs.iter().map(Vec::capacity).sum::<usize>() * 8
+            + self.pairs.capacity() * std::mem::size_of::<Vec<u64>>()
     }
 
     /// Sets the cell size to three mean radii: larger cells mean more candidates per gather, smaller ones more
     /// cells per photon to enter; three radii measured fastest on `cornell` (build and forward pass together).
-    fn set_cell_size(&mut self, mean_radius: f64) {
-        self.inv_cell = 1.0 / (3.0 * mean_radius as f32).max(1e-12);
-    }
-
-    /// Sizes the hash table: a power of two near half the photon count. Nearby photons share cells, so this
+    /// Sizes the hash table to a power of two near half the photon count: nearby photons share cells, so this
     /// keeps the load low while the table stays in cache during the build; collisions only add candidates.
-    fn set_table_size(&mut self) -> usize {
+    fn set_grid(&mut self, mean_radius: f64) -> usize {
         let size = (self.photons.len() / 2).next_power_of_two().max(16);
-        self.mask = (size - 1) as u32;
+        self.grid = Grid { inv_cell: 1.0 / (3.0 * mean_radius as f32).max(1e-12), mask: (size - 1) as u32 };
         size
     }
 
     /// Builds the grid over the current photons on the calling thread.
     pub fn build(&mut self) {
-        self.build_with(false);
+        self.build_with(1);
     }
 
-    /// Builds the same grid as `build`, finding the photons' cells with the threads of the current rayon pool
-    /// (a synchronous group); the result is identical to `build`'s.
+    /// Builds the same grid as `build`, entry for entry, with the threads of the current rayon pool (a
+    /// synchronous group).
     pub fn build_parallel(&mut self) {
-        self.build_with(true);
+        self.build_with(rayon::current_num_threads().max(1));
     }
 
-    fn build_with(&mut self, parallel: bool) {
-        self.starts.clear();
-        self.entries.clear();
-        self.pairs.clear();
-        if self.photons.is_empty() {
+    /// Counting sort of the (bucket, photon) pairs in `parts` parts: part p finds the pairs of the p-th slice of
+    /// the photons, sorted into the bucket ranges; range r then counts and places its buckets' pairs, reading
+    /// the parts in order. Each bucket therefore lists its photons in photon order, whatever `parts` is.
+    fn build_with(&mut self, parts: usize) {
+        self.built = !self.photons.is_empty();
+        if !self.built {
             return;
         }
         let radius = |p: &BackwardPhoton| p.radius2.sqrt() as f64;
         let sum_r: f64 =
-            if parallel { self.photons.par_iter().map(radius).sum() } else { self.photons.iter().map(radius).sum() };
-        self.set_cell_size(sum_r / self.photons.len() as f64);
-        let size = self.set_table_size();
-        // (bucket, photon) pairs, found once per photon: the expensive part, so the part done in parallel.
-        let mut pairs = std::mem::take(&mut self.pairs);
-        if parallel {
-            const CHUNK: usize = 4096;
-            let this = &*self;
-            let chunks: Vec<Vec<u64>> = this
-                .photons
-                .par_chunks(CHUNK)
-                .enumerate()
-                .map(|(c, chunk)| {
-                    let mut out = Vec::with_capacity(chunk.len() * 8);
-                    this.pairs_of(c * CHUNK, chunk, &mut out);
-                    out
-                })
-                .collect();
-            for c in &chunks {
-                pairs.extend_from_slice(c);
-            }
-        } else {
-            self.pairs_of(0, &self.photons, &mut pairs);
-        }
-        // Counting sort by bucket; pairs are in photon order, so each bucket lists its photons in order.
-        self.starts.resize(size + 1, 0);
-        for &pair in &pairs {
-            self.starts[(pair >> 32) as usize + 1] += 1;
-        }
-        for h in 0..size {
-            self.starts[h + 1] += self.starts[h];
-        }
-        self.entries.resize(pairs.len(), 0);
-        // Fill with a moving cursor per bucket, kept in `starts` and shifted back afterwards.
-        for &pair in &pairs {
-            let b = (pair >> 32) as usize;
-            self.entries[self.starts[b] as usize] = pair as u32;
-            self.starts[b] += 1;
-        }
-        for h in (1..=size).rev() {
-            self.starts[h] = self.starts[h - 1];
-        }
-        self.starts[0] = 0;
-        self.pairs = pairs;
-    }
+            if parts > 1 { self.photons.par_iter().map(radius).sum() } else { self.photons.iter().map(radius).sum() };
+        let size = self.set_grid(sum_r / self.photons.len() as f64);
+        let Self { photons, grid, starts, entries, pairs, .. } = self;
+        let grid = *grid;
+        // Buckets range_start(r)..range_start(r + 1) form range r.
+        let range_start = |r: usize| r * size / parts;
+        let log_size = size.trailing_zeros();
+        let range_of = |b: usize| ((b + 1) * parts - 1) >> log_size;
 
-    /// Appends (bucket << 32 | index) for every bucket of `photons`, the first of which has index `first`.
-    fn pairs_of(&self, first: usize, photons: &[BackwardPhoton], out: &mut Vec<u64>) {
-        let mut buckets = Vec::with_capacity(27);
-        for (j, p) in photons.iter().enumerate() {
-            self.buckets_of(p, &mut buckets);
-            out.extend(buckets.iter().map(|&b| ((b as u64) << 32) | (first + j) as u64));
-        }
-    }
-
-    /// Buckets of the cells a photon's sphere overlaps, each once: a photon whose cells collide in one bucket
-    /// must be entered there once, or it would be gathered twice.
-    fn buckets_of(&self, p: &BackwardPhoton, out: &mut Vec<usize>) {
-        let (lo, hi) = self.cell_range(p.position, p.radius2.sqrt());
-        out.clear();
-        for z in lo[2]..=hi[2] {
-            for y in lo[1]..=hi[1] {
-                for x in lo[0]..=hi[0] {
-                    out.push(bucket(x, y, z, self.mask));
+        // 1. The pairs, found once per photon: the expensive part.
+        pairs.resize_with(parts * parts, Vec::new);
+        let per_part = photons.len().div_ceil(parts);
+        let find_pairs = |(p, lists): (usize, &mut [Vec<u64>])| {
+            lists.iter_mut().for_each(Vec::clear);
+            let first = (p * per_part).min(photons.len());
+            let last = (first + per_part).min(photons.len());
+            let mut buckets = Vec::with_capacity(27);
+            for (i, photon) in photons[first..last].iter().enumerate() {
+                grid.buckets_of(photon, &mut buckets);
+                let pair = |b: usize| ((b as u64) << 32) | (first + i) as u64;
+                if let [list] = lists {
+                    list.extend(buckets.iter().map(|&b| pair(b)));
+                } else {
+                    for &b in &buckets {
+                        lists[range_of(b)].push(pair(b));
+                    }
                 }
             }
+        };
+        if parts > 1 {
+            pairs.par_chunks_mut(parts).enumerate().for_each(find_pairs);
+        } else {
+            find_pairs((0, &mut pairs[..]));
         }
-        out.sort_unstable();
-        out.dedup();
+
+        // 2. Counting sort, one bucket range at a time, each range writing its own slices of `starts` and
+        // `entries`.
+        let pairs = &*pairs;
+        let in_range = |r: usize| (0..parts).map(move |p| &pairs[p * parts + r]);
+        starts.resize(size + 1, 0);
+        let total: usize = pairs.iter().map(Vec::len).sum();
+        entries.resize(total, 0);
+        let mut ranges = Vec::with_capacity(parts);
+        let (mut starts_rest, mut entries_rest, mut offset) = (&mut starts[..size], &mut entries[..], 0);
+        for r in 0..parts {
+            let count: usize = in_range(r).map(Vec::len).sum();
+            let (s, s_rest) = starts_rest.split_at_mut(range_start(r + 1) - range_start(r));
+            let (e, e_rest) = entries_rest.split_at_mut(count);
+            ranges.push((r, s, e, offset as u32));
+            (starts_rest, entries_rest, offset) = (s_rest, e_rest, offset + count);
+        }
+        let sort_range = |(r, starts, entries, offset): (usize, &mut [u32], &mut [u32], u32)| {
+            let first = range_start(r);
+            starts.fill(0);
+            for &pair in in_range(r).flatten() {
+                starts[(pair >> 32) as usize - first] += 1;
+            }
+            let mut sum = 0;
+            for s in starts.iter_mut() {
+                (*s, sum) = (sum, sum + *s);
+            }
+            // Fill with a moving cursor per bucket, kept in `starts` and shifted back afterwards.
+            for &pair in in_range(r).flatten() {
+                let b = (pair >> 32) as usize - first;
+                entries[starts[b] as usize] = pair as u32;
+                starts[b] += 1;
+            }
+            for h in (1..starts.len()).rev() {
+                starts[h] = starts[h - 1] + offset;
+            }
+            if let Some(s) = starts.first_mut() {
+                *s = offset;
+            }
+        };
+        if parts > 1 {
+            ranges.into_par_iter().for_each(sort_range);
+        } else {
+            ranges.into_iter().for_each(sort_range);
+        }
+        starts[size] = total as u32;
     }
 
     /// Exactly the photons whose sphere contains `p`.
     #[inline]
     pub fn containing(&self, p: Vec3) -> impl Iterator<Item = &BackwardPhoton> {
-        let range = if self.starts.is_empty() {
+        let range = if !self.built {
             0..0
         } else {
-            let [x, y, z] = self.cell(p * self.inv_cell);
-            let b = bucket(x, y, z, self.mask);
+            let b = self.grid.bucket(self.grid.cell(p));
             self.starts[b] as usize..self.starts[b + 1] as usize
         };
         self.entries[range]
@@ -246,25 +306,31 @@ mod tests {
     }
 
     #[test]
-    fn parallel_build_finds_the_same_photons_as_the_sequential_build() {
+    fn parallel_build_makes_the_sequential_grid_entry_for_entry() {
         let mut s = Sampler::new(2, Pass::Camera, 1, 1);
-        let mut a = PhotonMap::new();
-        let mut b = PhotonMap::new();
-        for i in 0..3000 {
-            let p = photon(Vec3::new(s.next_f32(), s.next_f32(), s.next_f32()), 0.01 + 0.05 * s.next_f32(), i);
-            a.push(p);
-            b.push(p);
+        let photons: Vec<BackwardPhoton> = (0..3000)
+            .map(|i| photon(Vec3::new(s.next_f32(), s.next_f32(), s.next_f32()), 0.01 + 0.05 * s.next_f32(), i))
+            .collect();
+        let mut sequential = PhotonMap::new();
+        sequential.extend(&photons);
+        sequential.build();
+        assert!(sequential.entries.len() > photons.len(), "photons must straddle cells for the test to bite");
+        // Uneven lists, an empty one among them, as a group's backward pass leaves them.
+        let lists = vec![photons[..1000].to_vec(), Vec::new(), photons[1000..2999].to_vec(), photons[2999..].to_vec()];
+        let mut parallel = PhotonMap::new();
+        for threads in [1, 2, 3, 4] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| {
+                parallel.copy_from_lists(&lists);
+                parallel.build_parallel();
+            });
+            assert_eq!(parallel.photons, sequential.photons, "{threads} threads");
+            assert_eq!(parallel.starts, sequential.starts, "{threads} threads");
+            assert_eq!(parallel.entries, sequential.entries, "{threads} threads");
         }
-        a.build();
-        b.build_parallel();
-        for _ in 0..300 {
-            let q = Vec3::new(s.next_f32(), s.next_f32(), s.next_f32());
-            let mut x: Vec<u32> = a.containing(q).map(|p| p.pixel).collect();
-            let mut y: Vec<u32> = b.containing(q).map(|p| p.pixel).collect();
-            x.sort();
-            y.sort();
-            assert_eq!(x, y);
-        }
+        // Fewer photons than last phase: the buffer shrinks to the new lists.
+        parallel.copy_from_lists(&lists[..1]);
+        assert_eq!(parallel.photons, photons[..1000]);
     }
 
     #[test]
