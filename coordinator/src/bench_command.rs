@@ -469,9 +469,61 @@ Goals (true error = relative RMSE against the scene's reference, unlit pixels):
             );
         }
     }
+    any |= parallel_goals(s, rows);
     if !any {
         let _ = writeln!(s, "- (needs path and pbpm runs on scenes with a reference)");
     }
+}
+
+/// The mean and standard error of the mean of some ratios (standard error 0 for a single one).
+fn mean_and_sem(x: &[f64]) -> (f64, f64) {
+    let m = mean(x.iter().copied());
+    if x.len() < 2 {
+        return (m, 0.0);
+    }
+    let var = x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (x.len() - 1) as f64;
+    (m, (var / x.len() as f64).sqrt())
+}
+
+/// Issue 3's goals at every thread count above the fewest: two-level's tracing speedup, and its δ at equal time
+/// against sync and async as the mean ratio over runs paired by repeat, with its standard error. Repeats are
+/// interleaved, so the two runs of a pair share the machine's drift, and the pairing cancels most of it.
+fn parallel_goals(s: &mut String, rows: &[Row]) -> bool {
+    let mut any = false;
+    let of = |scene: &str, method: &str, t: usize| -> Vec<&Row> {
+        rows.iter().filter(|r| r.scene == scene && r.method == method && r.threads == t).collect()
+    };
+    let scenes: std::collections::BTreeSet<&str> = rows.iter().map(|r| r.scene.as_str()).collect();
+    for scene in scenes {
+        let counts: std::collections::BTreeSet<usize> =
+            rows.iter().filter(|r| r.scene == scene && r.method == "two-level").map(|r| r.threads).collect();
+        let Some(&fewest) = counts.first() else { continue };
+        for &t in counts.iter().filter(|&&t| t > fewest) {
+            let two = of(scene, "two-level", t);
+            let speedup = mean(two.iter().map(|r| r.rays_per_second()))
+                / mean(of(scene, "two-level", fewest).iter().map(|r| r.rays_per_second()))
+                * fewest as f64;
+            let mut line = format!("- {scene}, {t} threads: two-level tracing speedup {speedup:.2}× (goal ≥ 1.9)");
+            for other in ["sync", "async"] {
+                let ratios: Vec<f64> = two
+                    .iter()
+                    .filter_map(|a| {
+                        of(scene, other, t)
+                            .into_iter()
+                            .find(|b| b.repeat == a.repeat)
+                            .map(|b| a.delta_unlit / b.delta_unlit)
+                    })
+                    .collect();
+                if !ratios.is_empty() {
+                    let (m, se) = mean_and_sem(&ratios);
+                    let _ = write!(line, "; δ unlit two-level / {other} {m:.3} ± {se:.3}");
+                }
+            }
+            let _ = writeln!(s, "{line} (mean ± standard error over runs paired by repeat; goal ≤ 1).");
+            any = true;
+        }
+    }
+    any
 }
 
 fn csv(rows: &[Row]) -> String {
@@ -508,4 +560,60 @@ fn csv(rows: &[Row]) -> String {
         );
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(method: &str, threads: usize, repeat: u32, delta_unlit: f64, rays: u64) -> Row {
+        Row {
+            scene: "cornell".into(),
+            method: method.into(),
+            topology: "this machine".into(),
+            processes: 1,
+            groups: 1,
+            threads_per_group: threads,
+            threads,
+            repeat,
+            wall_s: 10.0,
+            phases: 100,
+            backward_rays: rays,
+            forward_rays: 0,
+            merges: 0,
+            delta_unlit,
+            delta_all: delta_unlit,
+            true_unlit: None,
+            true_all: None,
+            reference_delta_unlit: None,
+            peak_memory_bytes: None,
+            bytes_per_pixel: 0.0,
+            idle: None,
+            snapshot_bytes: None,
+            series: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn two_level_is_compared_with_sync_and_async_run_by_run_of_the_same_repeat() {
+        let rows = vec![
+            row("two-level", 1, 0, 0.06, 100),
+            row("two-level", 2, 0, 0.044, 190),
+            row("async", 2, 0, 0.040, 200),
+            row("two-level", 2, 1, 0.036, 194),
+            row("async", 2, 1, 0.040, 200),
+            // No sync run of repeat 0: the one sync pair is repeat 1's.
+            row("sync", 2, 1, 0.045, 180),
+        ];
+        let mut s = String::new();
+        assert!(parallel_goals(&mut s, &rows));
+        // Ratios to async 1.1 and 0.9: mean 1, standard error 0.1; the speedup from the mean rays per second.
+        assert!(s.contains("- cornell, 2 threads: two-level tracing speedup 1.92× (goal ≥ 1.9)"), "{s}");
+        assert!(s.contains("two-level / sync 0.800 ± 0.000"), "{s}");
+        assert!(s.contains("two-level / async 1.000 ± 0.100"), "{s}");
+        // Without two-level at two thread counts there is nothing to compare.
+        let mut none = String::new();
+        assert!(!parallel_goals(&mut none, &rows[2..3]));
+        assert!(none.is_empty());
+    }
 }

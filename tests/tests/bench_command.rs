@@ -65,6 +65,7 @@ fn bench_writes_a_row_per_run_their_error_series_and_the_report() {
     let report = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(report.contains("| cornell | two-level | 2 |") && report.contains("tracing speedup"), "{report}");
     assert!(report.contains("Goals") && report.contains("cornell: path tracer"), "{report}");
+    assert!(report.contains("- cornell, 2 threads: two-level tracing speedup"), "{report}");
 }
 
 #[test]

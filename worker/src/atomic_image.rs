@@ -6,6 +6,7 @@ use photonfarm::color::Rgb;
 use photonfarm::ghost::GHOST_LAYER;
 use photonfarm::integrator::Layer;
 use photonfarm::pbpm::Gather;
+use rayon::prelude::*;
 use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 
 /// Gathered (indirect, caustic) RGB per local pixel of a group's mask, followed by the pixel's auxiliary
@@ -19,6 +20,8 @@ pub struct GatherBuffer {
     ghost: Option<usize>,
     /// Merges counted by the gatherers, for the statistics and the stress test's bookkeeping.
     merges: AtomicU64,
+    /// Every value is zero (set by `clear_parallel`, cleared when a phase starts adding).
+    clean: bool,
 }
 
 #[inline]
@@ -34,17 +37,29 @@ fn add_f32(a: &AtomicU32, v: f32) {
 }
 
 impl GatherBuffer {
-    /// Zeroes the buffer for `pixels` local pixels with the auxiliary channels of `aux` (owner only, while its
-    /// map is closed).
+    /// Readies the buffer for `pixels` local pixels with the auxiliary channels of `aux` (owner only, while its
+    /// map is closed): zeroed, unless `clear_parallel` already zeroed it at this size.
     pub fn reset(&mut self, pixels: usize, aux: &AuxLayout) {
-        self.stride = 6 + aux.channels();
-        self.ghost = aux.offset(GHOST_LAYER).map(|o| 6 + o);
-        self.values.resize_with(pixels * self.stride, || AtomicU32::new(0));
-        self.values.truncate(pixels * self.stride);
-        for v in &mut self.values {
-            *v.get_mut() = 0;
+        let stride = 6 + aux.channels();
+        let ghost = aux.offset(GHOST_LAYER).map(|o| 6 + o);
+        if !(self.clean && self.stride == stride && self.ghost == ghost && self.values.len() == pixels * stride) {
+            self.stride = stride;
+            self.ghost = ghost;
+            self.values.resize_with(pixels * stride, || AtomicU32::new(0));
+            self.values.truncate(pixels * stride);
+            for v in &mut self.values {
+                *v.get_mut() = 0;
+            }
         }
+        self.clean = false;
         *self.merges.get_mut() = 0;
+    }
+
+    /// Zeroes the buffer with the threads of the current rayon pool once the phase has read it (owner only, while
+    /// its map is closed), so that the next `reset` has nothing to do on the group's first thread alone.
+    pub fn clear_parallel(&mut self) {
+        self.values.par_iter_mut().for_each(|v| *v.get_mut() = 0);
+        self.clean = true;
     }
 
     /// Gathered (indirect, caustic) of a local pixel.
@@ -144,5 +159,37 @@ mod tests {
         assert_eq!([0, 1, 2, 3].map(|c| b.get_aux(1, c)), [0.0, 0.5, 0.5, 0.5]);
         assert_eq!(b.get(0), [Rgb::ZERO; 2]);
         assert_eq!([0, 1, 2, 3].map(|c| b.get_aux(0, c)), [0.0; 4]);
+    }
+
+    #[test]
+    fn a_reset_starts_every_phase_from_zero_whether_or_not_the_last_phase_cleared_the_buffer() {
+        let (plain, ghost) = (
+            AuxLayout::default(),
+            AuxLayout::new(vec![photonfarm::accumulation::AuxLayer { name: GHOST_LAYER.into(), channels: 3 }]),
+        );
+        let mut b = GatherBuffer::default();
+        let dirty = |b: &GatherBuffer| b.sink().add(1, Layer::Indirect, true, Rgb::ONE);
+        b.reset(2, &plain);
+        dirty(&b);
+        // Not cleared: the reset zeroes.
+        b.reset(2, &plain);
+        assert_eq!(b.get(1), [Rgb::ZERO; 2]);
+        // Cleared in parallel, then reset at the same size: nothing left either.
+        dirty(&b);
+        b.clear_parallel();
+        b.reset(2, &plain);
+        assert_eq!(b.get(1), [Rgb::ZERO; 2]);
+        // Cleared, then a phase adds without a reset in between: the next reset still zeroes.
+        b.clear_parallel();
+        b.reset(2, &plain);
+        dirty(&b);
+        b.reset(2, &plain);
+        assert_eq!(b.get(1), [Rgb::ZERO; 2]);
+        // A new layout after a clear: sized and zeroed for it.
+        dirty(&b);
+        b.clear_parallel();
+        b.reset(3, &ghost);
+        assert!(b.capacity_bytes() >= 3 * 9 * 4);
+        assert_eq!((b.get(2), [0, 1, 2].map(|c| b.get_aux(2, c))), ([Rgb::ZERO; 2], [0.0; 3]));
     }
 }

@@ -24,7 +24,7 @@ use std::time::Instant;
 const BATCH: u64 = 16;
 
 /// Mask pixels per photon list of the backward pass: a unit of work for the group's threads.
-const PHOTON_CHUNK: usize = 1024;
+const PHOTON_CHUNK: usize = 256;
 
 /// The map data a group shares through its slot: the photon map and the luminance gathered into it.
 #[derive(Default)]
@@ -444,6 +444,7 @@ impl Group {
                     add_phase_to(sums, b);
                 });
         }
+        data.gathered.clear_parallel();
         self.stats.nanos.closing += nanos_since(t0);
         self.stats.phases += 1;
     }
