@@ -163,30 +163,27 @@ mod tests {
 
     #[test]
     fn a_reset_starts_every_phase_from_zero_whether_or_not_the_last_phase_cleared_the_buffer() {
-        let (plain, ghost) = (
-            AuxLayout::default(),
-            AuxLayout::new(vec![photonfarm::accumulation::AuxLayer { name: GHOST_LAYER.into(), channels: 3 }]),
-        );
-        let mut b = GatherBuffer::default();
-        let dirty = |b: &GatherBuffer| b.sink().add(1, Layer::Indirect, true, Rgb::ONE);
-        b.reset(2, &plain);
-        dirty(&b);
-        // Not cleared: the reset zeroes.
-        b.reset(2, &plain);
-        assert_eq!(b.get(1), [Rgb::ZERO; 2]);
-        // Cleared in parallel, then reset at the same size: nothing left either.
-        dirty(&b);
-        b.clear_parallel();
-        b.reset(2, &plain);
-        assert_eq!(b.get(1), [Rgb::ZERO; 2]);
-        // Cleared, then a phase adds without a reset in between: the next reset still zeroes.
-        b.clear_parallel();
-        b.reset(2, &plain);
-        dirty(&b);
-        b.reset(2, &plain);
-        assert_eq!(b.get(1), [Rgb::ZERO; 2]);
+        let ghost = AuxLayout::new(vec![photonfarm::accumulation::AuxLayer { name: GHOST_LAYER.into(), channels: 3 }]);
+        // Each sequence adds light at some point and ends with a reset, at 2 pixels without auxiliary layers:
+        // adds left over without a clear, adds cleared in parallel, and adds after a clear whose reset came.
+        let sequences: [&[&str]; 3] =
+            [&["reset", "add", "reset"], &["reset", "add", "clear", "reset"], &["clear", "reset", "add", "reset"]];
+        for steps in sequences {
+            let mut b = GatherBuffer::default();
+            b.reset(2, &AuxLayout::default());
+            for &step in steps {
+                match step {
+                    "reset" => b.reset(2, &AuxLayout::default()),
+                    "clear" => b.clear_parallel(),
+                    _ => b.sink().add(1, Layer::Indirect, true, Rgb::ONE),
+                }
+            }
+            assert_eq!(b.get(1), [Rgb::ZERO; 2], "{steps:?}");
+        }
         // A new layout after a clear: sized and zeroed for it.
-        dirty(&b);
+        let mut b = GatherBuffer::default();
+        b.reset(2, &AuxLayout::default());
+        b.sink().add(1, Layer::Indirect, true, Rgb::ONE);
         b.clear_parallel();
         b.reset(3, &ghost);
         assert!(b.capacity_bytes() >= 3 * 9 * 4);
