@@ -81,12 +81,7 @@ struct ForwardTally {
 impl ForwardTally {
     fn add(self, other: Self) -> Self {
         ForwardTally {
-            stats: ForwardStats {
-                light_paths: self.stats.light_paths + other.stats.light_paths,
-                rays: self.stats.rays + other.stats.rays,
-                merges: self.stats.merges + other.stats.merges,
-                capped: self.stats.capped + other.stats.capped,
-            },
+            stats: self.stats + other.stats,
             traced: self.traced + other.traced,
             own_merges: self.own_merges + other.own_merges,
             foreign: self.foreign + other.foreign,

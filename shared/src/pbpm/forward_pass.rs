@@ -24,6 +24,20 @@ pub struct ForwardStats {
     pub capped: u64,
 }
 
+impl std::ops::Add for ForwardStats {
+    type Output = Self;
+
+    /// The counts of two shares of a forward pass together.
+    fn add(self, o: Self) -> Self {
+        ForwardStats {
+            light_paths: self.light_paths + o.light_paths,
+            rays: self.rays + o.rays,
+            merges: self.merges + o.merges,
+            capped: self.capped + o.capped,
+        }
+    }
+}
+
 /// Where gathered light goes: (pixel, layer, whether the photon's camera path is a ghost path so that the
 /// light is ghost light too, τ · f · ΔΦ / (π r²)).
 pub trait Gather {
