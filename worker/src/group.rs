@@ -16,7 +16,7 @@ use photonfarm::scene::Scene;
 use photonfarm::spectrum::{band_values, PhaseSpectrum};
 use rayon::iter::Either;
 use rayon::prelude::*;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -33,11 +33,48 @@ const STOP_FRACTION: f64 = 0.25;
 /// Mask pixels per photon list of the backward pass: a unit of work for the group's threads.
 const PHOTON_CHUNK: usize = 256;
 
-/// The map data a group shares through its slot: the photon map and the luminance gathered into it.
+/// The map data a group shares through its slot: the photon map, the luminance gathered into it, and the
+/// phase's light-path quota with the indices the owner has claimed towards it.
 #[derive(Default)]
 pub struct GroupMap {
     pub photons: PhotonMap,
     pub gathered: GatherBuffer,
+    /// Light paths the phase needs counted against the map, the owner's and other groups' together.
+    quota: u64,
+    /// Light-path indices the owning group has handed to its threads this phase.
+    claimed: AtomicU64,
+}
+
+impl GroupMap {
+    /// Readies the quota for a new phase (owner, map closed).
+    fn start_phase(&mut self, quota: u64) {
+        self.quota = quota;
+        *self.claimed.get_mut() = 0;
+    }
+
+    /// Light paths the map still lacks, given the `foreign` paths other groups counted against it so far.
+    fn lacking(&self, foreign: u64) -> u64 {
+        self.quota.saturating_sub(self.claimed.load(Ordering::Relaxed) + foreign)
+    }
+
+    /// Claims the next indices towards the quota, at most `n` (owner's threads): None once the owner's claims
+    /// and the `foreign` paths meet it.
+    fn claim_towards_quota(&self, n: u64, foreign: u64) -> Option<(u64, u64)> {
+        let mut first = self.claimed.load(Ordering::Relaxed);
+        loop {
+            let count = n.min(self.quota.checked_sub(first + foreign).filter(|&left| left > 0)?);
+            match self.claimed.compare_exchange_weak(first, first + count, Ordering::Relaxed, Ordering::Relaxed) {
+                Ok(_) => return Some((first, count)),
+                Err(now) => first = now,
+            }
+        }
+    }
+
+    /// Claims `n` indices beyond the quota (owner's threads): paths that help other maps, or that the owner
+    /// traces while it waits to close.
+    fn claim_beyond_quota(&self, n: u64) -> u64 {
+        self.claimed.fetch_add(n, Ordering::Relaxed)
+    }
 }
 
 /// Counters of one group.
@@ -324,23 +361,29 @@ impl Group {
             data.photons.copy_from_lists(&self.photon_lists);
             data.photons.build_parallel();
             data.gathered.reset(self.mask.len(), &self.aux);
+            data.start_phase(settings.light_paths_per_phase(self.mask.len()));
         }
         self.stats.nanos.build += nanos_since(t0);
 
         // 3. Forward pass with the map open to every group.
         let t0 = Instant::now();
         slot.open(&self.token);
+        // The phase's quota counts every light path traced against the map, its own group's and the other
+        // groups' (paper §4.2): a light path that gathers into several open maps serves each of them, so a group
+        // whose map others trace against needs fewer paths of its own for the same light per pixel.
         let required = settings.light_paths_per_phase(self.mask.len());
-        // A stop is honoured from path index `minimum` on: a phase cut shorter has too few light paths for its
-        // camera paths, and its gathered light's variance grows as 1 / paths (see STOP_FRACTION).
+        // A stop is honoured once `minimum` paths are counted: a phase cut shorter has too few light paths for
+        // its camera paths, and its gathered light's variance grows as 1 / paths (see STOP_FRACTION).
         let minimum = ((required as f64 * STOP_FRACTION) as u64).max(1);
         let own = slot.owner_data(&self.token);
         // Light paths are traced in batches: foreign maps are acquired once per batch and each batch's paths
         // are counted in them at once, so the counters' cache lines move between cores once per batch, not per
-        // path. The group's own tallies stay with each thread's fold until the pass ends, and `guards` and
-        // `merges` are per-thread scratch, reused from batch to batch.
+        // path. The group's own tallies stay with each thread until the pass ends, and `guards` and `merges`
+        // are per-thread scratch, reused from batch to batch. Returns whether the stop cut the batch short and
+        // whether a foreign map it served still lacks light.
         let trace_batch = |first: u64,
                            count: u64,
+                           stop_from: u64,
                            closing: bool,
                            guards: &mut Vec<Guard<'c, GroupMap>>,
                            merges: &mut Vec<u64>,
@@ -360,7 +403,7 @@ impl Group {
             merges.resize(guards.len() + 1, 0);
             let mut done = 0;
             for index in first..first + count {
-                if !closing && index >= minimum && ctx.stop.load(Ordering::Relaxed) {
+                if index >= stop_from && ctx.stop.load(Ordering::Relaxed) {
                     break;
                 }
                 let mut s = Sampler::new(settings.seed, Pass::Light, key, index);
@@ -376,32 +419,48 @@ impl Group {
                 g.data().gathered.add_merges(m);
                 g.count_light_paths(done);
             }
+            let others_lack = guards.iter().any(|g| g.data().lacking(g.light_paths()) > 0);
             tally.own_merges += merges[0];
             tally.foreign += guards.len() as u64 * done;
             tally.traced += done;
             guards.clear();
+            (done < count, others_lack)
         };
-        let batches = required.div_ceil(BATCH);
-        let mut tally = (0..batches as usize)
-            .into_par_iter()
-            .fold(
-                || (Vec::new(), Vec::new(), ForwardTally::default()),
-                |(mut guards, mut merges, mut tally), b| {
-                    let first = b as u64 * BATCH;
-                    trace_batch(first, BATCH.min(required - first), false, &mut guards, &mut merges, &mut tally);
-                    (guards, merges, tally)
-                },
-            )
-            .map(|(_, _, tally)| tally)
-            .reduce(ForwardTally::default, ForwardTally::add);
+        // Every thread of the group claims batches of path indices until the paths counted against the map
+        // (its own claims plus the other groups' paths, which the slot counts as they come) meet the quota.
+        // Without foreign paths this traces indices 0..required, whatever the thread count. Then, while another
+        // group's open map still lacks light, the threads help it: a path traced now fills that quota at twice
+        // the rate, costs no more thread time than the owner tracing it alone, and adds light to this phase too.
+        // Groups then leave their forward passes together, so their next forward passes overlap again instead
+        // of drifting apart by the differences in their backward passes.
+        let mut tally = rayon::broadcast(|_| {
+            let (mut guards, mut merges, mut tally) = (Vec::new(), Vec::new(), ForwardTally::default());
+            let mut others_lack = false;
+            loop {
+                let foreign = slot.light_paths();
+                let (first, count, stop_from) = match own.claim_towards_quota(BATCH, foreign) {
+                    Some((first, count)) => (first, count, minimum.saturating_sub(foreign)),
+                    None if others_lack && !ctx.stop.load(Ordering::Relaxed) => {
+                        (own.claim_beyond_quota(BATCH), BATCH, 0)
+                    }
+                    None => break,
+                };
+                let cut;
+                (cut, others_lack) = trace_batch(first, count, stop_from, false, &mut guards, &mut merges, &mut tally);
+                if cut {
+                    break;
+                }
+            }
+            tally
+        })
+        .into_iter()
+        .fold(ForwardTally::default(), ForwardTally::add);
         self.stats.nanos.forward += nanos_since(t0);
         let t0 = Instant::now();
         // Keep tracing useful paths until no other group is inside the map (paper Fig. 9).
-        let mut extra = required;
         let (mut guards, mut merges) = (Vec::new(), Vec::new());
         while !slot.try_close(&self.token) {
-            trace_batch(extra, 1, true, &mut guards, &mut merges, &mut tally);
-            extra += 1;
+            trace_batch(own.claim_beyond_quota(1), 1, u64::MAX, true, &mut guards, &mut merges, &mut tally);
         }
         own.gathered.add_merges(tally.own_merges);
         let traced = tally.traced;

@@ -126,6 +126,11 @@ impl<T> Guard<'_, T> {
         self.slot.data.with(|p| unsafe { &*p })
     }
 
+    /// Light paths counted against the map since it was opened.
+    pub fn light_paths(&self) -> u64 {
+        self.slot.light_paths()
+    }
+
     /// Counts the guard's light path in the map's statistics.
     pub fn count_light_path(&self) {
         self.count_light_paths(1);
