@@ -32,6 +32,9 @@ struct Row {
     backward_rays: u64,
     forward_rays: u64,
     merges: u64,
+    light_paths: u64,
+    /// Light paths counted against the photon maps (once per map a path gathered into).
+    map_light_paths: u64,
     delta_unlit: f64,
     delta_all: f64,
     true_unlit: Option<f64>,
@@ -65,6 +68,13 @@ impl Row {
 
     fn rays_per_second(&self) -> f64 {
         self.rays() / self.wall_s.max(1e-9)
+    }
+
+    /// How many photon maps a light path served on average: above 1 where groups share their maps. None for
+    /// runs without light paths (the path tracer) and for records older than the count.
+    fn maps_per_light_path(&self) -> Option<f64> {
+        (self.light_paths > 0 && self.map_light_paths > 0)
+            .then(|| self.map_light_paths as f64 / self.light_paths as f64)
     }
 
     /// One progress line per finished run.
@@ -206,6 +216,8 @@ fn run_one(
         backward_rays: u(&r["totals"]["backward_rays"]),
         forward_rays: u(&r["totals"]["forward_rays"]),
         merges: u(&r["totals"]["merges"]),
+        light_paths: u(&r["totals"]["light_paths"]),
+        map_light_paths: u(&r["totals"]["map_light_paths"]),
         delta_unlit: f(&r["error"]["delta_unlit"]),
         delta_all: f(&r["error"]["delta_all"]),
         true_unlit: r["true_error"]["rmse_unlit"].as_f64(),
@@ -342,8 +354,8 @@ fn report(rows: &[Row], args: &BenchArgs, threads: &[usize]) -> String {
          directly.\n",
         args.repeats, args.time, threads[0], threads[0]
     );
-    let _ = writeln!(s, "| scene | method | threads | processes × groups × threads | forward rays | backward rays | tracing speedup | δ unlit / all | true error unlit / all | peak memory | bytes/pixel | idle |");
-    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(s, "| scene | method | threads | processes × groups × threads | forward rays | backward rays | tracing speedup | δ unlit / all | true error unlit / all | peak memory | bytes/pixel | idle | maps per light path |");
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     let mut keys: Vec<(&str, &str, usize)> = Vec::new();
     for r in rows {
         let k = (r.scene.as_str(), r.method.as_str(), r.threads);
@@ -366,7 +378,7 @@ fn report(rows: &[Row], args: &BenchArgs, threads: &[usize]) -> String {
         let g = group[0];
         let _ = writeln!(
             s,
-            "| {scene} | {method} | {t} | {}×{}×{} | {:.2} M | {:.2} M | {:.2}× | {:.2}%{range} / {:.2}% | {} / {} | {} | {:.0} | {} |",
+            "| {scene} | {method} | {t} | {}×{}×{} | {:.2} M | {:.2} M | {:.2}× | {:.2}%{range} / {:.2}% | {} / {} | {} | {:.0} | {} | {} |",
             g.processes,
             g.groups / g.processes.max(1),
             g.threads_per_group,
@@ -382,6 +394,7 @@ fn report(rows: &[Row], args: &BenchArgs, threads: &[usize]) -> String {
                 .unwrap_or_else(|| "–".into()),
             mean(group.iter().map(|r| r.bytes_per_pixel)),
             pct(opt_mean(group.iter().map(|r| r.idle))),
+            opt_mean(group.iter().map(|r| r.maps_per_light_path())).map_or_else(|| "–".into(), |m| format!("{m:.2}")),
         );
     }
     let distributed: Vec<&Row> = rows.iter().filter(|r| r.snapshot_bytes.is_some()).collect();
@@ -529,13 +542,13 @@ fn parallel_goals(s: &mut String, rows: &[Row]) -> bool {
 fn csv(rows: &[Row]) -> String {
     let mut s = String::from(
         "scene,method,topology,processes,groups,threads_per_group,threads,repeat,wall_s,backward_rays,forward_rays,\
-         merges,phases,delta_unlit,delta_all,true_unlit,true_all,peak_memory_bytes,bytes_per_pixel,idle_fraction,\
-         reference_delta_unlit\n",
+         merges,light_paths,map_light_paths,phases,delta_unlit,delta_all,true_unlit,true_all,peak_memory_bytes,\
+         bytes_per_pixel,idle_fraction,reference_delta_unlit\n",
     );
     for r in rows {
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{},{},{:.1},{},{}",
+            "{},{},{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{},{},{},{},{:.1},{},{}",
             r.scene,
             r.method,
             r.topology.replace(',', ";"),
@@ -548,6 +561,8 @@ fn csv(rows: &[Row]) -> String {
             r.backward_rays,
             r.forward_rays,
             r.merges,
+            r.light_paths,
+            r.map_light_paths,
             r.phases,
             r.delta_unlit,
             r.delta_all,
@@ -581,6 +596,8 @@ mod tests {
             backward_rays: rays,
             forward_rays: 0,
             merges: 0,
+            light_paths: 0,
+            map_light_paths: 0,
             delta_unlit,
             delta_all: delta_unlit,
             true_unlit: None,

@@ -76,7 +76,7 @@ pub struct BenchArgs {
     /// methods run one worker per synthetic NUMA node of one core, as many nodes as threads.
     #[arg(long, value_delimiter = ',')]
     pub threads: Option<Vec<usize>>,
-    /// Threads per group for two-level.
+    /// Most threads per group for two-level (1, 2 or 4); two threads or more always make at least two groups.
     #[arg(long, default_value_t = 2)]
     pub group_size: usize,
     /// Cores to pin to (default: every core this process may use).
@@ -185,7 +185,8 @@ pub struct RenderArgs {
     /// Threads for the in-process parallel methods (default: every core of --cores).
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Threads per synchronous group for --method two-level: 1, 2 or 4.
+    /// Most threads per synchronous group for --method two-level and three-level: 1, 2 or 4. Two threads or
+    /// more always make at least two groups (one group would be sync with masks).
     #[arg(long, default_value_t = 2)]
     pub group_size: usize,
     /// Cores to pin threads to, e.g. 0,1 or 0-3 (default: every core this process may use).

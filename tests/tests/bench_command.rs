@@ -49,6 +49,17 @@ fn bench_writes_a_row_per_run_their_error_series_and_the_report() {
         assert!(number("true_unlit") > 0.0 && number("true_unlit") < 1.0, "{r:?}");
         let processes = if r[col("method")] == "three-level" { r[col("threads")].as_str() } else { "1" };
         assert_eq!(r[col("processes")], processes, "{r:?}");
+        // A light path counts once in every map it gathers into: only groups sharing their maps (two-level on
+        // two threads: two groups of one) count it more than once.
+        let (paths, in_maps) = (number("light_paths"), number("map_light_paths"));
+        match (r[col("method")].as_str(), r[col("threads")].as_str()) {
+            ("path", _) => assert_eq!(paths, 0.0, "{r:?}"),
+            ("two-level", "2") => {
+                assert_eq!(r[col("groups")], "2", "{r:?}");
+                assert!(in_maps > 1.2 * paths, "{r:?}");
+            }
+            _ => assert_eq!(in_maps, paths, "{r:?}"),
+        }
     }
 
     let (series_header, series) = csv_rows(&out.join("series.csv"));
@@ -63,7 +74,8 @@ fn bench_writes_a_row_per_run_their_error_series_and_the_report() {
     }
 
     let report = std::fs::read_to_string(out.join("report.md")).unwrap();
-    assert!(report.contains("| cornell | two-level | 2 |") && report.contains("tracing speedup"), "{report}");
+    assert!(report.contains("| cornell | two-level | 2 | 1×2×1 |") && report.contains("tracing speedup"), "{report}");
+    assert!(report.contains("maps per light path"), "{report}");
     assert!(report.contains("Goals") && report.contains("cornell: path tracer"), "{report}");
     assert!(report.contains("- cornell, 2 threads: two-level tracing speedup"), "{report}");
 }

@@ -51,7 +51,8 @@ pub enum ConfigError {
 
 impl EngineConfig {
     /// The configuration of `method` on `threads` threads, `group_size` threads per group for two-level (or the
-    /// largest of group_size, 2 and 1 that divides the thread count, so that every core is used).
+    /// largest of group_size, 2 and 1 that divides the thread count into at least two groups, so that every
+    /// core is used and the groups share their maps).
     pub fn for_method(
         method: ParallelMethod,
         threads: usize,
@@ -71,10 +72,12 @@ impl EngineConfig {
                 if ![1, 2, 4].contains(&group_size) {
                     return Err(ConfigError::Invalid(format!("the group size must be 1, 2 or 4, got {group_size}")));
                 }
-                // Groups must be equal: fall back to the largest of g, 2, 1 that divides the thread count.
+                // Groups must be equal: fall back to the largest of g, 2, 1 that divides the thread count. And
+                // two threads or more make at least two groups: one group is `sync` with masks, without the
+                // semi-synchronous level whose shared maps let one light path serve several groups' phases.
                 let g = [group_size, 2, 1]
                     .into_iter()
-                    .filter(|&g| g <= group_size && threads.is_multiple_of(g))
+                    .filter(|&g| g <= group_size && threads.is_multiple_of(g) && (threads == 1 || threads / g >= 2))
                     .max()
                     .unwrap_or(1);
                 (threads / g, g, true, true)
@@ -326,6 +329,7 @@ impl Progressive for ParallelEngine<'_> {
                 backward_rays: s.backward_rays,
                 forward_rays: s.forward_rays,
                 light_paths: s.light_paths,
+                map_light_paths: s.light_paths_counted,
                 backward_photons: s.backward_photons,
                 merges: s.merges,
                 capped_light_paths: s.capped_light_paths,
@@ -374,6 +378,13 @@ mod tests {
         assert_eq!((three.groups, three.threads_per_group), (3, 1));
         let six = c(ParallelMethod::TwoLevel, 6, 4);
         assert_eq!((six.groups, six.threads_per_group), (3, 2));
+        // Never one group of several threads: two cores make two groups of one, four with g = 4 two of two.
+        let two_cores = c(ParallelMethod::TwoLevel, 2, 2);
+        assert_eq!((two_cores.groups, two_cores.threads_per_group), (2, 1));
+        let four = c(ParallelMethod::TwoLevel, 4, 4);
+        assert_eq!((four.groups, four.threads_per_group), (2, 2));
+        let one = c(ParallelMethod::TwoLevel, 1, 2);
+        assert_eq!((one.groups, one.threads_per_group), (1, 1));
         assert!(EngineConfig::for_method(ParallelMethod::TwoLevel, 4, 3, vec![0]).is_err());
         assert!(EngineConfig::for_method(ParallelMethod::Sync, 0, 1, vec![0]).is_err());
     }

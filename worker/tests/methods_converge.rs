@@ -92,8 +92,13 @@ fn configs(group_variants: bool) -> Vec<EngineConfig> {
         EngineConfig::for_method(ParallelMethod::TwoLevel, 2, 1, cores.clone()).unwrap(),
     ];
     if group_variants {
-        configs.push(EngineConfig::for_method(ParallelMethod::TwoLevel, 2, 2, cores.clone()).unwrap());
-        configs.push(EngineConfig::for_method(ParallelMethod::TwoLevel, 4, 4, cores.clone()).unwrap());
+        // Groups of 2 and of 4 threads: two of two, and one of each by hand (the layout rule never makes one
+        // group of several threads, but its synchronous stages must stay exact on their own).
+        let two_by_two = EngineConfig::for_method(ParallelMethod::TwoLevel, 4, 2, cores.clone()).unwrap();
+        assert_eq!((two_by_two.groups, two_by_two.threads_per_group), (2, 2));
+        configs.push(EngineConfig { groups: 1, threads_per_group: 2, ..two_by_two.clone() });
+        configs.push(EngineConfig { groups: 1, threads_per_group: 4, ..two_by_two.clone() });
+        configs.push(two_by_two);
         // Where sync fails (Amdahl: many threads, one map, barriers), it must stay slow but exact.
         configs.push(EngineConfig::for_method(ParallelMethod::Sync, 8, 8, cores.clone()).unwrap());
     }

@@ -13,7 +13,8 @@ pub use connection::{Connection, MessageReader, MessageWriter};
 pub use message::{EngineSpec, FileRef, Job, Message, Role, Snapshot, WorkerInfo};
 
 /// Bumped whenever a message changes shape; peers with another version are refused in the handshake.
-pub const PROTOCOL_VERSION: u32 = 4;
+/// 5: the totals count the light paths counted against photon maps.
+pub const PROTOCOL_VERSION: u32 = 5;
 
 /// Why a peer or a frame was refused, or the link failed.
 #[derive(Debug, thiserror::Error)]

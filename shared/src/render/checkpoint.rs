@@ -10,7 +10,8 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// 2: the sums' auxiliary layers (the ghost layer) are kept. 3: the settings hold the spectral-output bands.
-const FORMAT: u32 = 3;
+/// 4: the totals count the light paths counted against photon maps.
+const FORMAT: u32 = 4;
 
 /// Everything a resumed run continues from.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -22,6 +22,9 @@ pub struct RayTotals {
     /// Rays of light paths.
     pub forward_rays: u64,
     pub light_paths: u64,
+    /// Light paths counted against the photon maps: a light path counts once per map it gathered into, so this
+    /// exceeds `light_paths` where groups share their maps (two-level) and equals it elsewhere.
+    pub map_light_paths: u64,
     pub backward_photons: u64,
     /// Light-path vertices that met a backward photon.
     pub merges: u64,
@@ -35,6 +38,7 @@ impl std::ops::AddAssign for RayTotals {
         self.backward_rays += o.backward_rays;
         self.forward_rays += o.forward_rays;
         self.light_paths += o.light_paths;
+        self.map_light_paths += o.map_light_paths;
         self.backward_photons += o.backward_photons;
         self.merges += o.merges;
         self.capped_light_paths += o.capped_light_paths;
@@ -158,6 +162,7 @@ impl<'s> Engine<'s> {
         self.totals.backward_rays += report.backward_rays;
         self.totals.forward_rays += report.forward_rays;
         self.totals.light_paths += report.light_paths;
+        self.totals.map_light_paths += report.light_paths;
         self.totals.merges += report.merges;
         report
     }
