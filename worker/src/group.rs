@@ -526,3 +526,36 @@ fn aux_chunks(
         Either::Left(buffer.par_chunks_mut(chunk * channels).map(Some))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn claims_hand_out_every_index_once_until_own_and_foreign_paths_meet_the_quota() {
+        let mut map = GroupMap::default();
+        map.start_phase(100);
+        assert_eq!(map.lacking(0), 100);
+        let foreign = 10;
+        let claims: Vec<(u64, u64)> = std::thread::scope(|s| {
+            let handles: Vec<_> = (0..4)
+                .map(|_| {
+                    s.spawn(|| std::iter::from_fn(|| map.claim_towards_quota(16, foreign)).collect::<Vec<_>>())
+                })
+                .collect();
+            handles.into_iter().flat_map(|h| h.join().unwrap()).collect()
+        });
+        let mut indices: Vec<u64> = claims.iter().flat_map(|&(first, n)| first..first + n).collect();
+        indices.sort_unstable();
+        assert_eq!(indices, (0..90).collect::<Vec<_>>(), "each index once, 90 own + 10 foreign = the quota");
+        assert!(claims.iter().all(|&(_, n)| (1..=16).contains(&n)));
+        assert_eq!(map.lacking(foreign), 0);
+        // Helping and closing paths take fresh indices beyond the quota.
+        assert_eq!(map.claim_beyond_quota(16), 90);
+        assert_eq!(map.claim_beyond_quota(1), 106);
+        // More foreign paths than the quota: the owner claims none, and the next phase starts afresh.
+        map.start_phase(50);
+        assert_eq!(map.claim_towards_quota(16, 60), None);
+        assert_eq!(map.claim_towards_quota(16, 40), Some((0, 10)));
+    }
+}

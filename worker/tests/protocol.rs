@@ -133,3 +133,29 @@ fn stage_times_account_for_every_thread_second_of_the_rounds() {
     let covered = parts.iter().sum::<f64>() / (2.0 * wall);
     assert!((0.5..=1.0 + 1e-6).contains(&covered), "stages cover {covered:.3} of the thread time");
 }
+
+#[test]
+fn groups_sharing_maps_give_every_phase_its_light_with_fewer_light_paths_of_their_own() {
+    let sc = scene("cornell.toml", 64);
+    let settings = RenderSettings::for_scene(&sc, Method::Pbpm, 6);
+    let config = EngineConfig::for_method(ParallelMethod::TwoLevel, 2, 2, vec![0, 1]).unwrap();
+    assert_eq!((config.groups, config.threads_per_group), (2, 1));
+    let mut engine = ParallelEngine::new(&sc, settings, config).unwrap();
+    let never = AtomicBool::new(false);
+    let rounds = 40;
+    for _ in 0..rounds {
+        engine.run_round(&never, None);
+    }
+    let stats = engine.group_stats();
+    let phases: u64 = stats.iter().map(|s| s.phases).sum();
+    let traced: u64 = stats.iter().map(|s| s.light_paths).sum();
+    let counted: u64 = stats.iter().map(|s| s.light_paths_counted).sum();
+    // Each group's phase needs light paths for half the image; only the phases a round's stop cut (at most one
+    // per group and round) may have fewer.
+    let quota = settings.light_paths_per_phase(64 * 64 / 2);
+    let full_phases = phases - 2 * rounds;
+    eprintln!("{phases} phases: {traced} light paths traced, {counted} counted by the maps (quota {quota})");
+    assert!(counted >= full_phases * quota, "{counted} light paths counted for {full_phases} full phases of {quota}");
+    // With both maps open at once a light path serves both: 2 at best, 1 if the groups never overlapped.
+    assert!(counted as f64 >= 1.3 * traced as f64, "maps per light path {:.2}", counted as f64 / traced as f64);
+}
