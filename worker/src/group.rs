@@ -352,8 +352,12 @@ impl Group {
         self.stats.backward_rays += backward_rays;
         self.stats.backward_photons += self.photon_lists.iter().map(|l| l.len() as u64).sum::<u64>();
 
-        // 2. Build the map while it is closed.
+        // 2. Build the map while it is closed. The phase's quota counts every light path traced against the map,
+        // its own group's and the other groups' (paper §4.2): a light path that gathers into several open maps
+        // serves each of them, so a group whose map others trace against needs fewer paths of its own for the
+        // same light per pixel.
         self.stats.nanos.backward += nanos_since(t0);
+        let required = settings.light_paths_per_phase(self.mask.len());
         let t0 = Instant::now();
         let slot = &ctx.slots[self.index];
         {
@@ -361,17 +365,13 @@ impl Group {
             data.photons.copy_from_lists(&self.photon_lists);
             data.photons.build_parallel();
             data.gathered.reset(self.mask.len(), &self.aux);
-            data.start_phase(settings.light_paths_per_phase(self.mask.len()));
+            data.start_phase(required);
         }
         self.stats.nanos.build += nanos_since(t0);
 
         // 3. Forward pass with the map open to every group.
         let t0 = Instant::now();
         slot.open(&self.token);
-        // The phase's quota counts every light path traced against the map, its own group's and the other
-        // groups' (paper §4.2): a light path that gathers into several open maps serves each of them, so a group
-        // whose map others trace against needs fewer paths of its own for the same light per pixel.
-        let required = settings.light_paths_per_phase(self.mask.len());
         // A stop is honoured once `minimum` paths are counted: a phase cut shorter has too few light paths for
         // its camera paths, and its gathered light's variance grows as 1 / paths (see STOP_FRACTION).
         let minimum = ((required as f64 * STOP_FRACTION) as u64).max(1);
@@ -429,8 +429,8 @@ impl Group {
         // Every thread of the group claims batches of path indices until the paths counted against the map
         // (its own claims plus the other groups' paths, which the slot counts as they come) meet the quota.
         // Without foreign paths this traces indices 0..required, whatever the thread count. Then, while another
-        // group's open map still lacks light, the threads help it: a path traced now fills that quota at twice
-        // the rate, costs no more thread time than the owner tracing it alone, and adds light to this phase too.
+        // group's open map still lacks light, the threads help it: a path traced now fills that quota faster,
+        // costs no more thread time than the owner tracing it alone, and adds light to this phase too.
         // Groups then leave their forward passes together, so their next forward passes overlap again instead
         // of drifting apart by the differences in their backward passes.
         let mut tally = rayon::broadcast(|_| {
