@@ -539,9 +539,7 @@ mod tests {
         let foreign = 10;
         let claims: Vec<(u64, u64)> = std::thread::scope(|s| {
             let handles: Vec<_> = (0..4)
-                .map(|_| {
-                    s.spawn(|| std::iter::from_fn(|| map.claim_towards_quota(16, foreign)).collect::<Vec<_>>())
-                })
+                .map(|_| s.spawn(|| std::iter::from_fn(|| map.claim_towards_quota(16, foreign)).collect::<Vec<_>>()))
                 .collect();
             handles.into_iter().flat_map(|h| h.join().unwrap()).collect()
         });

@@ -206,7 +206,7 @@ pub fn launch(
         if inner == ParallelMethod::Sync {
             "one synchronous group".to_string()
         } else {
-            format!("two-level with groups of {}", args.group_size)
+            format!("two-level with groups of at most {}", args.group_size)
         },
     );
     let mut join_template = job(0, None, None, remote_interval);
