@@ -1,15 +1,23 @@
 //! Progressive backward photon mapping (paper §2, DESIGN §1): each phase traces camera paths that store
 //! backward photons, builds a map of them, traces light paths that gather into the map, and closes the phase
-//! into the running sums.
+//! into the running sums. `phase` puts the stages together once, for the single-threaded engine and the
+//! worker's groups alike; the other files are the stages' parts (camera and light paths, the photon and its
+//! map, the buffers gathered light waits in, the radius schedule) and where the stages run (`executor`).
 
 pub mod backward_pass;
+pub mod executor;
 pub mod forward_pass;
+pub mod gather_buffer;
+pub mod phase;
 pub mod photon;
 pub mod photon_map;
 pub mod radius;
 
 pub use backward_pass::{trace_camera_path, BackwardSettings};
+pub use executor::Executor;
 pub use forward_pass::{gather, trace_light_path, ForwardStats, Gather, LightVertex};
+pub use gather_buffer::{AtomicGatherBuffer, AtomicSink, GatherBuffer};
+pub use phase::{Phase, PhaseBuffers};
 pub use photon::BackwardPhoton;
 pub use photon_map::PhotonMap;
-pub use radius::RadiusSchedule;
+pub use radius::{PhaseNumbering, RadiusSchedule};

@@ -1,6 +1,7 @@
 //! The backward photon map: a hashed uniform grid built by counting sort each phase. Each photon is entered in
 //! every cell its sphere overlaps, so a gather looks at a single cell.
 
+use super::executor::Executor;
 use super::photon::BackwardPhoton;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -102,6 +103,17 @@ impl PhotonMap {
     /// current rayon pool; call `build_parallel` before gathering. The buffer is sized once for as many photons
     /// as the lists have room for, so that it never grows by doubling past them.
     pub fn copy_from_lists(&mut self, lists: &[Vec<BackwardPhoton>]) {
+        self.copy_lists(lists, Executor::CurrentPool);
+    }
+
+    /// Replaces the photons by the lists' photons, in list order, and builds the grid over them, both with
+    /// `exec`'s threads: the same grid, entry for entry, whatever the executor.
+    pub fn build_from_lists(&mut self, lists: &[Vec<BackwardPhoton>], exec: Executor) {
+        self.copy_lists(lists, exec);
+        self.build_with(exec.threads());
+    }
+
+    fn copy_lists(&mut self, lists: &[Vec<BackwardPhoton>], exec: Executor) {
         self.built = false;
         let total = lists.iter().map(Vec::len).sum();
         let room = lists.iter().map(Vec::capacity).sum::<usize>().max(total);
@@ -120,7 +132,7 @@ impl PhotonMap {
             targets.push((target, list));
             rest = tail;
         }
-        targets.into_par_iter().for_each(|(target, list)| target.copy_from_slice(list));
+        exec.run(targets.into_par_iter()).for_each(|(target, list)| target.copy_from_slice(list));
     }
 
     /// Bytes held by the map's buffers.

@@ -27,6 +27,32 @@ impl RadiusSchedule {
     }
 }
 
+/// Who else renders a pixel's phases, so that the schedule's j counts every phase the pixel has had across
+/// groups and processes (assuming they progress alike), as in a single-threaded run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PhaseNumbering {
+    /// Groups of one process rendering the same pixels in a deal (1 with tile masks), and this group's rank.
+    pub groups: u64,
+    pub group: u64,
+    /// Processes rendering the same image (combination, three-level), and this process's rank.
+    pub processes: u64,
+    pub process: u64,
+    /// Phases every pixel had before this run (a resumed run).
+    pub resumed: u64,
+}
+
+impl PhaseNumbering {
+    /// One renderer of every pixel: j is the pixel's own phase count plus one.
+    pub const ALONE: PhaseNumbering = PhaseNumbering { groups: 1, group: 0, processes: 1, process: 0, resumed: 0 };
+
+    /// The 1-based j of a pixel's next phase, for a pixel that had `before_deal` phases (merged over every
+    /// renderer) when the current deal started and has had `this_deal` phases of this group since.
+    #[inline]
+    pub fn next_phase(&self, before_deal: u64, this_deal: u64) -> u64 {
+        (before_deal + this_deal * self.groups + self.group) * self.processes + self.process + self.resumed + 1
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -38,5 +64,22 @@ mod tests {
         assert!((r1 - 0.03).abs() < 1e-7);
         let r8 = s.radius(1.5, 8);
         assert!(((r8 * r8) / (r1 * r1) - 8f32.powf(-1.0 / 3.0)).abs() < 1e-5);
+    }
+
+    #[test]
+    fn phase_numbers_of_sharers_interleave_without_gaps_or_repeats() {
+        // Two groups over one image in two processes: their first three phases each take j = 1..12 once.
+        let mut seen = Vec::new();
+        for process in 0..2 {
+            for group in 0..2 {
+                let n = PhaseNumbering { groups: 2, group, processes: 2, process, resumed: 0 };
+                seen.extend((0..3).map(|k| n.next_phase(0, k)));
+            }
+        }
+        seen.sort_unstable();
+        assert_eq!(seen, (1..=12).collect::<Vec<_>>());
+        assert_eq!(PhaseNumbering::ALONE.next_phase(4, 2), 7);
+        let resumed = PhaseNumbering { resumed: 10, ..PhaseNumbering::ALONE };
+        assert_eq!(resumed.next_phase(0, 0), 11);
     }
 }

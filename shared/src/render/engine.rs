@@ -2,15 +2,12 @@
 
 use super::settings::{Method, RenderSettings};
 use crate::accumulation::{Accumulator, AuxLayout};
-use crate::color::Rgb;
-use crate::integrator::{path_tracer, Layer, LayerValues};
-use crate::pbpm::{
-    backward_pass::BackwardStats, gather, trace_camera_path, trace_light_path, BackwardSettings, ForwardStats,
-    PhotonMap,
-};
+use crate::integrator::path_tracer;
+use crate::pbpm::phase::{start_aux, Closing};
+use crate::pbpm::{Executor, GatherBuffer, PhaseBuffers, PhotonMap};
 use crate::sampling::{Pass, Sampler};
 use crate::scene::Scene;
-use crate::spectrum::{band_values, PhaseSpectrum, Wavelength};
+use crate::spectrum::PhaseSpectrum;
 use serde::{Deserialize, Serialize};
 
 /// Counts accumulated over a run.
@@ -55,21 +52,17 @@ pub struct PhaseReport {
     pub merges: u64,
 }
 
-/// Runs phases over the whole image on the calling thread and keeps the running sums.
+/// Runs phases over the whole image on the calling thread and keeps the running sums: one group of one thread
+/// whose map nobody shares, running the stages of `pbpm::phase`.
 pub struct Engine<'s> {
     scene: &'s Scene,
     settings: RenderSettings,
     sums: Accumulator,
+    /// Every pixel of the image, in order: the pixels the phases render.
+    pixels: Vec<u32>,
+    buffers: PhaseBuffers,
     map: PhotonMap,
-    phase_values: Vec<LayerValues>,
-    /// Gathered (indirect, caustic) luminance of the phase, before division by the light-path count.
-    gathered: Vec<[Rgb; 2]>,
-    /// The phase's auxiliary values per pixel (`sums.aux`'s layout), from the camera pass, and the auxiliary
-    /// light gathered (before division by the light-path count); both empty without auxiliary layers.
-    aux_phase: Vec<f32>,
-    aux_gathered: Vec<f32>,
-    /// Where the ghost layer's channels start among a pixel's auxiliary channels, when the scene has one.
-    ghost: Option<usize>,
+    gathered: GatherBuffer,
     totals: RayTotals,
 }
 
@@ -77,21 +70,19 @@ impl<'s> Engine<'s> {
     /// An engine with empty sums.
     pub fn new(scene: &'s Scene, settings: RenderSettings) -> Self {
         let pixels = scene.camera.pixel_count();
-        let mut map = PhotonMap::new();
-        // At most one photon per diffuse vertex of each camera path.
-        map.reserve(pixels * settings.backward_diffuse_depth as usize);
         let aux = AuxLayout::for_scene(scene, settings.spectral_bands);
-        let aux_channels = aux.channels();
+        let mut buffers = PhaseBuffers::new(aux.clone());
+        buffers.resize(pixels);
+        let mut gathered = GatherBuffer::default();
+        gathered.reset(pixels, &aux);
         Engine {
             scene,
             settings,
-            ghost: aux.offset(crate::ghost::GHOST_LAYER),
             sums: Accumulator::with_aux(scene.camera.width, scene.camera.height, aux),
-            map,
-            phase_values: vec![[Rgb::ZERO; 4]; pixels],
-            gathered: vec![[Rgb::ZERO; 2]; pixels],
-            aux_phase: vec![0.0; pixels * aux_channels],
-            aux_gathered: vec![0.0; pixels * aux_channels],
+            pixels: (0..pixels as u32).collect(),
+            buffers,
+            map: PhotonMap::new(),
+            gathered,
             totals: RayTotals::default(),
         }
     }
@@ -113,43 +104,14 @@ impl<'s> Engine<'s> {
 
     /// Bytes held per pixel by the sums, the phase buffers and the photon map.
     pub fn bytes_per_pixel(&self) -> f64 {
-        let pixels = self.phase_values.len().max(1);
-        let fixed = self.sums.pixels.capacity() * std::mem::size_of::<crate::accumulation::PixelSums>()
-            + self.phase_values.capacity() * std::mem::size_of::<LayerValues>()
-            + self.gathered.capacity() * std::mem::size_of::<[Rgb; 2]>();
-        let aux = self.sums.aux.capacity_bytes() + (self.aux_phase.capacity() + self.aux_gathered.capacity()) * 4;
-        (fixed + aux + self.map.capacity_bytes()) as f64 / pixels as f64
-    }
-
-    /// Starts a pixel's auxiliary values of the phase from its camera path: its ghost light in the ghost layer
-    /// (nothing without auxiliary layers).
-    #[inline]
-    fn start_aux(&mut self, pixel: usize, ghost: Rgb) {
-        let n = self.sums.aux.layout().channels();
-        self.aux_phase[pixel * n..(pixel + 1) * n].fill(0.0);
-        if let Some(o) = self.ghost {
-            let base = pixel * n + o;
-            self.aux_phase[base..base + 3].copy_from_slice(&[ghost.x, ghost.y, ghost.z]);
-        }
-    }
-
-    /// Closes a pixel's auxiliary values of the phase, adding the gathered ones divided by the light paths, and
-    /// its spectral-output bands from its phase total at its wavelength.
-    #[inline]
-    fn close_aux(&mut self, pixel: usize, inv_n: f32, total: Rgb, wavelength: Option<Wavelength>) {
-        let n = self.sums.aux.layout().channels();
-        if n == 0 {
-            return;
-        }
-        let range = pixel * n..(pixel + 1) * n;
-        for (v, g) in self.aux_phase[range.clone()].iter_mut().zip(&self.aux_gathered[range.clone()]) {
-            *v += g * inv_n;
-        }
-        if let (Some((offset, bands)), Some(w)) = (self.sums.aux.layout().bands(), wavelength) {
-            let start = pixel * n + offset;
-            band_values(total, &w, &mut self.aux_phase[start..start + bands]);
-        }
-        self.sums.aux.add_phase(pixel, &self.aux_phase[range]);
+        let pixels = self.pixels.len().max(1);
+        let sums = self.sums.pixels.capacity() * std::mem::size_of::<crate::accumulation::PixelSums>()
+            + self.sums.aux.capacity_bytes();
+        let phase = self.pixels.capacity() * 4
+            + self.buffers.capacity_bytes()
+            + self.gathered.capacity_bytes()
+            + self.map.capacity_bytes();
+        (sums + phase) as f64 / pixels as f64
     }
 
     /// Renders one more phase and closes it into the sums.
@@ -173,6 +135,10 @@ impl<'s> Engine<'s> {
         let cam = &scene.camera;
         let mut stats = path_tracer::PathStats::default();
         let spectral = self.settings.is_spectral(scene);
+        let aux = self.sums.aux.layout().clone();
+        let (channels, ghost_offset) = (aux.channels(), aux.offset(crate::ghost::GHOST_LAYER));
+        let closing = Closing { inv_n: 0.0, bands: aux.bands() };
+        let mut aux_phase = vec![0.0; channels];
         for pixel in 0..cam.pixel_count() {
             let (x, y) = ((pixel % cam.width as usize) as u32, (pixel / cam.width as usize) as u32);
             let mut s = Sampler::new(self.settings.seed, Pass::Path, phase, pixel as u64);
@@ -184,89 +150,37 @@ impl<'s> Engine<'s> {
                 PhaseSpectrum::RGB
             };
             let (v, ghost) = path_tracer::trace(scene, self.settings.max_depth, &spectrum, ray, &mut s, &mut stats);
-            self.sums.add_phase(pixel, &v, 1);
-            self.start_aux(pixel, ghost);
-            // Nothing is gathered: the gathered buffer stays zero.
-            self.close_aux(pixel, 0.0, v.iter().sum(), spectrum.wavelength(0));
+            start_aux(&mut aux_phase, ghost_offset, ghost);
+            // Nothing is gathered.
+            let aux_sums = &mut self.sums.aux.values_mut()[pixel * channels..(pixel + 1) * channels];
+            let (aux, aux_sums) = if channels == 0 {
+                (None, None)
+            } else {
+                (Some((&mut aux_phase[..], spectrum.wavelength(0))), Some(aux_sums))
+            };
+            closing.close_pixel(&v, None, aux, &mut self.sums.pixels[pixel], aux_sums);
         }
         PhaseReport { phase, backward_rays: stats.rays, ..Default::default() }
     }
 
     fn pbpm_phase(&mut self) -> PhaseReport {
-        let phase = self.totals.phases + 1;
-        let scene = self.scene;
-        let cam = &scene.camera;
-        let bs = BackwardSettings {
-            max_depth: self.settings.max_depth,
-            backward_diffuse_depth: self.settings.backward_diffuse_depth,
-            radius: self.settings.radius_schedule(scene),
-            phase,
-            spectrum: self.settings.phase_spectrum(scene, phase),
-        };
-        // 1. Backward pass.
-        self.map.clear();
-        let mut bstats = BackwardStats::default();
-        for pixel in 0..cam.pixel_count() {
-            let (x, y) = ((pixel % cam.width as usize) as u32, (pixel / cam.width as usize) as u32);
-            let mut s = Sampler::new(self.settings.seed, Pass::Camera, phase, pixel as u64);
-            let ray = cam.generate_ray(x, y, s.next_2d(), s.next_2d());
-            let map = &mut self.map;
-            let (v, ghost) =
-                trace_camera_path(scene, &bs, pixel as u32, ray, &mut s, &mut bstats, &mut |b| map.push(b));
-            self.phase_values[pixel] = v;
-            self.start_aux(pixel, ghost);
-        }
-        // 2. Backward photon map.
-        self.map.build();
-        // 3. Forward pass.
-        let n = self.settings.light_paths_per_phase(cam.pixel_count());
-        let mut fstats = ForwardStats::default();
-        for g in self.gathered.iter_mut() {
-            *g = [Rgb::ZERO; 2];
-        }
-        self.aux_gathered.fill(0.0);
-        let gathered = &mut self.gathered;
-        let (aux_gathered, aux_channels, ghost_offset) =
-            (&mut self.aux_gathered, self.sums.aux.layout().channels(), self.ghost);
-        let mut sink = |pixel: u32, layer: Layer, ghost: bool, v: Rgb| {
-            let slot = if layer == Layer::Caustic { 1 } else { 0 };
-            gathered[pixel as usize][slot] += v;
-            if let (true, Some(o)) = (ghost, ghost_offset) {
-                let base = pixel as usize * aux_channels + o;
-                for (a, c) in aux_gathered[base..base + 3].iter_mut().zip([v.x, v.y, v.z]) {
-                    *a += c;
-                }
-            }
-        };
-        let (max_depth, bdd) = (self.settings.max_depth, self.settings.backward_diffuse_depth);
-        let map = &self.map;
-        let mut merges = 0;
-        for i in 0..n {
-            let mut s = Sampler::new(self.settings.seed, Pass::Light, phase, i);
-            trace_light_path(scene, max_depth, &bs.spectrum, i, &mut s, &mut fstats, &mut |v| {
-                merges += gather(map, v, max_depth, bdd, &mut sink)
-            });
-        }
-        fstats.merges = merges;
-        // 4. Close the phase: the gathered sums are normalised by the number of light paths traced against
-        // the map.
-        let inv_n = 1.0 / n as f32;
-        for pixel in 0..cam.pixel_count() {
-            let mut v = self.phase_values[pixel];
-            v[Layer::Indirect as usize] += self.gathered[pixel][0] * inv_n;
-            v[Layer::Caustic as usize] += self.gathered[pixel][1] * inv_n;
-            self.sums.add_phase(pixel, &v, 1);
-            let w = bs.spectrum.wavelength(PhaseSpectrum::class_of(pixel as u64));
-            self.close_aux(pixel, inv_n, v.iter().sum(), w);
-        }
-        self.totals.backward_photons += bstats.photons;
-        self.totals.capped_light_paths += fstats.capped;
+        let number = self.totals.phases + 1;
+        let exec = Executor::CallingThread;
+        let phase = self.settings.phase(self.scene, number);
+        // Every pixel has had the same phases: j is the engine's phase count plus one.
+        let backward_rays = self.buffers.camera_pass(exec, &phase, &self.pixels, |_| number);
+        self.buffers.build_map(exec, &mut self.map);
+        let n = self.settings.light_paths_per_phase(self.pixels.len());
+        let forward = phase.forward_pass(0..n, &self.map, &mut self.gathered);
+        self.buffers.close(exec, &phase, &mut self.gathered, n, &mut self.sums.pixels, &mut self.sums.aux);
+        self.totals.backward_photons += self.buffers.photons();
+        self.totals.capped_light_paths += forward.capped;
         PhaseReport {
-            phase,
-            backward_rays: bstats.rays,
-            forward_rays: fstats.rays,
-            light_paths: fstats.light_paths,
-            merges: fstats.merges,
+            phase: number,
+            backward_rays,
+            forward_rays: forward.rays,
+            light_paths: forward.light_paths,
+            merges: forward.merges,
         }
     }
 }

@@ -1,6 +1,6 @@
 //! Settings of one rendering run.
 
-use crate::pbpm::RadiusSchedule;
+use crate::pbpm::{Phase, RadiusSchedule};
 use crate::sampling::{Pass, Sampler};
 use crate::scene::{Scene, SceneRenderSettings};
 use crate::spectrum::PhaseSpectrum;
@@ -79,6 +79,19 @@ impl RenderSettings {
     /// True when the run renders spectrally: the scene disperses, or spectral output is asked for.
     pub fn is_spectral(&self, scene: &Scene) -> bool {
         crate::spectrum::ENABLED && (self.spectral_bands > 0 || scene.is_spectral())
+    }
+
+    /// The phase whose random streams `key` names, with its wavelengths.
+    pub fn phase<'a>(&self, scene: &'a Scene, key: u64) -> Phase<'a> {
+        Phase {
+            scene,
+            seed: self.seed,
+            key,
+            max_depth: self.max_depth,
+            backward_diffuse_depth: self.backward_diffuse_depth,
+            radius: self.radius_schedule(scene),
+            spectrum: self.phase_spectrum(scene, key),
+        }
     }
 
     /// Light paths traced per phase for an image of `pixels` pixels.

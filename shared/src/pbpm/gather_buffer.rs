@@ -1,0 +1,323 @@
+//! Where the forward pass's gathered light waits for the phase to close: f32 (indirect, caustic) RGB per local
+//! pixel of the phase, then the pixel's auxiliary channels (the ghost layer's gathered light). A plain buffer
+//! takes the adds of one thread; an atomic one takes adds from any thread, for light paths of other groups
+//! gathering into an open map (paper §4.2) and for groups whose threads share their own map.
+
+use super::forward_pass::Gather;
+use crate::accumulation::AuxLayout;
+use crate::color::Rgb;
+use crate::ghost::GHOST_LAYER;
+use crate::integrator::Layer;
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
+
+/// Values per pixel before the auxiliary channels: (indirect, caustic) × RGB.
+const FIXED: usize = 6;
+
+/// How a pixel's values are laid out: their count, and where the ghost layer's channels start.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct Stride {
+    values: usize,
+    ghost: Option<usize>,
+}
+
+impl Stride {
+    fn of(aux: &AuxLayout) -> Self {
+        Stride { values: FIXED + aux.channels(), ghost: aux.offset(GHOST_LAYER).map(|o| FIXED + o) }
+    }
+
+    /// The value indices an add of `value` to `layer` (and to the ghost layer, for ghost light) touches, with
+    /// the channel each takes.
+    #[inline]
+    fn targets(&self, pixel: u32, layer: Layer, ghost: bool) -> (usize, Option<usize>) {
+        let base = pixel as usize * self.values;
+        let usual = base + if layer == Layer::Caustic { 3 } else { 0 };
+        (usual, self.ghost.filter(|_| ghost).map(|g| base + g))
+    }
+}
+
+/// Gathered light of one phase added by one thread. Zero between phases: `close` in `phase.rs` reads it and
+/// zeroes it as it goes, and `absorb` zeroes what it takes.
+#[derive(Clone, Debug, Default)]
+pub struct GatherBuffer {
+    values: Vec<f32>,
+    stride: Stride,
+}
+
+impl GatherBuffer {
+    /// Sizes the buffer for `pixels` local pixels with the auxiliary channels of `aux`, all zero.
+    pub fn reset(&mut self, pixels: usize, aux: &AuxLayout) {
+        let stride = Stride::of(aux);
+        if stride != self.stride {
+            self.values.clear();
+            self.stride = stride;
+        }
+        // Values already held are zero (the invariant above): only new ones need writing.
+        self.values.resize(pixels * stride.values, 0.0);
+    }
+
+    /// Values per pixel: 6, plus the auxiliary channels.
+    pub fn stride(&self) -> usize {
+        self.stride.values
+    }
+
+    /// Every pixel's values, pixel after pixel.
+    pub fn values_mut(&mut self) -> &mut [f32] {
+        &mut self.values
+    }
+
+    /// Gathered (indirect, caustic) of a local pixel.
+    pub fn get(&self, local: usize) -> [Rgb; 2] {
+        let v = &self.values[local * self.stride.values..];
+        [Rgb::new(v[0], v[1], v[2]), Rgb::new(v[3], v[4], v[5])]
+    }
+
+    /// Gathered auxiliary channel `channel` of a local pixel.
+    pub fn get_aux(&self, local: usize, channel: usize) -> f32 {
+        self.values[local * self.stride.values + FIXED + channel]
+    }
+
+    /// Adds what `other` gathered into this buffer and zeroes `other`, with the threads of the current rayon
+    /// pool. Both buffers must have the same size and layout.
+    pub fn absorb(&mut self, other: &mut AtomicGatherBuffer) {
+        assert_eq!(
+            (self.values.len(), self.stride),
+            (other.values.len(), other.stride),
+            "absorbing gathered light of another size"
+        );
+        self.values.par_iter_mut().zip(other.values.par_iter_mut()).for_each(|(a, b)| {
+            *a += f32::from_bits(std::mem::take(b.get_mut()));
+        });
+        other.clean = true;
+    }
+
+    /// Bytes held.
+    pub fn capacity_bytes(&self) -> usize {
+        self.values.capacity() * 4
+    }
+}
+
+impl Gather for GatherBuffer {
+    #[inline]
+    fn add(&mut self, pixel: u32, layer: Layer, ghost: bool, value: Rgb) {
+        let (usual, ghost) = self.stride.targets(pixel, layer, ghost);
+        for (v, c) in self.values[usual..usual + 3].iter_mut().zip([value.x, value.y, value.z]) {
+            *v += c;
+        }
+        if let Some(g) = ghost {
+            for (v, c) in self.values[g..g + 3].iter_mut().zip([value.x, value.y, value.z]) {
+                *v += c;
+            }
+        }
+    }
+}
+
+/// Gathered light of one phase added from any thread by f32 compare-and-swap loops, with a count of the merges
+/// the adders made.
+#[derive(Debug, Default)]
+pub struct AtomicGatherBuffer {
+    values: Vec<AtomicU32>,
+    stride: Stride,
+    merges: AtomicU64,
+    /// Every value is zero (set by `GatherBuffer::absorb` and `reset`).
+    clean: bool,
+}
+
+#[inline]
+fn add_f32(a: &AtomicU32, v: f32) {
+    let mut current = a.load(Ordering::Relaxed);
+    loop {
+        let new = (f32::from_bits(current) + v).to_bits();
+        match a.compare_exchange_weak(current, new, Ordering::Relaxed, Ordering::Relaxed) {
+            Ok(_) => return,
+            Err(x) => current = x,
+        }
+    }
+}
+
+impl AtomicGatherBuffer {
+    /// Readies the buffer for `pixels` local pixels with the auxiliary channels of `aux` (by its owner, while
+    /// no other thread adds): zero, with no merges counted.
+    pub fn reset(&mut self, pixels: usize, aux: &AuxLayout) {
+        let stride = Stride::of(aux);
+        if !(self.clean && self.stride == stride && self.values.len() == pixels * stride.values) {
+            self.stride = stride;
+            self.values.resize_with(pixels * stride.values, || AtomicU32::new(0));
+            self.values.truncate(pixels * stride.values);
+            self.values.par_iter_mut().for_each(|v| *v.get_mut() = 0);
+        }
+        self.clean = false;
+        *self.merges.get_mut() = 0;
+    }
+
+    /// Gathered (indirect, caustic) of a local pixel.
+    pub fn get(&self, local: usize) -> [Rgb; 2] {
+        let f = |k: usize| f32::from_bits(self.values[local * self.stride.values + k].load(Ordering::Relaxed));
+        [Rgb::new(f(0), f(1), f(2)), Rgb::new(f(3), f(4), f(5))]
+    }
+
+    /// Gathered auxiliary channel `channel` of a local pixel.
+    pub fn get_aux(&self, local: usize, channel: usize) -> f32 {
+        f32::from_bits(self.values[local * self.stride.values + FIXED + channel].load(Ordering::Relaxed))
+    }
+
+    /// Merges recorded since the last reset.
+    pub fn merges(&self) -> u64 {
+        self.merges.load(Ordering::Relaxed)
+    }
+
+    /// Records merges made into this buffer (callers count them per batch of light paths and add them once).
+    pub fn add_merges(&self, n: u64) {
+        if n > 0 {
+            self.merges.fetch_add(n, Ordering::Relaxed);
+        }
+    }
+
+    /// A sink that adds into this buffer from any thread.
+    pub fn sink(&self) -> AtomicSink<'_> {
+        AtomicSink { buffer: self }
+    }
+
+    /// Bytes held.
+    pub fn capacity_bytes(&self) -> usize {
+        self.values.capacity() * 4
+    }
+}
+
+/// Adds gathered light into an `AtomicGatherBuffer`.
+pub struct AtomicSink<'a> {
+    buffer: &'a AtomicGatherBuffer,
+}
+
+impl Gather for AtomicSink<'_> {
+    #[inline]
+    fn add(&mut self, pixel: u32, layer: Layer, ghost: bool, value: Rgb) {
+        let (usual, ghost) = self.buffer.stride.targets(pixel, layer, ghost);
+        let values = &self.buffer.values;
+        for (k, c) in [value.x, value.y, value.z].into_iter().enumerate() {
+            add_f32(&values[usual + k], c);
+        }
+        if let Some(g) = ghost {
+            for (k, c) in [value.x, value.y, value.z].into_iter().enumerate() {
+                add_f32(&values[g + k], c);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::accumulation::AuxLayer;
+
+    fn ghost_layout() -> AuxLayout {
+        AuxLayout::new(vec![
+            AuxLayer { name: "band".into(), channels: 1 },
+            AuxLayer { name: GHOST_LAYER.into(), channels: 3 },
+        ])
+    }
+
+    #[test]
+    fn concurrent_atomic_adds_lose_nothing() {
+        let mut b = AtomicGatherBuffer::default();
+        b.reset(2, &AuxLayout::default());
+        std::thread::scope(|s| {
+            for _ in 0..4 {
+                s.spawn(|| {
+                    let mut sink = b.sink();
+                    for _ in 0..10_000 {
+                        sink.add(1, Layer::Caustic, true, Rgb::new(1.0, 2.0, 0.5));
+                    }
+                    b.add_merges(10_000);
+                });
+            }
+        });
+        assert_eq!(b.get(1)[1], Rgb::new(40_000.0, 80_000.0, 20_000.0));
+        assert_eq!(b.get(0), [Rgb::ZERO; 2]);
+        assert_eq!(b.merges(), 40_000);
+        assert_eq!(b.capacity_bytes(), 2 * 6 * 4, "no ghost channels without a ghost layer");
+    }
+
+    #[test]
+    fn ghost_light_lands_in_its_layer_and_its_usual_layer_but_other_light_only_in_its_usual_layer() {
+        let mut atomic = AtomicGatherBuffer::default();
+        atomic.reset(3, &ghost_layout());
+        let mut plain = GatherBuffer::default();
+        plain.reset(3, &ghost_layout());
+        let adds = [
+            (2, Layer::Indirect, true, Rgb::new(1.0, 2.0, 3.0)),
+            (2, Layer::Caustic, false, Rgb::splat(10.0)),
+            (1, Layer::Caustic, true, Rgb::splat(0.5)),
+        ];
+        for (p, l, g, v) in adds {
+            atomic.sink().add(p, l, g, v);
+            plain.add(p, l, g, v);
+        }
+        let read_atomic = |p: usize| (atomic.get(p), [0, 1, 2, 3].map(|c| atomic.get_aux(p, c)));
+        let read_plain = |p: usize| (plain.get(p), [0, 1, 2, 3].map(|c| plain.get_aux(p, c)));
+        assert!((0..3).all(|p| read_atomic(p) == read_plain(p)), "both buffers lay light out alike");
+        assert_eq!(read_plain(2), ([Rgb::new(1.0, 2.0, 3.0), Rgb::splat(10.0)], [0.0, 1.0, 2.0, 3.0]));
+        assert_eq!(read_plain(1), ([Rgb::ZERO, Rgb::splat(0.5)], [0.0, 0.5, 0.5, 0.5]));
+        assert_eq!(read_plain(0), ([Rgb::ZERO; 2], [0.0; 4]));
+    }
+
+    #[test]
+    fn absorbing_adds_the_atomic_light_and_leaves_it_zero_for_the_next_phase() {
+        let mut plain = GatherBuffer::default();
+        plain.reset(2, &ghost_layout());
+        let mut atomic = AtomicGatherBuffer::default();
+        atomic.reset(2, &ghost_layout());
+        plain.add(1, Layer::Indirect, true, Rgb::ONE);
+        atomic.sink().add(1, Layer::Indirect, true, Rgb::splat(2.0));
+        atomic.sink().add(0, Layer::Caustic, false, Rgb::splat(4.0));
+        plain.absorb(&mut atomic);
+        assert_eq!(plain.get(1)[0], Rgb::splat(3.0));
+        assert_eq!(plain.get_aux(1, 1), 3.0);
+        assert_eq!(plain.get(0)[1], Rgb::splat(4.0));
+        assert_eq!((atomic.get(0), atomic.get(1)), ([Rgb::ZERO; 2], [Rgb::ZERO; 2]));
+        // The absorbed buffer counts as clean: the next reset at its size has nothing to zero, and is zero.
+        atomic.reset(2, &ghost_layout());
+        assert_eq!(atomic.get(0), [Rgb::ZERO; 2]);
+    }
+
+    #[test]
+    fn a_reset_starts_every_phase_from_zero_whether_or_not_the_last_phase_was_absorbed() {
+        // Each sequence adds light at some point and ends with a reset, at 2 pixels without auxiliary layers:
+        // adds left over without an absorb, adds absorbed, and adds after an absorb whose reset came.
+        let sequences: [&[&str]; 3] =
+            [&["reset", "add", "reset"], &["reset", "add", "absorb", "reset"], &["absorb", "reset", "add", "reset"]];
+        for steps in sequences {
+            let mut b = AtomicGatherBuffer::default();
+            b.reset(2, &AuxLayout::default());
+            let mut plain = GatherBuffer::default();
+            plain.reset(2, &AuxLayout::default());
+            for &step in steps {
+                match step {
+                    "reset" => b.reset(2, &AuxLayout::default()),
+                    "absorb" => plain.absorb(&mut b),
+                    _ => b.sink().add(1, Layer::Indirect, true, Rgb::ONE),
+                }
+            }
+            assert_eq!(b.get(1), [Rgb::ZERO; 2], "{steps:?}");
+        }
+        // A new layout after an absorb: sized and zeroed for it.
+        let (mut b, mut plain) = (AtomicGatherBuffer::default(), GatherBuffer::default());
+        b.reset(2, &AuxLayout::default());
+        plain.reset(2, &AuxLayout::default());
+        b.sink().add(1, Layer::Indirect, true, Rgb::ONE);
+        plain.absorb(&mut b);
+        b.reset(3, &ghost_layout());
+        assert!(b.capacity_bytes() >= 3 * 10 * 4);
+        assert_eq!((b.get(2), [0, 1, 2, 3].map(|c| b.get_aux(2, c))), ([Rgb::ZERO; 2], [0.0; 4]));
+    }
+
+    #[test]
+    fn a_plain_buffer_resized_to_a_new_layout_starts_at_zero() {
+        let mut plain = GatherBuffer::default();
+        plain.reset(2, &AuxLayout::default());
+        plain.add(1, Layer::Caustic, false, Rgb::ONE);
+        plain.reset(3, &ghost_layout());
+        assert_eq!(plain.stride(), 10);
+        assert!((0..3).all(|p| plain.get(p) == [Rgb::ZERO; 2]));
+    }
+}

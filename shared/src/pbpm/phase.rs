@@ -1,0 +1,297 @@
+//! One phase of progressive backward photon mapping over a set of pixels (DESIGN §1, paper §2):
+//!
+//! 1. the camera pass traces one camera path per pixel, keeps its visible-light and direct-light values and
+//!    stores backward photons at its diffuse vertices ([`PhaseBuffers::camera_pass`]);
+//! 2. the photon map is built from those photons ([`PhaseBuffers::build_map`]);
+//! 3. light paths gather into the map ([`Phase::trace_light_path`], [`Phase::gather`]);
+//! 4. the close adds every pixel's phase value to its running sums ([`PhaseBuffers::close`]).
+//!
+//! The single-threaded engine runs these stages over the whole image on the calling thread; a worker's
+//! synchronous group runs them over its tile mask on its pinned threads and drives step 3 itself (its light-path
+//! quota, the other groups' maps, the stop). Both reach the same image: the stages are this file's, once.
+
+use super::backward_pass::{trace_camera_path, BackwardSettings, BackwardStats};
+use super::executor::Executor;
+use super::forward_pass::{gather, trace_light_path, ForwardStats, Gather, LightVertex};
+use super::gather_buffer::GatherBuffer;
+use super::photon::BackwardPhoton;
+use super::photon_map::PhotonMap;
+use super::radius::RadiusSchedule;
+use crate::accumulation::{auxiliary::add_phase_to, AuxLayout, AuxSums, PixelSums};
+use crate::color::Rgb;
+use crate::integrator::{Layer, LayerValues};
+use crate::sampling::{Pass, Sampler};
+use crate::scene::Scene;
+use crate::spectrum::{band_values, PhaseSpectrum, Wavelength};
+use rayon::iter::Either;
+use rayon::prelude::*;
+
+/// Pixels per unit of work of the camera pass and the close, each with its own photon list.
+pub const PIXEL_CHUNK: usize = 256;
+
+/// What every stage of one phase reads: the scene, the estimator's settings, the phase's random key and its
+/// wavelengths.
+#[derive(Clone, Copy)]
+pub struct Phase<'a> {
+    pub scene: &'a Scene,
+    /// Job seed: with `key` and the pixel or light-path index it seeds every random stream of the phase.
+    pub seed: u64,
+    /// Tells this phase's random streams from every other phase's of the run.
+    pub key: u64,
+    pub max_depth: u32,
+    pub backward_diffuse_depth: u32,
+    pub radius: RadiusSchedule,
+    /// The phase's wavelengths: its camera and light paths share them, so their joins are at one wavelength.
+    pub spectrum: PhaseSpectrum,
+}
+
+impl Phase<'_> {
+    /// Traces light path number `index` of the phase and hands each vertex that may gather (DESIGN §1 step 3)
+    /// to `visit`.
+    #[inline]
+    pub fn trace_light_path(&self, index: u64, stats: &mut ForwardStats, visit: &mut impl FnMut(&LightVertex)) {
+        let mut s = Sampler::new(self.seed, Pass::Light, self.key, index);
+        trace_light_path(self.scene, self.max_depth, &self.spectrum, index, &mut s, stats, visit);
+    }
+
+    /// Gathers a light vertex into `map`, adding to `sink` (paper eq. 4); returns the merges.
+    #[inline]
+    pub fn gather(&self, map: &PhotonMap, v: &LightVertex, sink: &mut impl Gather) -> u64 {
+        gather(map, v, self.max_depth, self.backward_diffuse_depth, sink)
+    }
+
+    /// Traces light paths `indices` into one map and its buffer: the forward pass of a map nobody shares.
+    pub fn forward_pass(
+        &self,
+        indices: std::ops::Range<u64>,
+        map: &PhotonMap,
+        gathered: &mut GatherBuffer,
+    ) -> ForwardStats {
+        let (mut stats, mut merges) = (ForwardStats::default(), 0);
+        for index in indices {
+            self.trace_light_path(index, &mut stats, &mut |v| merges += self.gather(map, v, gathered));
+        }
+        stats.merges = merges;
+        stats
+    }
+
+    /// The wavelength a local pixel's camera path was carried at (its class among the phase's wavelengths).
+    fn wavelength_of(&self, local: usize) -> Option<Wavelength> {
+        self.spectrum.wavelength(PhaseSpectrum::class_of(local as u64))
+    }
+}
+
+/// A phase's per-pixel buffers over the local pixels it renders (the whole image, or a group's mask), kept
+/// from phase to phase so that memory stays flat.
+#[derive(Debug)]
+pub struct PhaseBuffers {
+    aux: AuxLayout,
+    /// Where the ghost layer's channels start among a pixel's auxiliary channels, when the image has one.
+    ghost: Option<usize>,
+    /// The camera pass's layer values per local pixel.
+    camera: Vec<LayerValues>,
+    /// The camera pass's auxiliary values, channels per local pixel (empty without auxiliary layers).
+    aux_camera: Vec<f32>,
+    /// The camera pass's photons, one list per `PIXEL_CHUNK` local pixels, in pixel order.
+    photon_lists: Vec<Vec<BackwardPhoton>>,
+}
+
+/// One chunk's auxiliary values, or None for every chunk when there are no auxiliary channels, so that an image
+/// without auxiliary layers iterates as it would without them.
+fn aux_chunks<T: Send>(
+    buffer: &mut [T],
+    channels: usize,
+    pixels: usize,
+) -> impl IndexedParallelIterator<Item = Option<&mut [T]>> {
+    if channels == 0 {
+        Either::Right((0..pixels.div_ceil(PIXEL_CHUNK)).into_par_iter().map(|_| None))
+    } else {
+        Either::Left(buffer.par_chunks_mut(PIXEL_CHUNK * channels).map(Some))
+    }
+}
+
+impl PhaseBuffers {
+    /// Empty buffers for an image with the auxiliary layers of `aux`.
+    pub fn new(aux: AuxLayout) -> Self {
+        PhaseBuffers {
+            ghost: aux.offset(crate::ghost::GHOST_LAYER),
+            aux,
+            camera: Vec::new(),
+            aux_camera: Vec::new(),
+            photon_lists: Vec::new(),
+        }
+    }
+
+    /// The auxiliary layers.
+    pub fn aux(&self) -> &AuxLayout {
+        &self.aux
+    }
+
+    /// Sizes the buffers for `pixels` local pixels (a new mask).
+    pub fn resize(&mut self, pixels: usize) {
+        self.camera.clear();
+        self.camera.resize(pixels, [Rgb::ZERO; 4]);
+        self.aux_camera.clear();
+        self.aux_camera.resize(pixels * self.aux.channels(), 0.0);
+        self.photon_lists.resize_with(pixels.div_ceil(PIXEL_CHUNK), Vec::new);
+    }
+
+    /// Photons the last camera pass stored.
+    pub fn photons(&self) -> u64 {
+        self.photon_lists.iter().map(|l| l.len() as u64).sum()
+    }
+
+    /// Bytes held.
+    pub fn capacity_bytes(&self) -> usize {
+        self.camera.capacity() * std::mem::size_of::<LayerValues>()
+            + self.aux_camera.capacity() * 4
+            + self.photon_lists.iter().map(Vec::capacity).sum::<usize>() * std::mem::size_of::<BackwardPhoton>()
+    }
+
+    /// Stage 1: one camera path per local pixel; `pixels[i]` is local pixel i's image pixel, and `next_phase(i)`
+    /// its phase number j for the radius schedule. Returns the rays traced.
+    pub fn camera_pass(
+        &mut self,
+        exec: Executor,
+        phase: &Phase,
+        pixels: &[u32],
+        next_phase: impl Fn(usize) -> u64 + Sync,
+    ) -> u64 {
+        assert_eq!(pixels.len(), self.camera.len(), "camera pass over pixels the buffers were not sized for");
+        let cam = &phase.scene.camera;
+        let (channels, ghost_offset) = (self.aux.channels(), self.ghost);
+        let bdd = phase.backward_diffuse_depth;
+        let chunks = pixels
+            .par_chunks(PIXEL_CHUNK)
+            .zip(self.camera.par_chunks_mut(PIXEL_CHUNK))
+            .zip(self.photon_lists.par_iter_mut())
+            .zip(aux_chunks(&mut self.aux_camera, channels, pixels.len()))
+            .enumerate();
+        exec.run(chunks)
+            .map(|(chunk, (((pixels, values), photons), mut aux))| {
+                photons.clear();
+                // A camera path stores at most one photon per diffuse vertex it continues from: at full size
+                // from the first phase, a list never grows, and holds what `--memory-limit` assumed.
+                photons.reserve_exact(pixels.len() * bdd as usize);
+                let mut stats = BackwardStats::default();
+                for (i, (&pixel, out)) in pixels.iter().zip(values.iter_mut()).enumerate() {
+                    let local = chunk * PIXEL_CHUNK + i;
+                    let bs = BackwardSettings {
+                        max_depth: phase.max_depth,
+                        backward_diffuse_depth: bdd,
+                        radius: phase.radius,
+                        phase: next_phase(local),
+                        spectrum: phase.spectrum,
+                    };
+                    let (x, y) = (pixel % cam.width, pixel / cam.width);
+                    let mut s = Sampler::new(phase.seed, Pass::Camera, phase.key, pixel as u64);
+                    let ray = cam.generate_ray(x, y, s.next_2d(), s.next_2d());
+                    let (v, ghost) =
+                        trace_camera_path(phase.scene, &bs, local as u32, ray, &mut s, &mut stats, &mut |b| {
+                            photons.push(b)
+                        });
+                    *out = v;
+                    if let Some(aux) = aux.as_deref_mut() {
+                        start_aux(&mut aux[i * channels..(i + 1) * channels], ghost_offset, ghost);
+                    }
+                }
+                stats.rays
+            })
+            .sum()
+    }
+
+    /// Stage 2: the photon map of the camera pass's photons, in pixel order.
+    pub fn build_map(&self, exec: Executor, map: &mut PhotonMap) {
+        map.build_from_lists(&self.photon_lists, exec);
+    }
+
+    /// Stage 4: closes the phase at every local pixel into `sums` and `aux_sums`, with the gathered light divided
+    /// by the `light_paths` counted against the map, and leaves `gathered` zero for the next phase.
+    pub fn close(
+        &mut self,
+        exec: Executor,
+        phase: &Phase,
+        gathered: &mut GatherBuffer,
+        light_paths: u64,
+        sums: &mut [PixelSums],
+        aux_sums: &mut AuxSums,
+    ) {
+        let pixels = self.camera.len();
+        assert_eq!((sums.len(), gathered.stride()), (pixels, 6 + self.aux.channels()), "closing other pixels");
+        let stride = gathered.stride();
+        let closing = Closing { inv_n: 1.0 / light_paths.max(1) as f32, bands: self.aux.bands() };
+        let channels = self.aux.channels();
+        let chunks = self
+            .camera
+            .par_chunks(PIXEL_CHUNK)
+            .zip(sums.par_chunks_mut(PIXEL_CHUNK))
+            .zip(gathered.values_mut().par_chunks_mut(PIXEL_CHUNK * stride))
+            .zip(aux_chunks(&mut self.aux_camera, channels, pixels))
+            .zip(aux_chunks(aux_sums.values_mut(), channels, pixels))
+            .enumerate();
+        exec.run(chunks).for_each(|(chunk, ((((camera, sums), gathered), mut aux), mut aux_sums))| {
+            for (i, (value, sums)) in camera.iter().zip(sums).enumerate() {
+                let local = chunk * PIXEL_CHUNK + i;
+                let aux =
+                    aux.as_deref_mut().map(|a| (&mut a[i * channels..(i + 1) * channels], phase.wavelength_of(local)));
+                let aux_sums = aux_sums.as_deref_mut().map(|s| &mut s[i * channels..(i + 1) * channels]);
+                closing.close_pixel(value, Some(&mut gathered[i * stride..(i + 1) * stride]), aux, sums, aux_sums);
+            }
+        });
+    }
+}
+
+/// Starts a pixel's auxiliary values of the phase from its camera path: its ghost light in the ghost layer.
+#[inline]
+pub fn start_aux(aux: &mut [f32], ghost_offset: Option<usize>, ghost: Rgb) {
+    aux.fill(0.0);
+    if let Some(o) = ghost_offset {
+        aux[o..o + 3].copy_from_slice(&[ghost.x, ghost.y, ghost.z]);
+    }
+}
+
+/// How a phase closes at each pixel.
+#[derive(Clone, Copy, Debug)]
+pub struct Closing {
+    /// One over the light paths counted against the map.
+    pub inv_n: f32,
+    /// Where the spectral-output bands lie among the auxiliary channels, and how many there are.
+    pub bands: Option<(usize, usize)>,
+}
+
+impl Closing {
+    /// Closes one pixel: its phase value L_ij is the camera pass's `value` plus the `gathered` light over the
+    /// light paths (DESIGN §1 step 4); the auxiliary channels (`aux`, started by `start_aux`, and the pixel's
+    /// wavelength) get their gathered light too and the spectral bands of the phase total. Leaves `gathered`
+    /// zero.
+    #[inline]
+    pub fn close_pixel(
+        &self,
+        value: &LayerValues,
+        gathered: Option<&mut [f32]>,
+        aux: Option<(&mut [f32], Option<Wavelength>)>,
+        sums: &mut PixelSums,
+        aux_sums: Option<&mut [f64]>,
+    ) {
+        let mut v = *value;
+        let mut gathered_aux: &[f32] = &[];
+        if let Some(g) = gathered.as_deref() {
+            v[Layer::Indirect as usize] += Rgb::new(g[0], g[1], g[2]) * self.inv_n;
+            v[Layer::Caustic as usize] += Rgb::new(g[3], g[4], g[5]) * self.inv_n;
+            gathered_aux = &g[6..];
+        }
+        sums.add_phase(&v, 1);
+        if let (Some((aux, wavelength)), Some(aux_sums)) = (aux, aux_sums) {
+            for (a, g) in aux.iter_mut().zip(gathered_aux) {
+                *a += g * self.inv_n;
+            }
+            if let (Some((offset, n)), Some(w)) = (self.bands, wavelength) {
+                band_values(v.iter().sum(), &w, &mut aux[offset..offset + n]);
+            }
+            add_phase_to(aux_sums, aux);
+        }
+        if let Some(g) = gathered {
+            g.fill(0.0);
+        }
+    }
+}
