@@ -1,4 +1,4 @@
-//! The forward pass's last step in the worker: adding gathered light into a `GatherBuffer` through its atomic
+//! The forward pass's last step in the worker: adding gathered light into an `AtomicGatherBuffer` through its
 //! sink (three f32 compare-and-swap loops per add), at random pixels of a 256×256 mask. One thread; two threads
 //! into one shared buffer, as groups gathering into the same open map do; two threads into two separate buffers,
 //! the same work without sharing; and, as the baseline, plain non-atomic f32 adds on one thread as the
@@ -12,11 +12,11 @@
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use photonfarm::color::Rgb;
 use photonfarm::integrator::Layer;
+use photonfarm::pbpm::AtomicGatherBuffer;
 use photonfarm::pbpm::Gather;
 use photonfarm::sampling::{Pass, Sampler};
 use std::hint::black_box;
 use std::time::Duration;
-use worker::atomic_image::GatherBuffer;
 
 const PIXELS: usize = 256 * 256;
 /// Adds per thread per iteration: enough that spawning the second thread is a negligible part of an iteration.
@@ -34,13 +34,13 @@ fn adds(thread: u64) -> Vec<(u32, Layer, Rgb)> {
         .collect()
 }
 
-fn buffer() -> GatherBuffer {
-    let mut b = GatherBuffer::default();
+fn buffer() -> AtomicGatherBuffer {
+    let mut b = AtomicGatherBuffer::default();
     b.reset(PIXELS, &photonfarm::accumulation::AuxLayout::default());
     b
 }
 
-fn add_all(buffer: &GatherBuffer, adds: &[(u32, Layer, Rgb)]) {
+fn add_all(buffer: &AtomicGatherBuffer, adds: &[(u32, Layer, Rgb)]) {
     let mut sink = buffer.sink();
     for &(pixel, layer, value) in adds {
         sink.add(black_box(pixel), layer, false, value);

@@ -6,6 +6,7 @@ use crate::group::{Group, GroupMap, GroupStats, RoundContext};
 use crate::map_slot::MapSlot;
 use crate::mask;
 use photonfarm::accumulation::{Accumulator, AuxLayout};
+use photonfarm::pbpm::PhaseNumbering;
 use photonfarm::render::record::StageSeconds;
 use photonfarm::render::session::Progressive;
 use photonfarm::render::{RayTotals, RenderSettings};
@@ -117,14 +118,18 @@ impl EngineConfig {
         // plus the build's u64 (cell, photon) pair, in buffers that grow by doubling as the count varies from
         // phase to phase, with a table of half a bucket per photon.
         let photon = 2 * std::mem::size_of::<photonfarm::pbpm::BackwardPhoton>() + 2 * 8 * (4 + 8) + 2;
-        // A group's auxiliary buffers: the camera pass's values, the gathered channels and the sums.
-        let aux_per_pixel = 2 * aux.phase_bytes_per_pixel() + aux.sum_bytes_per_pixel();
+        // Gathered light: the group's plain buffer, and the map's atomic one where other groups or several
+        // threads add into it; each holds (indirect, caustic) RGB in f32 and the auxiliary channels.
+        let gather_buffers = 1 + (self.shared_maps || self.threads_per_group > 1) as usize;
+        let gathered = gather_buffers * (6 * 4 + aux.phase_bytes_per_pixel());
+        // The camera pass's values and the sums; the mask and the phases before the deal take 8 bytes.
         let per_pixel = std::mem::size_of::<LayerValues>()
             + std::mem::size_of::<PixelSums>()
             + 8
-            + 24
+            + gathered
             + backward_diffuse_depth as usize * photon
-            + aux_per_pixel;
+            + aux.phase_bytes_per_pixel()
+            + aux.sum_bytes_per_pixel();
         (Accumulator::bytes_per_pixel(aux) + coverage * per_pixel) as f64
     }
 
@@ -248,9 +253,12 @@ impl<'s> ParallelEngine<'s> {
             shared_maps: self.config.shared_maps,
             stop: &stop,
             deal: self.deals,
-            process_sharers: self.config.process_sharers.max(1) as u64,
-            process_index: self.config.process_index as u64,
-            phase_offset: self.config.phase_offset as u64,
+            numbering: PhaseNumbering {
+                processes: self.config.process_sharers.max(1) as u64,
+                process: self.config.process_index as u64,
+                resumed: self.config.phase_offset as u64,
+                ..PhaseNumbering::ALONE
+            },
         };
         let k = self.config.phases_per_deal as u64;
         let (tx, rx) = mpsc::channel();

@@ -1,21 +1,17 @@
 //! A synchronous group (level 1, DESIGN §2.1): g threads pinned to cores of one node, cooperating on every stage
 //! of a phase over the group's mask, with rayon's joins as the barriers between stages.
 
-use crate::atomic_image::GatherBuffer;
 use crate::map_slot::{Guard, MapSlot, OwnerToken};
-use photonfarm::accumulation::{auxiliary::add_phase_to, AuxLayout, AuxSums, PixelSums};
+use photonfarm::accumulation::AuxLayout;
+use photonfarm::accumulation::{AuxSums, PixelSums};
 use photonfarm::color::Rgb;
-use photonfarm::integrator::{Layer, LayerValues};
-use photonfarm::pbpm::backward_pass::BackwardStats;
+use photonfarm::integrator::Layer;
 use photonfarm::pbpm::{
-    gather, trace_camera_path, trace_light_path, BackwardPhoton, BackwardSettings, ForwardStats, PhotonMap,
+    AtomicGatherBuffer, AtomicSink, Executor, ForwardStats, Gather, GatherBuffer, Phase, PhaseBuffers, PhaseNumbering,
+    PhotonMap,
 };
 use photonfarm::render::RenderSettings;
-use photonfarm::sampling::{Pass, Sampler};
 use photonfarm::scene::Scene;
-use photonfarm::spectrum::{band_values, PhaseSpectrum};
-use rayon::iter::Either;
-use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
@@ -30,15 +26,14 @@ const BATCH: u64 = 16;
 /// b dominates, lose to `pbpm`.
 const STOP_FRACTION: f64 = 0.25;
 
-/// Mask pixels per photon list of the backward pass: a unit of work for the group's threads.
-const PHOTON_CHUNK: usize = 256;
-
-/// The map data a group shares through its slot: the photon map, the luminance gathered into it, and the
-/// phase's light-path quota with the indices the owner has claimed towards it.
+/// The map data a group shares through its slot: the photon map, the light gathered into it from several
+/// threads, and the phase's light-path quota with the indices the owner has claimed towards it.
 #[derive(Default)]
 pub struct GroupMap {
     pub photons: PhotonMap,
-    pub gathered: GatherBuffer,
+    /// Light gathered by other groups' paths, and by the group's own paths when it has several threads; the
+    /// owner's paths of a one-thread group add into its plain buffer instead, without atomics.
+    pub shared: AtomicGatherBuffer,
     /// Light paths the phase needs counted against the map, the owner's and other groups' together.
     quota: u64,
     /// Light-path indices the owning group has handed to its threads this phase.
@@ -138,12 +133,27 @@ pub struct RoundContext<'a> {
     pub shared_maps: bool,
     pub stop: &'a AtomicBool,
     pub deal: u64,
-    /// Processes rendering the same pixels (three-level, combination) and this one's index among them: the
-    /// radius schedule counts their phases too, assuming they progress alike.
-    pub process_sharers: u64,
-    pub process_index: u64,
-    /// Phases every pixel had before this run (a resumed run).
-    pub phase_offset: u64,
+    /// The processes rendering the same pixels and the phases before this run, for the radius schedule (each
+    /// group adds the groups of its deal).
+    pub numbering: PhaseNumbering,
+}
+
+/// Where a group's own light paths add their gathered light.
+enum OwnSink<'a> {
+    /// The group's plain buffer: one thread traces all its paths.
+    Plain(&'a mut GatherBuffer),
+    /// The map's atomic buffer: several threads trace them.
+    Shared(AtomicSink<'a>),
+}
+
+impl Gather for OwnSink<'_> {
+    #[inline]
+    fn add(&mut self, pixel: u32, layer: Layer, ghost: bool, value: Rgb) {
+        match self {
+            OwnSink::Plain(b) => b.add(pixel, layer, ghost, value),
+            OwnSink::Shared(s) => s.add(pixel, layer, ghost, value),
+        }
+    }
 }
 
 /// One synchronous group and its buffers over its current mask.
@@ -155,15 +165,10 @@ pub struct Group {
     mask: Vec<u32>,
     /// Phases each pixel of the mask had before this deal (the radius schedule's j).
     phases_before: Vec<u32>,
-    backward: Vec<LayerValues>,
-    /// The backward pass's photons, one list per `PHOTON_CHUNK` mask pixels, copied into the map each phase.
-    photon_lists: Vec<Vec<BackwardPhoton>>,
+    buffers: PhaseBuffers,
+    /// Light gathered by the group's own paths when it has one thread, and where the phase closes from.
+    gathered: GatherBuffer,
     sums: Vec<PixelSums>,
-    /// The image's auxiliary layers, where the ghost layer's channels start among them, the phase's auxiliary
-    /// values from the camera pass (channels per mask pixel; empty without auxiliary layers) and their sums.
-    aux: AuxLayout,
-    ghost: Option<usize>,
-    aux_backward: Vec<f32>,
     aux_sums: AuxSums,
     phases_this_deal: u64,
     /// Groups that render the same pixels in a deal (all of them without masks): the radius schedule counts
@@ -198,13 +203,10 @@ impl Group {
             token,
             mask: Vec::new(),
             phases_before: Vec::new(),
-            backward: Vec::new(),
-            photon_lists: Vec::new(),
+            buffers: PhaseBuffers::new(aux.clone()),
+            gathered: GatherBuffer::default(),
             sums: Vec::new(),
-            ghost: aux.offset(photonfarm::ghost::GHOST_LAYER),
-            aux_backward: Vec::new(),
-            aux_sums: AuxSums::new(aux.clone(), 0),
-            aux,
+            aux_sums: AuxSums::new(aux, 0),
             phases_this_deal: 0,
             pixel_sharers: 1,
             stats: GroupStats::default(),
@@ -235,25 +237,22 @@ impl Group {
     pub fn capacity_bytes(&mut self, slot: &MapSlot<GroupMap>) -> usize {
         let own = self.mask.capacity() * 4
             + self.phases_before.capacity() * 4
-            + self.backward.capacity() * std::mem::size_of::<LayerValues>()
-            + self.photon_lists.iter().map(Vec::capacity).sum::<usize>() * std::mem::size_of::<BackwardPhoton>()
+            + self.buffers.capacity_bytes()
+            + self.gathered.capacity_bytes()
             + self.sums.capacity() * std::mem::size_of::<PixelSums>()
-            + self.aux_backward.capacity() * 4
             + self.aux_sums.capacity_bytes();
         // Asked between rounds, when every map is closed.
         let data = slot.data_mut(&mut self.token);
-        own + data.photons.capacity_bytes() + data.gathered.capacity_bytes()
+        own + data.photons.capacity_bytes() + data.shared.capacity_bytes()
     }
 
     /// Takes a new mask for the next deal; `phases_before[i]` is how many phases mask pixel i already had.
     pub fn start_deal(&mut self, mask: Vec<u32>, phases_before: Vec<u32>, pixel_sharers: u32) {
         self.pixel_sharers = pixel_sharers.max(1);
-        self.backward.clear();
-        self.backward.resize(mask.len(), [Rgb::ZERO; 4]);
+        self.buffers.resize(mask.len());
+        self.gathered.reset(mask.len(), self.buffers.aux());
         self.sums.clear();
         self.sums.resize(mask.len(), PixelSums::default());
-        self.aux_backward.clear();
-        self.aux_backward.resize(mask.len() * self.aux.channels(), 0.0);
         self.aux_sums.reset(mask.len());
         self.mask = mask;
         self.phases_before = phases_before;
@@ -286,91 +285,80 @@ impl Group {
         (deal << 32) | ((self.index as u64) << 20) | self.phases_this_deal
     }
 
-    /// One phase over the mask: backward pass, map build, forward pass with the map open, close.
-    fn run_phase<'c>(&mut self, ctx: &RoundContext<'c>) {
-        let scene = ctx.scene;
-        let settings = ctx.settings;
-        let key = self.phase_key(ctx.deal);
-        let cam = &scene.camera;
-        let radius = settings.radius_schedule(scene);
-        let (max_depth, bdd) = (settings.max_depth, settings.backward_diffuse_depth);
-        let sharers = self.pixel_sharers as u64;
-        let index = if sharers > 1 { self.index as u64 } else { 0 };
+    /// One phase over the mask (the stages of `pbpm::phase`), with the forward pass driven by the light-path
+    /// quota, the other groups' open maps and the round's stop.
+    fn run_phase(&mut self, ctx: &RoundContext) {
+        let exec = Executor::CurrentPool;
         // Wavelengths per group phase: its camera and light paths join only among themselves.
-        let spectrum = settings.phase_spectrum(scene, key);
-        let (aux_channels, ghost_offset) = (self.aux.channels(), self.ghost);
+        let phase = ctx.settings.phase(ctx.scene, self.phase_key(ctx.deal));
+        let sharers = self.pixel_sharers as u64;
+        let numbering =
+            PhaseNumbering { groups: sharers, group: if sharers > 1 { self.index as u64 } else { 0 }, ..ctx.numbering };
 
-        // 1. Backward pass over the mask, in parallel, each chunk of the mask into its own photon list, so that
-        // the lists keep their buffers from phase to phase and the photons their pixel order.
+        // 1. Camera pass over the mask.
         let t0 = Instant::now();
-        self.photon_lists.resize_with(self.mask.len().div_ceil(PHOTON_CHUNK), Vec::new);
         let (phases_before, sums) = (&self.phases_before, &self.sums);
-        let backward_rays: u64 = self
-            .mask
-            .par_chunks(PHOTON_CHUNK)
-            .zip(self.backward.par_chunks_mut(PHOTON_CHUNK))
-            .zip(self.photon_lists.par_iter_mut())
-            .zip(aux_chunks(&mut self.aux_backward, aux_channels, PHOTON_CHUNK, self.mask.len()))
-            .enumerate()
-            .map(|(chunk, (((pixels, values), photons), mut aux))| {
-                photons.clear();
-                // A camera path stores at most one photon per diffuse vertex it continues from: at full size
-                // from the first phase, a list never grows, and holds what `--memory-limit` assumed.
-                photons.reserve_exact(pixels.len() * bdd as usize);
-                let mut st = BackwardStats::default();
-                for (i, (&pixel, out)) in pixels.iter().zip(values.iter_mut()).enumerate() {
-                    let local = chunk * PHOTON_CHUNK + i;
-                    let bs = BackwardSettings {
-                        max_depth,
-                        backward_diffuse_depth: bdd,
-                        radius,
-                        // Phases of this pixel by every group so far, assuming sharers progress alike.
-                        phase: (phases_before[local] as u64 + sums[local].phases as u64 * sharers + index)
-                            * ctx.process_sharers
-                            + ctx.process_index
-                            + ctx.phase_offset
-                            + 1,
-                        spectrum,
-                    };
-                    let (x, y) = (pixel % cam.width, pixel / cam.width);
-                    let mut s = Sampler::new(settings.seed, Pass::Camera, key, pixel as u64);
-                    let ray = cam.generate_ray(x, y, s.next_2d(), s.next_2d());
-                    let (v, ghost) =
-                        trace_camera_path(scene, &bs, local as u32, ray, &mut s, &mut st, &mut |b| photons.push(b));
-                    *out = v;
-                    if let Some(aux) = aux.as_deref_mut() {
-                        let aux = &mut aux[i * aux_channels..(i + 1) * aux_channels];
-                        aux.fill(0.0);
-                        if let Some(o) = ghost_offset {
-                            aux[o..o + 3].copy_from_slice(&[ghost.x, ghost.y, ghost.z]);
-                        }
-                    }
-                }
-                st.rays
-            })
-            .sum();
-        self.stats.backward_rays += backward_rays;
-        self.stats.backward_photons += self.photon_lists.iter().map(|l| l.len() as u64).sum::<u64>();
+        self.stats.backward_rays += self.buffers.camera_pass(exec, &phase, &self.mask, |local| {
+            numbering.next_phase(phases_before[local] as u64, sums[local].phases as u64)
+        });
+        self.stats.backward_photons += self.buffers.photons();
+        self.stats.nanos.backward += nanos_since(t0);
 
         // 2. Build the map while it is closed. The phase's quota counts every light path traced against the map,
         // its own group's and the other groups' (paper §4.2): a light path that gathers into several open maps
         // serves each of them, so a group whose map others trace against needs fewer paths of its own for the
         // same light per pixel.
-        self.stats.nanos.backward += nanos_since(t0);
-        let required = settings.light_paths_per_phase(self.mask.len());
+        let required = ctx.settings.light_paths_per_phase(self.mask.len());
         let t0 = Instant::now();
         let slot = &ctx.slots[self.index];
+        // One thread adds its own paths' light without atomics; several share the map's atomic buffer.
+        let one_thread = rayon::current_num_threads() == 1;
+        let uses_shared = ctx.shared_maps || !one_thread;
         {
             let data = slot.data_mut(&mut self.token);
-            data.photons.copy_from_lists(&self.photon_lists);
-            data.photons.build_parallel();
-            data.gathered.reset(self.mask.len(), &self.aux);
+            self.buffers.build_map(exec, &mut data.photons);
+            if uses_shared {
+                data.shared.reset(self.mask.len(), self.buffers.aux());
+            }
             data.start_phase(required);
         }
         self.stats.nanos.build += nanos_since(t0);
 
         // 3. Forward pass with the map open to every group.
         let t0 = Instant::now();
+        let tally = self.forward_pass(ctx, &phase, required, one_thread);
+        self.stats.nanos.forward += nanos_since(t0);
+        let t0 = Instant::now();
+        self.stats.light_paths += tally.traced;
+        self.stats.forward_rays += tally.stats.rays;
+        self.stats.capped_light_paths += tally.stats.capped;
+        self.stats.foreign_acquisitions += tally.foreign;
+
+        // 4. Close the phase: gathered luminance normalised by every light path traced against the map.
+        let counted = slot.light_paths();
+        self.stats.light_paths_counted += counted;
+        let data = slot.data_mut(&mut self.token);
+        self.stats.merges += tally.own_merges + data.shared.merges();
+        if uses_shared {
+            self.gathered.absorb(&mut data.shared);
+        }
+        self.buffers.close(exec, &phase, &mut self.gathered, counted, &mut self.sums, &mut self.aux_sums);
+        self.stats.nanos.closing += nanos_since(t0);
+        self.stats.phases += 1;
+    }
+
+    /// Stage 3 with the map open: traces the phase's light paths on the group's threads until the quota is met
+    /// (and, while another group's map still lacks light, helps it), then keeps tracing until no other group is
+    /// inside the map, and closes it.
+    fn forward_pass<'c>(
+        &mut self,
+        ctx: &RoundContext<'c>,
+        phase: &Phase,
+        required: u64,
+        one_thread: bool,
+    ) -> ForwardTally {
+        let me = self.index;
+        let slot = &ctx.slots[me];
         slot.open(&self.token);
         // A stop is honoured once `minimum` paths are counted: a phase cut shorter has too few light paths for
         // its camera paths, and its gathered light's variance grows as 1 / paths (see STOP_FRACTION).
@@ -381,42 +369,35 @@ impl Group {
         // path. The group's own tallies stay with each thread until the pass ends, and `guards` and `merges`
         // are per-thread scratch, reused from batch to batch. Returns whether the stop cut the batch short and
         // whether a foreign map it served still lacks light.
-        let trace_batch = |first: u64,
-                           count: u64,
-                           stop_from: u64,
-                           closing: bool,
+        let trace_batch = |batch: Batch,
+                           sink: &mut OwnSink,
                            guards: &mut Vec<Guard<'c, GroupMap>>,
                            merges: &mut Vec<u64>,
                            tally: &mut ForwardTally| {
             // While closing, the owner takes no other map: two closing owners never wait on each other.
             guards.clear();
-            if ctx.shared_maps && !closing {
+            if ctx.shared_maps && !batch.closing {
                 guards.extend(
-                    ctx.slots
-                        .iter()
-                        .enumerate()
-                        .filter(|&(k, _)| k != self.index)
-                        .filter_map(|(_, sl)| sl.try_acquire()),
+                    ctx.slots.iter().enumerate().filter(|&(k, _)| k != me).filter_map(|(_, sl)| sl.try_acquire()),
                 );
             }
             merges.clear();
             merges.resize(guards.len() + 1, 0);
             let mut done = 0;
-            for index in first..first + count {
-                if index >= stop_from && ctx.stop.load(Ordering::Relaxed) {
+            for index in batch.first..batch.first + batch.count {
+                if index >= batch.stop_from && ctx.stop.load(Ordering::Relaxed) {
                     break;
                 }
-                let mut s = Sampler::new(settings.seed, Pass::Light, key, index);
-                trace_light_path(scene, max_depth, &spectrum, index, &mut s, &mut tally.stats, &mut |v| {
-                    merges[0] += gather(&own.photons, v, max_depth, bdd, &mut own.gathered.sink());
+                phase.trace_light_path(index, &mut tally.stats, &mut |v| {
+                    merges[0] += phase.gather(&own.photons, v, sink);
                     for (g, m) in guards.iter().zip(merges[1..].iter_mut()) {
-                        *m += gather(&g.data().photons, v, max_depth, bdd, &mut g.data().gathered.sink());
+                        *m += phase.gather(&g.data().photons, v, &mut g.data().shared.sink());
                     }
                 });
                 done += 1;
             }
             for (g, &m) in guards.iter().zip(&merges[1..]) {
-                g.data().gathered.add_merges(m);
+                g.data().shared.add_merges(m);
                 g.count_light_paths(done);
             }
             let others_lack = guards.iter().any(|g| g.data().lacking(g.light_paths()) > 0);
@@ -424,7 +405,7 @@ impl Group {
             tally.foreign += guards.len() as u64 * done;
             tally.traced += done;
             guards.clear();
-            (done < count, others_lack)
+            (done < batch.count, others_lack)
         };
         // Every thread of the group claims batches of path indices until the paths counted against the map
         // (its own claims plus the other groups' paths, which the slot counts as they come) meet the quota.
@@ -433,98 +414,55 @@ impl Group {
         // costs no more thread time than the owner tracing it alone, and adds light to this phase too.
         // Groups then leave their forward passes together, so their next forward passes overlap again instead
         // of drifting apart by the differences in their backward passes.
-        let mut tally = rayon::broadcast(|_| {
+        let thread_pass = |sink: &mut OwnSink| {
             let (mut guards, mut merges, mut tally) = (Vec::new(), Vec::new(), ForwardTally::default());
             let mut others_lack = false;
             loop {
                 let foreign = slot.light_paths();
-                let (first, count, stop_from) = match own.claim_towards_quota(BATCH, foreign) {
-                    Some((first, count)) => (first, count, minimum.saturating_sub(foreign)),
+                let batch = match own.claim_towards_quota(BATCH, foreign) {
+                    Some((first, count)) => {
+                        Batch { first, count, stop_from: minimum.saturating_sub(foreign), closing: false }
+                    }
                     None if others_lack && !ctx.stop.load(Ordering::Relaxed) => {
-                        (own.claim_beyond_quota(BATCH), BATCH, 0)
+                        Batch { first: own.claim_beyond_quota(BATCH), count: BATCH, stop_from: 0, closing: false }
                     }
                     None => break,
                 };
                 let cut;
-                (cut, others_lack) = trace_batch(first, count, stop_from, false, &mut guards, &mut merges, &mut tally);
+                (cut, others_lack) = trace_batch(batch, sink, &mut guards, &mut merges, &mut tally);
                 if cut {
                     break;
                 }
             }
             tally
-        })
-        .into_iter()
-        .fold(ForwardTally::default(), ForwardTally::add);
-        self.stats.nanos.forward += nanos_since(t0);
-        let t0 = Instant::now();
+        };
+        let mut sink = if one_thread { OwnSink::Plain(&mut self.gathered) } else { OwnSink::Shared(own.shared.sink()) };
+        let mut tally = if one_thread {
+            thread_pass(&mut sink)
+        } else {
+            rayon::broadcast(|_| thread_pass(&mut OwnSink::Shared(own.shared.sink())))
+                .into_iter()
+                .fold(ForwardTally::default(), ForwardTally::add)
+        };
         // Keep tracing useful paths until no other group is inside the map (paper Fig. 9).
         let (mut guards, mut merges) = (Vec::new(), Vec::new());
         while !slot.try_close(&self.token) {
-            trace_batch(own.claim_beyond_quota(1), 1, u64::MAX, true, &mut guards, &mut merges, &mut tally);
+            let batch = Batch { first: own.claim_beyond_quota(1), count: 1, stop_from: u64::MAX, closing: true };
+            trace_batch(batch, &mut sink, &mut guards, &mut merges, &mut tally);
         }
-        own.gathered.add_merges(tally.own_merges);
-        let traced = tally.traced;
-        slot.count_owner_paths(&self.token, traced);
-        self.stats.light_paths += traced;
-        self.stats.forward_rays += tally.stats.rays;
-        self.stats.capped_light_paths += tally.stats.capped;
-        self.stats.foreign_acquisitions += tally.foreign;
-
-        // 4. Close the phase: gathered luminance normalised by every light path traced against the map.
-        let counted = slot.light_paths();
-        self.stats.light_paths_counted += counted;
-        let data = slot.data_mut(&mut self.token);
-        self.stats.merges += data.gathered.merges();
-        let inv_n = 1.0 / counted as f32;
-        let gathered = &data.gathered;
-        self.backward.par_iter().zip(self.sums.par_iter_mut()).enumerate().for_each(|(i, (b, sums))| {
-            let g = gathered.get(i);
-            let mut v = *b;
-            v[Layer::Indirect as usize] += g[0] * inv_n;
-            v[Layer::Caustic as usize] += g[1] * inv_n;
-            sums.add_phase(&v, 1);
-        });
-        if aux_channels > 0 {
-            let (bands, backward) = (self.aux.bands(), &self.backward);
-            self.aux_backward
-                .par_chunks_mut(aux_channels)
-                .zip(self.aux_sums.values_mut().par_chunks_mut(aux_channels))
-                .enumerate()
-                .for_each(|(i, (b, sums))| {
-                    for (c, v) in b.iter_mut().enumerate() {
-                        *v += gathered.get_aux(i, c) * inv_n;
-                    }
-                    // Spectral output: the pixel's phase total was carried at its class's wavelength (the
-                    // backward pass dealt classes by mask index).
-                    if let (Some((offset, n)), Some(w)) =
-                        (bands, spectrum.wavelength(PhaseSpectrum::class_of(i as u64)))
-                    {
-                        let g = gathered.get(i);
-                        let total = backward[i].iter().sum::<Rgb>() + (g[0] + g[1]) * inv_n;
-                        band_values(total, &w, &mut b[offset..offset + n]);
-                    }
-                    add_phase_to(sums, b);
-                });
-        }
-        data.gathered.clear_parallel();
-        self.stats.nanos.closing += nanos_since(t0);
-        self.stats.phases += 1;
+        slot.count_owner_paths(&self.token, tally.traced);
+        tally
     }
 }
 
-/// The auxiliary values of each chunk of `chunk` pixels (`pixels` of them, `channels` values each), or None for
-/// every chunk when there are no channels: an image without auxiliary layers iterates as it did without them.
-fn aux_chunks(
-    buffer: &mut [f32],
-    channels: usize,
-    chunk: usize,
-    pixels: usize,
-) -> impl IndexedParallelIterator<Item = Option<&mut [f32]>> {
-    if channels == 0 {
-        Either::Right((0..pixels.div_ceil(chunk)).into_par_iter().map(|_| None))
-    } else {
-        Either::Left(buffer.par_chunks_mut(chunk * channels).map(Some))
-    }
+/// Light-path indices a thread traces in one go: `first..first + count`, of which those from `stop_from` on
+/// give way to the round's stop; `closing` while the owner waits to close its map.
+#[derive(Clone, Copy)]
+struct Batch {
+    first: u64,
+    count: u64,
+    stop_from: u64,
+    closing: bool,
 }
 
 #[cfg(test)]

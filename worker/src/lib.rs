@@ -2,7 +2,6 @@
 //! their backward photon maps through atomic counters (level 2), and the classic parallel methods as
 //! configurations of the same engine (DESIGN §2).
 
-pub mod atomic_image;
 pub mod engine;
 pub mod group;
 pub mod job;

@@ -122,6 +122,12 @@ fn ghost_light_gathered_also_into_other_groups_maps_gives_the_single_threaded_gh
     check(&scene, 600, 4, "room behind a window");
 }
 
+/// Buffers of gathered light a group holds per pixel it covers: its plain one, and its map's atomic one when
+/// other groups or several threads add into the map.
+fn gather_buffers(config: &EngineConfig) -> usize {
+    1 + (config.shared_maps || config.threads_per_group > 1) as usize
+}
+
 /// `EngineConfig::bytes_per_pixel` as it was before auxiliary layers: the merged sums, and per pixel a group
 /// covers its phase values, sums, mask and phase count entries, gathered light, and its photons (held twice,
 /// eight grid entries each in buffers with room to double, half a hash bucket).
@@ -131,7 +137,7 @@ fn estimate_without_auxiliary_layers(config: &EngineConfig, backward_diffuse_dep
     let per_pixel = std::mem::size_of::<photonfarm::integrator::LayerValues>()
         + std::mem::size_of::<PixelSums>()
         + 8
-        + 24
+        + 24 * gather_buffers(config)
         + backward_diffuse_depth as usize * photon;
     (std::mem::size_of::<PixelSums>() + coverage * per_pixel) as f64
 }
@@ -147,11 +153,12 @@ fn the_memory_estimate_adds_exactly_the_ghost_planes_and_covers_what_an_engine_w
         let before = estimate_without_auxiliary_layers(&config, bdd);
         // No ghost planes: the estimate is what it was.
         assert_eq!(config.bytes_per_pixel(bdd, &AuxLayout::for_scene(&cornell, 0)), before, "{method:?}");
-        // Ghost planes: 3 f64 sums in the merged image, and per pixel a group covers 3 f64 sums and two f32
-        // buffers (camera pass, gathered light).
+        // Ghost planes: 3 f64 sums in the merged image, and per pixel a group covers 3 f64 sums and f32 buffers
+        // of the camera pass and of each buffer of gathered light.
         let coverage = if config.masks { 1 } else { config.groups } as f64;
         let estimate = config.bytes_per_pixel(bdd, &AuxLayout::for_scene(&lens, 0));
-        assert_eq!(estimate, before + 3.0 * (8.0 + coverage * (8.0 + 4.0 + 4.0)), "{method:?}");
+        let gathered = 4.0 * gather_buffers(&config) as f64;
+        assert_eq!(estimate, before + 3.0 * (8.0 + coverage * (8.0 + 4.0 + gathered)), "{method:?}");
         let mut engine = ParallelEngine::new(&lens, settings, config).unwrap();
         engine.run_round(&AtomicBool::new(false), None);
         let held = engine.capacity_bytes() as f64 / (72.0 * 48.0);
