@@ -2,7 +2,8 @@
 //! change of codec touches one file).
 
 use super::ProtocolError;
-use crate::render::{ParallelMethod, RayTotals, RenderSettings};
+use crate::render::settings::{ParallelMethod, RenderSettings};
+use crate::render::totals::RayTotals;
 use serde::{Deserialize, Serialize};
 
 /// Which end of a link a peer is.

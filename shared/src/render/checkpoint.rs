@@ -1,9 +1,9 @@
 //! Checkpoints: the merged sums of a run with what is needed to continue it (`coordinator render --resume`),
 //! written atomically beside the image so that a crash loses at most the phases since the last one.
 
-use super::engine::RayTotals;
 use super::record::HistoryEntry;
 use super::settings::RenderSettings;
+use super::totals::RayTotals;
 use crate::accumulation::{Accumulator, AuxLayout};
 use crate::protocol::snapshot::{apply_delta, encode_delta, Compression};
 use serde::{Deserialize, Serialize};
