@@ -5,7 +5,7 @@
 use crate::engine::{EngineConfig, ParallelEngine};
 use crate::memory_binding::{self, MemoryBinding};
 use crate::topology;
-use photonfarm::protocol::snapshot::{encode_delta, Compression};
+use photonfarm::accumulation::delta::{encode_delta, Compression};
 use photonfarm::protocol::{Job, Snapshot, WorkerInfo};
 use photonfarm::render::session::Progressive;
 use photonfarm::scene::Scene;

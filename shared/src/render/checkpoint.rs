@@ -4,8 +4,8 @@
 use super::record::HistoryEntry;
 use super::settings::RenderSettings;
 use super::totals::RayTotals;
+use crate::accumulation::delta::{apply_delta, encode_delta, Compression};
 use crate::accumulation::{Accumulator, AuxLayout};
-use crate::protocol::snapshot::{apply_delta, encode_delta, Compression};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -30,7 +30,7 @@ pub struct Checkpoint {
     pub history: Vec<HistoryEntry>,
     /// The auxiliary layers of the sums.
     pub aux: AuxLayout,
-    /// The sums, as an exact delta from zero (see `protocol::snapshot`).
+    /// The sums, as an exact delta from zero (see `accumulation::delta`).
     sums: Vec<u8>,
 }
 

@@ -10,7 +10,7 @@ use crate::color::Rgb;
 use crate::geometry::{Analytic, Annulus, LensSurface, Mesh, MeshTriangle, SceneGeometry, Sphere, SurfaceHit};
 use crate::light::{EmissionTexture, Light, Lights};
 use crate::material::Material;
-use crate::spectrum::RefractiveIndex;
+use crate::spectrum::{Dispersive, RefractiveIndex};
 use crate::texture::{barycentric, interpolate_uv, quad_uvs, Texture};
 use error::line_of;
 use file::{LightSection, MaterialSection, SceneFile};
