@@ -1,8 +1,8 @@
-//! Ghosts (issue 6): light that reached a sensor after reflections inside the camera's lens. A camera path is
-//! a *ghost path* from the moment it takes a reflection at a dielectric surface (Fresnel or total internal
-//! reflection) before its first diffuse vertex; all light it contributes from then on (emitters seen through
-//! the lens, next-event estimates, and the light later gathered into its backward photons) is ghost light.
-//! The ghost layer shows that part of the total; the light stays in its usual layer as well.
+//! Ghosts: light that reached a sensor after reflections inside the camera's lens. A camera path is a *ghost path* from
+//! the moment it takes a reflection at a dielectric surface (Fresnel or total internal reflection) before its first
+//! diffuse vertex; all light it contributes from then on (emitters seen through the lens, next-event estimates, and the
+//! light later gathered into its backward photons) is ghost light. The ghost layer shows that part of the total; the
+//! light stays in its usual layer as well.
 
 use crate::geometry::SurfaceHit;
 use crate::material::Material;
