@@ -10,7 +10,7 @@ use anyhow::{bail, Context, Result};
 use clap::ValueEnum;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use worker::{topology, EngineConfig};
+use worker::{machine, EngineConfig};
 
 /// Seconds per run and the methods of `--quick`: every method once on both scenes in under five minutes.
 const QUICK_TIME: f64 = 8.0;
@@ -244,8 +244,8 @@ pub fn run(mut args: BenchArgs) -> Result<()> {
         bail!("--repeats must be at least 1");
     }
     let all = match &args.cores {
-        Some(list) => topology::parse_cores(list).map_err(|e| anyhow::anyhow!("--cores: {e}"))?.len(),
-        None => topology::all_cores().len(),
+        Some(list) => machine::parse_cores(list).map_err(|e| anyhow::anyhow!("--cores: {e}"))?.len(),
+        None => machine::all_cores().len(),
     };
     let threads: Vec<usize> = match &args.threads {
         Some(t) if t.is_empty() || t.contains(&0) => bail!("--threads needs positive thread counts, e.g. 1,2"),

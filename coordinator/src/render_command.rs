@@ -14,7 +14,7 @@ use photonfarm::scene::Scene;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-use worker::{topology, EngineConfig, ParallelEngine, ParallelMethod};
+use worker::{machine, EngineConfig, ParallelEngine, ParallelMethod};
 
 const DEFAULT_TIME_S: f64 = 30.0;
 /// The checkpoint's file name in the output folder.
@@ -143,8 +143,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
         None => (Box::new(Engine::new(&scene, settings)), "1 thread".to_string()),
         Some(m) => {
             let cores = match &args.cores {
-                Some(list) => topology::parse_cores(list).map_err(|e| anyhow::anyhow!("--cores: {e}"))?,
-                None => topology::all_cores(),
+                Some(list) => machine::parse_cores(list).map_err(|e| anyhow::anyhow!("--cores: {e}"))?,
+                None => machine::all_cores(),
             };
             let mut threads = args.threads.unwrap_or(cores.len());
             if let Some(limit) = args.memory_limit {

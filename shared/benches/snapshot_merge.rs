@@ -6,9 +6,9 @@
 //! size is printed once per resolution.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
+use photonfarm::accumulation::delta::{apply_delta, encode_delta, Compression};
 use photonfarm::accumulation::Accumulator;
 use photonfarm::color::Rgb;
-use photonfarm::protocol::snapshot::{apply_delta, encode_delta, Compression};
 use photonfarm::sampling::{Pass, Sampler};
 use std::hint::black_box;
 

@@ -2,13 +2,17 @@
 //! whoever merges them computes δ over the merged sums.
 
 pub mod auxiliary;
+pub mod delta;
+mod non_finite;
 
 pub use auxiliary::{AuxLayer, AuxLayout, AuxSums};
+pub use non_finite::non_finite_dropped;
 
 use crate::color::{luminance, luminance_f64, Rgb};
+use crate::ghost::GHOST_LAYER;
 use crate::integrator::{Layer, LayerValues};
+use non_finite::sanitize;
 use serde::{Deserialize, Serialize};
-use std::sync::atomic::{AtomicU64, Ordering};
 
 /// The sums one pixel keeps (paper §2's layers, in f64 as the final image needs).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -186,41 +190,22 @@ impl Accumulator {
         }
     }
 
+    /// Σ over pixels of the luminance of the ghost layer's sums and of the total's sums (sums, not means: their
+    /// differences between two moments are the image sums of the phases in between). None without a ghost layer.
+    pub fn ghost_luminance_sums(&self) -> Option<(f64, f64)> {
+        let offset = self.aux.layout().offset(GHOST_LAYER)?;
+        let (mut ghost, mut total) = (0.0, 0.0);
+        for p in 0..self.pixels.len() {
+            let g = &self.aux.pixel(p)[offset..offset + 3];
+            ghost += luminance_f64([g[0], g[1], g[2]]);
+            total += self.pixels[p].sum.iter().map(|l| luminance_f64(*l)).sum::<f64>();
+        }
+        Some((ghost, total))
+    }
+
     /// Bytes of the sums per pixel with the auxiliary layers of `aux`.
     pub fn bytes_per_pixel(aux: &AuxLayout) -> usize {
         std::mem::size_of::<PixelSums>() + aux.sum_bytes_per_pixel()
-    }
-}
-
-/// Phase values this process dropped for not being finite.
-static NON_FINITE_DROPPED: AtomicU64 = AtomicU64::new(0);
-
-/// How many phase values with a NaN or an infinity this process has dropped; the run record flags any.
-pub fn non_finite_dropped() -> u64 {
-    NON_FINITE_DROPPED.load(Ordering::Relaxed)
-}
-
-/// No NaN or infinity may ever reach the sums: such a sample is dropped, counted, and flagged in the record (it
-/// is a bug to find).
-#[inline]
-fn sanitize(v: Rgb) -> Rgb {
-    if v.is_finite() {
-        v
-    } else {
-        NON_FINITE_DROPPED.fetch_add(1, Ordering::Relaxed);
-        Rgb::ZERO
-    }
-}
-
-/// True when every value of a pixel's auxiliary channels is finite; otherwise they are dropped together and
-/// counted like a fixed layer's value.
-#[inline]
-fn sanitize_slice(v: &[f32]) -> bool {
-    if v.iter().all(|x| x.is_finite()) {
-        true
-    } else {
-        NON_FINITE_DROPPED.fetch_add(1, Ordering::Relaxed);
-        false
     }
 }
 

@@ -1,8 +1,8 @@
-//! Ghosts (issue 6): light that reached a sensor after reflections inside the camera's lens. A camera path is
-//! a *ghost path* from the moment it takes a reflection at a dielectric surface (Fresnel or total internal
-//! reflection) before its first diffuse vertex; all light it contributes from then on (emitters seen through
-//! the lens, next-event estimates, and the light later gathered into its backward photons) is ghost light.
-//! The ghost layer shows that part of the total; the light stays in its usual layer as well.
+//! Ghosts: light that reached a sensor after reflections inside the camera's lens. A camera path is a *ghost path* from
+//! the moment it takes a reflection at a dielectric surface (Fresnel or total internal reflection) before its first
+//! diffuse vertex; all light it contributes from then on (emitters seen through the lens, next-event estimates, and the
+//! light later gathered into its backward photons) is ghost light. The ghost layer shows that part of the total; the
+//! light stays in its usual layer as well.
 
 use crate::geometry::SurfaceHit;
 use crate::material::Material;
@@ -27,20 +27,6 @@ pub fn scene_can_make_ghosts(scene: &Scene) -> bool {
 #[inline]
 pub fn is_dielectric_reflection(material: &Material, hit: &SurfaceHit, wo: Vec3, wi: Vec3) -> bool {
     matches!(material, Material::Dielectric { .. }) && wo.dot(hit.ng) * wi.dot(hit.ng) > 0.0
-}
-
-/// Σ over pixels of the luminance of the ghost layer's sums and of the total's sums (sums, not means: their
-/// differences between two moments are the image sums of the phases in between). None without a ghost layer.
-pub fn luminance_sums(sums: &crate::accumulation::Accumulator) -> Option<(f64, f64)> {
-    use crate::color::luminance_f64;
-    let offset = sums.aux.layout().offset(GHOST_LAYER)?;
-    let (mut ghost, mut total) = (0.0, 0.0);
-    for p in 0..sums.pixels.len() {
-        let g = &sums.aux.pixel(p)[offset..offset + 3];
-        ghost += luminance_f64([g[0], g[1], g[2]]);
-        total += sums.pixels[p].sum.iter().map(|l| luminance_f64(*l)).sum::<f64>();
-    }
-    Some((ghost, total))
 }
 
 #[cfg(test)]

@@ -1,5 +1,46 @@
 //! photonfarm's renderer library: scenes, ray tracing, progressive backward photon mapping (PBPM), the
-//! reference path tracer, accumulation with the SEM error estimate, and image output.
+//! reference path tracer, accumulation with the SEM error estimate, image output, and the protocol between the
+//! coordinator and its workers.
+//!
+//! # Crate map
+//!
+//! The modules form layers, listed here from the bottom up. A module imports modules of its own layer or of
+//! lower ones, never of a higher one.
+//!
+//! **Colour, sampling and geometry.** `color` (linear RGB), `sampling` (random streams and the warps from
+//! uniform numbers to directions and points) and `geometry` (rays, triangle meshes, analytic lens surfaces and
+//! the BVH over them) import nothing of the crate. `camera` (pinhole, thin lens, sensor behind a lens) builds
+//! its rays from `geometry` and `sampling`.
+//!
+//! **Spectra, materials and lights.** `spectrum` holds wavelengths, dispersive refractive indices and the
+//! colour state of a path; it knows of materials only through its `Dispersive` trait. `material` (scattering
+//! at a surface hit) and `light` (emitters and their sampling) read `geometry`'s hits and `sampling`'s warps;
+//! `texture` (PNG textures looked up over a triangle) serves lights and the scene's albedo textures.
+//!
+//! **Scene.** `scene` is the loaded scene the integrators read (objects, materials, geometry, lights, camera)
+//! and, in `scene::loader`, its construction from a TOML file with errors that name the file, line and field.
+//! It builds on the two layers below it.
+//!
+//! **Integrators and the PBPM estimator.** `integrator` holds the image layers, next-event estimation and the
+//! reference path tracer; `pbpm` the backward pass that stores photons on camera paths, the photon map, the
+//! forward pass that gathers light paths into it, and the radius schedule; `ghost` tells which light is ghost
+//! light (reflected inside a lens). They read the scene.
+//!
+//! **Accumulation and error.** `accumulation` keeps the running sums of every pixel and layer, the auxiliary
+//! layers (ghost light, wavelength bands), the error estimate δ over the SEM, and `accumulation::delta`, the
+//! exact compressed deltas of the sums that snapshots and checkpoints carry. It reads the layers of
+//! `integrator` and chooses the auxiliary layers from the scene.
+//!
+//! **Image output.** `image_io` writes multi-layer OpenEXR files (and reads them back, for references) and PNG
+//! previews, each replaced atomically; it imports nothing of the crate.
+//!
+//! **Render sessions and records.** `render` holds a run's settings and counters (`render::totals`), the
+//! single-threaded engine that every parallel method must agree with, progressive sessions, images from the
+//! sums, checkpoints and the JSON record of a run. It drives the layers below.
+//!
+//! **Protocol.** `protocol` is the coordinator–worker link: frames, messages, the handshake. It reads only
+//! `render::settings` and `render::totals` (what a job asks for, what a worker counted); the sums travel as
+//! `accumulation::delta` bytes.
 
 pub mod accumulation;
 pub mod camera;

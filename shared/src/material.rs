@@ -4,7 +4,7 @@
 use crate::color::{luminance, Rgb};
 use crate::geometry::SurfaceHit;
 use crate::sampling::{cosine_hemisphere, Frame};
-use crate::spectrum::{RefractiveIndex, Wavelength};
+use crate::spectrum::{Dispersive, RefractiveIndex, Wavelength};
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
 
@@ -50,29 +50,6 @@ impl Material {
     /// True when scattering is a Dirac delta: such vertices are followed, never used for photons or NEE.
     pub fn is_delta(&self) -> bool {
         !matches!(self, Material::Diffuse { .. })
-    }
-
-    /// True when the material's behaviour depends on wavelength: a path that meets it becomes spectral.
-    pub fn is_dispersive(&self) -> bool {
-        matches!(self, Material::Dielectric { ior, ext_ior, .. } if ior.is_dispersive() || ext_ior.is_dispersive())
-    }
-
-    /// The material as a path at one wavelength sees it: colours read at the wavelength (the same value in
-    /// every channel), indices evaluated there.
-    pub fn at_wavelength(&self, w: &Wavelength) -> Material {
-        let v = |c: Rgb| Rgb::splat(w.value_of(c));
-        match *self {
-            Material::Diffuse { albedo } => Material::Diffuse { albedo: v(albedo) },
-            Material::Mirror { reflectance } => Material::Mirror { reflectance: v(reflectance) },
-            Material::Coating { reflectance, transmittance } => {
-                Material::Coating { reflectance: v(reflectance), transmittance: v(transmittance) }
-            }
-            Material::Dielectric { ior, ext_ior, anti_reflection } => Material::Dielectric {
-                ior: RefractiveIndex::constant(ior.at(w.nm)),
-                ext_ior: RefractiveIndex::constant(ext_ior.at(w.nm)),
-                anti_reflection,
-            },
-        }
     }
 
     /// The Lambertian albedo, for diffuse surfaces.
@@ -150,6 +127,31 @@ impl Material {
             return Some(ScatterSample { weight: sample.weight * (num / den), ..sample });
         }
         Some(sample)
+    }
+}
+
+impl Dispersive for Material {
+    /// True when the material's behaviour depends on wavelength: a path that meets it becomes spectral.
+    fn is_dispersive(&self) -> bool {
+        matches!(self, Material::Dielectric { ior, ext_ior, .. } if ior.is_dispersive() || ext_ior.is_dispersive())
+    }
+
+    /// The material as a path at one wavelength sees it: colours read at the wavelength (the same value in
+    /// every channel), indices evaluated there.
+    fn at_wavelength(&self, w: &Wavelength) -> Material {
+        let v = |c: Rgb| Rgb::splat(w.value_of(c));
+        match *self {
+            Material::Diffuse { albedo } => Material::Diffuse { albedo: v(albedo) },
+            Material::Mirror { reflectance } => Material::Mirror { reflectance: v(reflectance) },
+            Material::Coating { reflectance, transmittance } => {
+                Material::Coating { reflectance: v(reflectance), transmittance: v(transmittance) }
+            }
+            Material::Dielectric { ior, ext_ior, anti_reflection } => Material::Dielectric {
+                ior: RefractiveIndex::constant(ior.at(w.nm)),
+                ext_ior: RefractiveIndex::constant(ext_ior.at(w.nm)),
+                anti_reflection,
+            },
+        }
     }
 }
 

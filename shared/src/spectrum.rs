@@ -6,7 +6,6 @@
 //! (1, 1, 1), so that white and grey surfaces and lights look the same in RGB and in spectral rendering.
 
 use crate::color::Rgb;
-use crate::material::Material;
 use crate::sampling::Sampler;
 use glam::{Mat3, Vec3};
 use std::sync::OnceLock;
@@ -244,6 +243,17 @@ impl PhaseSpectrum {
     }
 }
 
+/// What a path's colour state needs to know of a surface it scatters from: whether the surface's behaviour
+/// depends on wavelength, and how it looks at one wavelength. Materials implement it; this module needs nothing
+/// else of them.
+pub trait Dispersive: Sized {
+    /// True when the behaviour depends on wavelength: a path that meets it becomes spectral.
+    fn is_dispersive(&self) -> bool;
+
+    /// The surface as a path at one wavelength sees it.
+    fn at_wavelength(&self, w: &Wavelength) -> Self;
+}
+
 /// The colour state of one path: RGB, or spectral at its class's wavelength once the path met a dispersive
 /// surface (its throughput then holds the spectral value in all three channels). `S` is false in the
 /// integrators' instantiation for RGB phases, where every method below folds to the RGB case at compile time.
@@ -288,7 +298,7 @@ impl<const S: bool> PathSpectrum<S> {
     /// The material a path scatters from: at a dispersive surface an RGB path turns spectral (its throughput
     /// `beta` read at the wavelength); a spectral path sees every material at its wavelength.
     #[inline]
-    pub fn material(&mut self, m: Material, beta: &mut Rgb) -> Material {
+    pub fn material<M: Dispersive>(&mut self, m: M, beta: &mut Rgb) -> M {
         if !(S && ENABLED) {
             return m;
         }

@@ -16,7 +16,7 @@ use photonfarm::material::{Material, Transport};
 use photonfarm::pbpm::PhotonMap;
 use photonfarm::render::{Engine, Method};
 use photonfarm::scene::Scene;
-use photonfarm::spectrum::Wavelength;
+use photonfarm::spectrum::{Dispersive, Wavelength};
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
@@ -300,7 +300,7 @@ fn ghost_luminance(sums: &Accumulator, p: usize) -> f64 {
 
 /// Σ over pixels of the luminance of the ghost layer's sums and of the total's sums.
 fn image_sums(sums: &Accumulator) -> (f64, f64) {
-    photonfarm::ghost::luminance_sums(sums).expect("the scene has a ghost layer")
+    sums.ghost_luminance_sums().expect("the scene has a ghost layer")
 }
 
 /// Renders `phases` phases and returns, per phase, the image's ghost and total luminance sums. Pixels of one

@@ -9,7 +9,7 @@ use photonfarm::geometry::{ray::offset_origin, Ray};
 use photonfarm::material::{fresnel_dielectric, Material, Transport};
 use photonfarm::render::{Engine, Method};
 use photonfarm::scene::Scene;
-use photonfarm::spectrum::{rgb_matching, Wavelength, LAMBDA_MAX, LAMBDA_MIN};
+use photonfarm::spectrum::{rgb_matching, Dispersive, Wavelength, LAMBDA_MAX, LAMBDA_MIN};
 
 /// The scene's glass as its file states it: N-SF11, n_d and Abbe number V_d.
 const N_D: f64 = 1.78472;

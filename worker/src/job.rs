@@ -3,9 +3,9 @@
 //! every snapshot is a consistent estimate.
 
 use crate::engine::{EngineConfig, ParallelEngine};
+use crate::machine;
 use crate::memory_binding::{self, MemoryBinding};
-use crate::topology;
-use photonfarm::protocol::snapshot::{encode_delta, Compression};
+use photonfarm::accumulation::delta::{encode_delta, Compression};
 use photonfarm::protocol::{Job, Snapshot, WorkerInfo};
 use photonfarm::render::session::Progressive;
 use photonfarm::scene::Scene;
@@ -53,7 +53,7 @@ pub fn engine_config(job: &Job) -> Result<EngineConfig, String> {
     let cores = match &spec.cores {
         Some(c) if !c.is_empty() => c.clone(),
         Some(_) => return Err("the job gives an empty core list".into()),
-        None => topology::all_cores(),
+        None => machine::all_cores(),
     };
     let mut config =
         EngineConfig::for_method(spec.method, cores.len(), spec.group_size, cores).map_err(|e| e.to_string())?;
@@ -111,7 +111,7 @@ pub fn run(
     };
     let pinned = engine.pinned_threads();
     let info = WorkerInfo {
-        hostname: topology::hostname(),
+        hostname: machine::hostname(),
         threads,
         cores: cores.clone(),
         numa_node: job.engine.numa_node,

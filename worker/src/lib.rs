@@ -6,10 +6,10 @@ pub mod engine;
 pub mod group;
 pub mod job;
 pub mod link;
+pub mod machine;
 pub mod map_slot;
 pub mod mask;
 pub mod memory_binding;
 pub mod sync_primitives;
-pub mod topology;
 
 pub use engine::{ConfigError, EngineConfig, ParallelEngine, ParallelMethod};

@@ -2,8 +2,8 @@
 //! acknowledgements, heartbeats and the stop request in, until the job ends or the link fails.
 
 use crate::job::{self, JobEvent};
+use photonfarm::accumulation::delta::Compression;
 use photonfarm::protocol::auth::{handshake, Peer};
-use photonfarm::protocol::snapshot::Compression;
 use photonfarm::protocol::{Connection, Job, Message, ProtocolError, Role, Secret};
 use sha2::{Digest, Sha256};
 use std::collections::BTreeMap;

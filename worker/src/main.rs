@@ -101,7 +101,7 @@ async fn run(cli: Cli) -> Result<()> {
                 .collect();
             let loopback = !addrs.is_empty() && addrs.iter().all(|a| a.ip().is_loopback());
             let mut opts =
-                LinkOptions::new(s.name.clone().unwrap_or_else(worker::topology::hostname), secret(&s, loopback)?);
+                LinkOptions::new(s.name.clone().unwrap_or_else(worker::machine::hostname), secret(&s, loopback)?);
             opts.slowdown = s.slowdown;
             // The coordinator may still be starting: retry for a while.
             let deadline = Instant::now() + Duration::from_secs(15);
@@ -122,7 +122,7 @@ async fn run(cli: Cli) -> Result<()> {
         }
         Command::Serve { listen, secret: s } => {
             let mut opts = LinkOptions::new(
-                s.name.clone().unwrap_or_else(worker::topology::hostname),
+                s.name.clone().unwrap_or_else(worker::machine::hostname),
                 secret(&s, listen.ip().is_loopback())?,
             );
             opts.slowdown = s.slowdown;

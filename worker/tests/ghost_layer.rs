@@ -30,7 +30,7 @@ fn fill_lit_lens() -> Scene {
 
 /// Σ over pixels of the luminance of the ghost layer's sums and of the total's sums.
 fn image_sums(sums: &Accumulator) -> (f64, f64) {
-    photonfarm::ghost::luminance_sums(sums).expect("the scene has a ghost layer")
+    sums.ghost_luminance_sums().expect("the scene has a ghost layer")
 }
 
 /// The ghost fraction of the image's light, Σ ghost / Σ total, with its standard error from the increments of

@@ -78,7 +78,7 @@ pub fn launch(
     if inner_group_size_is_invalid(args) {
         bail!("the group size must be 1, 2 or 4, got {}", args.group_size);
     }
-    let real_cores = worker::topology::all_cores();
+    let real_cores = worker::machine::all_cores();
     let machine = topology::detect(args.topology.as_deref(), &real_cores)?;
     let secret = remote_secret(args)?;
     let inner = if args.method == MethodArg::Combination { ParallelMethod::Sync } else { ParallelMethod::TwoLevel };

@@ -8,8 +8,8 @@ pub mod topology;
 
 use anyhow::{Context, Result};
 use network::{Control, Event, NetworkPlan, Planned};
+use photonfarm::accumulation::delta::apply_delta;
 use photonfarm::accumulation::{Accumulator, AuxLayout};
-use photonfarm::protocol::snapshot::apply_delta;
 use photonfarm::render::record::WorkerRecord;
 use photonfarm::render::session::Progressive;
 use photonfarm::render::{RayTotals, RenderSettings};

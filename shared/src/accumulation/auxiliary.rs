@@ -3,8 +3,10 @@
 //! layers already hold, so it has no squared sums: δ, the SEM and the fixed sums never depend on it. A scene
 //! that needs none allocates none, and its sums, snapshots and memory stay as they were.
 
-use super::sanitize_slice;
+use super::non_finite::sanitize_slice;
+use crate::ghost::{scene_can_make_ghosts, GHOST_LAYER};
 use crate::scene::Scene;
+use crate::spectrum::band_name;
 use serde::{Deserialize, Serialize};
 
 /// One auxiliary layer: its name (the EXR layer's) and 1 (grey) or 3 (RGB) channels.
@@ -45,11 +47,11 @@ impl AuxLayout {
     /// channel each); nothing otherwise.
     pub fn for_scene(scene: &Scene, spectral_bands: u32) -> Self {
         let mut layers = Vec::new();
-        if crate::ghost::scene_can_make_ghosts(scene) {
-            layers.push(AuxLayer { name: crate::ghost::GHOST_LAYER.into(), channels: 3 });
+        if scene_can_make_ghosts(scene) {
+            layers.push(AuxLayer { name: GHOST_LAYER.into(), channels: 3 });
         }
         for b in 0..spectral_bands {
-            layers.push(AuxLayer { name: crate::spectrum::band_name(b, spectral_bands), channels: 1 });
+            layers.push(AuxLayer { name: band_name(b, spectral_bands), channels: 1 });
         }
         AuxLayout::new(layers)
     }

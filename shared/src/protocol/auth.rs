@@ -3,8 +3,8 @@
 //! never printed; a proof cannot be replayed (fresh nonces) or reflected (the role is inside the MAC).
 
 use super::connection::Connection;
-use super::message::{Message, Role};
-use super::{ProtocolError, PROTOCOL_VERSION};
+use super::error::ProtocolError;
+use super::message::{Message, Role, PROTOCOL_VERSION};
 use hmac::{Hmac, Mac};
 use sha2::Sha256;
 use std::path::Path;

@@ -2,9 +2,9 @@
 //! with a frame limit and timeouts. It splits into a reader and a writer for links that read and write at
 //! once.
 
+use super::error::ProtocolError;
 use super::frame::{read_frame, write_frame, DEFAULT_MAX_FRAME};
 use super::message::{decode, encode, Message};
-use super::ProtocolError;
 use std::net::SocketAddr;
 use std::time::Duration;
 use tokio::io::{AsyncWriteExt, BufReader, BufWriter};

@@ -2,7 +2,7 @@
 //! maximum before anything is allocated, and the body is read as it arrives, so a peer that announces a large
 //! frame and sends little costs no more memory than it sent.
 
-use super::ProtocolError;
+use super::error::ProtocolError;
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 
 /// Default largest frame: a 1920×1080 snapshot with every layer is about 150 MB before compression.

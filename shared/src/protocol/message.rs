@@ -1,9 +1,14 @@
 //! Every message of the protocol, as one enum, and its binary encoding (bincode 2 behind this one module, so a
 //! change of codec touches one file).
 
-use super::ProtocolError;
-use crate::render::{ParallelMethod, RayTotals, RenderSettings};
+use super::error::ProtocolError;
+use crate::render::settings::{ParallelMethod, RenderSettings};
+use crate::render::totals::RayTotals;
 use serde::{Deserialize, Serialize};
+
+/// Bumped whenever a message changes shape; peers with another version are refused in the handshake.
+/// 5: the totals count the light paths counted against photon maps.
+pub const PROTOCOL_VERSION: u32 = 5;
 
 /// Which end of a link a peer is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -81,7 +86,7 @@ pub struct Snapshot {
     pub seq: u64,
     /// The worker's counters since its start (cumulative, so a lost snapshot cannot skew them).
     pub totals: RayTotals,
-    /// Per-pixel sums added since the previous snapshot (see `snapshot::encode_delta`).
+    /// Per-pixel sums added since the previous snapshot (see `accumulation::delta`).
     pub delta: Vec<u8>,
     /// The snapshot interval the worker uses now, and how long sending its previous snapshot took (ms).
     pub interval_ms: u64,

@@ -1,11 +1,11 @@
 //! Checkpoints: the merged sums of a run with what is needed to continue it (`coordinator render --resume`),
 //! written atomically beside the image so that a crash loses at most the phases since the last one.
 
-use super::engine::RayTotals;
 use super::record::HistoryEntry;
 use super::settings::RenderSettings;
+use super::totals::RayTotals;
+use crate::accumulation::delta::{apply_delta, encode_delta, Compression};
 use crate::accumulation::{Accumulator, AuxLayout};
-use crate::protocol::snapshot::{apply_delta, encode_delta, Compression};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -30,7 +30,7 @@ pub struct Checkpoint {
     pub history: Vec<HistoryEntry>,
     /// The auxiliary layers of the sums.
     pub aux: AuxLayout,
-    /// The sums, as an exact delta from zero (see `protocol::snapshot`).
+    /// The sums, as an exact delta from zero (see `accumulation::delta`).
     sums: Vec<u8>,
 }
 

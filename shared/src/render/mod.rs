@@ -1,5 +1,5 @@
-//! Rendering runs: settings, the single-threaded progressive engine, images from the sums, memory and the run
-//! record.
+//! Rendering runs: settings, the counters a run reports, the single-threaded progressive engine, images from the
+//! sums, memory, checkpoints and the run record.
 
 pub mod checkpoint;
 pub mod engine;
@@ -8,6 +8,8 @@ pub mod memory;
 pub mod record;
 pub mod session;
 pub mod settings;
+pub mod totals;
 
-pub use engine::{Engine, PhaseReport, RayTotals};
+pub use engine::Engine;
 pub use settings::{Method, ParallelMethod, RenderSettings};
+pub use totals::{PhaseReport, RayTotals};

@@ -1,8 +1,8 @@
 //! The JSON record of a run: enough to reproduce it (scene hash, settings, seed) and to chart its speed against
 //! its accuracy (rays and δ after every phase).
 
-use super::engine::RayTotals;
 use super::settings::RenderSettings;
+use super::totals::RayTotals;
 use crate::accumulation::ErrorEstimate;
 use serde::{Deserialize, Serialize};
 

@@ -1,8 +1,9 @@
 //! A progressive run: phases until a time, phase or error target is met, or the user interrupts.
 
-use super::engine::{Engine, RayTotals};
+use super::engine::Engine;
 use super::record::HistoryEntry;
 use super::settings::RenderSettings;
+use super::totals::RayTotals;
 use crate::accumulation::Accumulator;
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicBool, Ordering};

@@ -1,4 +1,5 @@
-//! The cores a worker may use: given by the coordinator (`--cores 0,1`) or every core the OS reports.
+//! The machine a worker runs on: the cores it may use, given by the coordinator (`--cores 0,1`) or every core
+//! the OS reports, and the machine's name.
 
 /// Parses a core list like `0,1,4-7`.
 pub fn parse_cores(text: &str) -> Result<Vec<usize>, String> {

@@ -1,10 +1,10 @@
-//! Snapshot deltas: per-pixel sums added since the previous snapshot, exact (f64), laid out plane by plane with
-//! the bytes of each plane shuffled by significance so that zstd finds the repetition in exponents and counts.
+//! Deltas of the sums: per-pixel sums added between two moments, exact (f64), laid out plane by plane with the
+//! bytes of each plane shuffled by significance so that zstd finds the repetition in exponents and counts.
 //! The auxiliary layers' channels follow as further planes; the header names them, so that sums of another
-//! layout are refused rather than misread.
+//! layout are refused rather than misread. Workers send them in snapshots; checkpoints store the sums as a delta
+//! from zero.
 
-use super::ProtocolError;
-use crate::accumulation::{Accumulator, AuxLayout, PixelSums};
+use super::{Accumulator, AuxLayout, PixelSums};
 
 const MAGIC: &[u8; 4] = b"PFD2";
 /// f64 planes: 12 layer sums (4 layers × RGB), then 5 squared-luminance sums.
@@ -138,24 +138,28 @@ pub struct DeltaSummary {
     pub raw_bytes: usize,
 }
 
+/// Why a delta was refused: it does not fit the sums it was applied to, or holds a value no sum can have.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct DeltaError(String);
+
 /// Adds a delta to `sums` after checking all of it: the image size, the auxiliary layers, finite numbers,
 /// non-negative squares. A refused delta leaves `sums` unchanged.
-pub fn apply_delta(bytes: &[u8], sums: &mut Accumulator) -> Result<DeltaSummary, ProtocolError> {
+pub fn apply_delta(bytes: &[u8], sums: &mut Accumulator) -> Result<DeltaSummary, DeltaError> {
     let n = sums.pixels.len();
     let layout = layout_bytes(sums.aux.layout());
     let aux_channels = sums.aux.layout().channels();
     let expected = 8 + layout.len() + (BYTES_PER_PIXEL + 8 * aux_channels) * n;
-    let raw = zstd::bulk::decompress(bytes, expected)
-        .map_err(|e| ProtocolError::Snapshot(format!("cannot decompress: {e}")))?;
+    let raw = zstd::bulk::decompress(bytes, expected).map_err(|e| DeltaError(format!("cannot decompress: {e}")))?;
     if raw.len() != expected || &raw[..4] != MAGIC || raw[4..8] != (n as u32).to_le_bytes() {
-        return Err(ProtocolError::Snapshot(format!(
+        return Err(DeltaError(format!(
             "expected a delta of {n} pixels with the auxiliary layers {} ({expected} bytes), got {} bytes",
             layout_names(sums.aux.layout()),
             raw.len()
         )));
     }
     if raw[8..8 + layout.len()] != layout[..] {
-        return Err(ProtocolError::Snapshot(format!(
+        return Err(DeltaError(format!(
             "the delta's auxiliary layers are not the image's {}",
             layout_names(sums.aux.layout())
         )));
@@ -169,7 +173,7 @@ pub fn apply_delta(bytes: &[u8], sums: &mut Accumulator) -> Result<DeltaSummary,
         .collect();
     for (k, plane) in values.iter().enumerate() {
         if let Some((i, v)) = plane.iter().enumerate().find(|(_, v)| !v.is_finite() || (k >= 12 && **v < 0.0)) {
-            return Err(ProtocolError::Snapshot(format!("pixel {i} has an invalid sum ({v})")));
+            return Err(DeltaError(format!("pixel {i} has an invalid sum ({v})")));
         }
     }
     let aux_values: Vec<Vec<f64>> = (0..aux_channels)
@@ -179,7 +183,7 @@ pub fn apply_delta(bytes: &[u8], sums: &mut Accumulator) -> Result<DeltaSummary,
         .collect();
     for plane in &aux_values {
         if let Some((i, v)) = plane.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-            return Err(ProtocolError::Snapshot(format!("pixel {i} has an invalid auxiliary sum ({v})")));
+            return Err(DeltaError(format!("pixel {i} has an invalid auxiliary sum ({v})")));
         }
     }
     let (phases, rays) = (unshuffle::<4>(phases, n), unshuffle::<4>(rays, n));
