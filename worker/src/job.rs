@@ -2,7 +2,7 @@
 //! hands over a snapshot of the phases completed since the previous one. Only whole rounds are sent, so
 //! every snapshot is a consistent estimate.
 
-use crate::engine::{EngineConfig, ParallelEngine};
+use crate::parallel::{EngineConfig, ParallelEngine};
 use crate::machine;
 use crate::memory_binding::{self, MemoryBinding};
 use photonfarm::accumulation::delta::{encode_delta, Compression};

@@ -1,15 +1,13 @@
-//! The worker engine: synchronous groups of pinned threads (level 1) rendering random tile masks and sharing
-//! their backward photon maps through atomic counters (level 2), and the classic parallel methods as
-//! configurations of the same engine (DESIGN §2).
+//! photonfarm's rendering process. `parallel` is the engine: synchronous groups of pinned threads (level 1)
+//! rendering random tile masks and sharing their backward photon maps through atomic counters (level 2), with
+//! the classic parallel methods as configurations of it. The rest is the process around it: `job` renders a job
+//! and sends its snapshots, `link` is the worker's end of the protocol, `machine` and `memory_binding` find and
+//! bind the cores and memory it may use; `main.rs` is `worker join` and `worker serve`.
 
-pub mod engine;
-pub mod group;
 pub mod job;
 pub mod link;
 pub mod machine;
-pub mod map_slot;
-pub mod mask;
 pub mod memory_binding;
-pub mod sync_primitives;
+pub mod parallel;
 
-pub use engine::{ConfigError, EngineConfig, ParallelEngine, ParallelMethod};
+pub use parallel::{ConfigError, EngineConfig, ParallelEngine, ParallelMethod};

@@ -4,7 +4,7 @@
 //! group acquires an open map by a compare-and-swap increment (moving on when it fails), gathers into it, counts
 //! its light path in the map's statistics and releases by a decrement. No locks on this path.
 
-use crate::sync_primitives::{AtomicBool, AtomicU32, AtomicU64, Cell, Ordering};
+use super::sync_primitives::{AtomicBool, AtomicU32, AtomicU64, Cell, Ordering};
 
 /// A shared slot holding one group's map data `T`.
 pub struct MapSlot<T> {
@@ -220,7 +220,7 @@ mod loom_tests {
             slot.count_owner_paths(&owner, 1);
             slot.owner_data(&owner).contributions.fetch_add(1, Ordering::Relaxed);
             while !slot.try_close(&owner) {
-                crate::sync_primitives::spin_yield();
+                super::sync_primitives::spin_yield();
             }
             let counted = slot.light_paths();
             let data = slot.data_mut(&mut owner);

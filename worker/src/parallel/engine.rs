@@ -2,9 +2,9 @@
 //! main thread deals masks, runs the groups until one of them has finished K phases, stops them all, forms the
 //! whole image and deals again.
 
-use crate::group::{Group, GroupMap, GroupStats, RoundContext};
-use crate::map_slot::MapSlot;
-use crate::mask;
+use super::group::{Group, GroupMap, GroupStats, RoundContext};
+use super::map_slot::MapSlot;
+use super::mask;
 use photonfarm::accumulation::{Accumulator, AuxLayout};
 use photonfarm::pbpm::PhaseNumbering;
 use photonfarm::render::record::StageSeconds;

@@ -1,7 +1,7 @@
 //! A synchronous group (level 1, DESIGN §2.1): g threads pinned to cores of one node, cooperating on every stage
 //! of a phase over the group's mask, with rayon's joins as the barriers between stages.
 
-use crate::map_slot::{Guard, MapSlot, OwnerToken};
+use super::map_slot::{Guard, MapSlot, OwnerToken};
 use photonfarm::accumulation::AuxLayout;
 use photonfarm::accumulation::{AuxSums, PixelSums};
 use photonfarm::color::Rgb;
