@@ -50,46 +50,26 @@ pub enum ConfigError {
 }
 
 impl EngineConfig {
-    /// The configuration of `method` on `threads` threads, `group_size` threads per group for two-level (or the
-    /// largest of group_size, 2 and 1 that divides the thread count into at least two groups, so that every
-    /// core is used and the groups share their maps).
+    /// The configuration of `method` on `threads` threads: its row of the methods' table
+    /// ([`photonfarm::render::method`]), with `group_size` the most threads per group for two-level.
     pub fn for_method(
         method: ParallelMethod,
         threads: usize,
         group_size: usize,
         cores: Vec<usize>,
     ) -> Result<Self, ConfigError> {
-        if threads == 0 {
-            return Err(ConfigError::Invalid("at least one thread is needed".into()));
-        }
         if cores.is_empty() {
             return Err(ConfigError::Invalid("the core list is empty".into()));
         }
-        let (groups, per_group, masks, shared) = match method {
-            ParallelMethod::Sync => (1, threads, false, false),
-            ParallelMethod::Async => (threads, 1, false, false),
-            ParallelMethod::TwoLevel => {
-                if ![1, 2, 4].contains(&group_size) {
-                    return Err(ConfigError::Invalid(format!("the group size must be 1, 2 or 4, got {group_size}")));
-                }
-                // Groups must be equal: fall back to the largest of g, 2, 1 that divides the thread count. And
-                // two threads or more make at least two groups: one group is `sync` with masks, without the
-                // semi-synchronous level whose shared maps let one light path serve several groups' phases.
-                let g = [group_size, 2, 1]
-                    .into_iter()
-                    .filter(|&g| g <= group_size && threads.is_multiple_of(g) && (threads == 1 || threads / g >= 2))
-                    .max()
-                    .unwrap_or(1);
-                (threads / g, g, true, true)
-            }
-        };
+        let layout = photonfarm::render::Method::from(method).layout();
+        let groups = layout.grouping.split(threads, group_size).map_err(|e| ConfigError::Invalid(e.to_string()))?;
         Ok(EngineConfig {
             method,
-            groups,
-            threads_per_group: per_group,
-            masks,
-            shared_maps: shared,
-            tile_size: if groups > 16 { 64 } else { 32 },
+            groups: groups.groups,
+            threads_per_group: groups.threads_per_group,
+            masks: layout.masks,
+            shared_maps: layout.shared_maps,
+            tile_size: if groups.groups > 16 { 64 } else { 32 },
             phases_per_deal: 6,
             cores,
             process_sharers: 1,
@@ -387,5 +367,18 @@ mod tests {
         assert_eq!((one.groups, one.threads_per_group), (1, 1));
         assert!(EngineConfig::for_method(ParallelMethod::TwoLevel, 4, 3, vec![0]).is_err());
         assert!(EngineConfig::for_method(ParallelMethod::Sync, 0, 1, vec![0]).is_err());
+        // Every configuration is its method's row of the table.
+        for m in [ParallelMethod::Sync, ParallelMethod::Async, ParallelMethod::TwoLevel] {
+            let row = photonfarm::render::Method::from(m).layout();
+            for (t, g) in [(1, 2), (2, 2), (3, 2), (4, 2), (4, 4), (6, 2), (6, 4), (8, 1), (8, 2), (8, 4)] {
+                let config = c(m, t, g);
+                let groups = row.grouping.split(t, g).unwrap();
+                assert_eq!(
+                    (config.groups, config.threads_per_group, config.masks, config.shared_maps),
+                    (groups.groups, groups.threads_per_group, row.masks, row.shared_maps),
+                    "{m:?} on {t} threads, group size {g}"
+                );
+            }
+        }
     }
 }

@@ -1,6 +1,7 @@
 //! The single-threaded progressive engine: the reference every parallel method must agree with.
 
-use super::settings::{Method, RenderSettings};
+use super::method::Estimator;
+use super::settings::RenderSettings;
 use crate::accumulation::{Accumulator, AuxLayout};
 use crate::color::Rgb;
 use crate::integrator::{path_tracer, Layer, LayerValues};
@@ -154,9 +155,9 @@ impl<'s> Engine<'s> {
 
     /// Renders one more phase and closes it into the sums.
     pub fn run_phase(&mut self) -> PhaseReport {
-        let report = match self.settings.method {
-            Method::Pbpm => self.pbpm_phase(),
-            Method::Path => self.path_phase(),
+        let report = match self.settings.estimator {
+            Estimator::Pbpm => self.pbpm_phase(),
+            Estimator::Path => self.path_phase(),
         };
         self.totals.phases += 1;
         self.totals.backward_rays += report.backward_rays;

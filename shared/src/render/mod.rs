@@ -5,9 +5,11 @@ pub mod checkpoint;
 pub mod engine;
 pub mod images;
 pub mod memory;
+pub mod method;
 pub mod record;
 pub mod session;
 pub mod settings;
 
 pub use engine::{Engine, PhaseReport, RayTotals};
-pub use settings::{Method, ParallelMethod, RenderSettings};
+pub use method::{Estimator, Layout, Method, ParallelMethod};
+pub use settings::RenderSettings;
