@@ -124,12 +124,28 @@ fn run_one(
         return Ok(None);
     };
     let out = dir.join("runs").join(format!("{scene}-{method}-{threads}t-r{repeat}"));
+    render(scene, method, threads, repeat, args, &out)?;
+    let key = RunKey { scene, method, threads, repeat };
+    read_run(&out.join("run.json"), key, plan).map(Some)
+}
+
+/// Which configuration and repeat a run is.
+#[derive(Clone, Copy)]
+struct RunKey<'a> {
+    scene: &'a str,
+    method: Method,
+    threads: usize,
+    repeat: u32,
+}
+
+/// Renders one configuration into `out` as a `coordinator render` process.
+fn render(scene: &str, method: Method, threads: usize, repeat: u32, args: &BenchArgs, out: &Path) -> Result<()> {
     let exe = std::env::current_exe().context("cannot find this program")?;
     let mut cmd = std::process::Command::new(exe);
     cmd.args(["render", &format!("scenes/{scene}.toml"), "--quiet", "--method", method.name()])
         .args(["--time", &args.time.to_string(), "--seed", &(args.seed + repeat as u64).to_string()])
         .arg("--out")
-        .arg(&out)
+        .arg(out)
         .stdout(std::process::Stdio::null());
     let layout = method.layout();
     match (layout.processes, layout.parallel) {
@@ -157,10 +173,14 @@ fn run_one(
             out.display()
         );
     }
-    let path = out.join("run.json");
+    Ok(())
+}
+
+/// Reads a run's `run.json` into its results row and series, `plan` its layout.
+fn read_run(path: &Path, key: RunKey, plan: Planned) -> Result<Run> {
     // Read as JSON values: a δ that is not a number yet is written as null.
     let r: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(&path).with_context(|| format!("cannot read {}", path.display()))?)
+        serde_json::from_slice(&std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?)
             .with_context(|| format!("{} is not a run record", path.display()))?;
     let f = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
     let u = |v: &serde_json::Value| v.as_u64().unwrap_or(0);
@@ -168,10 +188,10 @@ fn run_one(
     let series: Vec<SeriesRow> = history
         .iter()
         .map(|h| SeriesRow {
-            scene: scene.to_string(),
-            method,
-            threads,
-            repeat,
+            scene: key.scene.to_string(),
+            method: key.method,
+            threads: key.threads,
+            repeat: key.repeat,
             time_s: f(&h["time_s"]),
             rays: u(&h["backward_rays"]) + u(&h["forward_rays"]),
             delta_unlit: f(&h["delta_unlit"]),
@@ -196,14 +216,14 @@ fn run_one(
         (g("waiting") + g("between_rounds")) / total.max(1e-12)
     });
     let row = ResultsRow {
-        scene: scene.to_string(),
-        method,
+        scene: key.scene.to_string(),
+        method: key.method,
         topology: plan.topology,
         processes: if workers.is_empty() { plan.processes } else { workers.len() },
         groups: plan.groups,
         threads_per_group: plan.threads_per_group,
-        threads,
-        repeat,
+        threads: key.threads,
+        repeat: key.repeat,
         wall_s: wall,
         backward_rays: u(&r["totals"]["backward_rays"]),
         forward_rays: u(&r["totals"]["forward_rays"]),
@@ -217,10 +237,10 @@ fn run_one(
         true_all: r["true_error"]["rmse_all"].as_f64(),
         peak_memory_bytes: peak,
         bytes_per_pixel: f(&r["bytes_per_pixel"]),
-        idle: if method.is_distributed() { None } else { idle },
+        idle: if key.method.is_distributed() { None } else { idle },
         reference_delta_unlit: r["true_error"]["reference_delta_unlit"].as_f64(),
     };
-    Ok(Some(Run { row, series, snapshot_bytes }))
+    Ok(Run { row, series, snapshot_bytes })
 }
 
 pub fn run(mut args: BenchArgs) -> Result<()> {
