@@ -170,13 +170,13 @@ impl Method {
                 "PBPM, one single-thread group per thread, each over the whole image with its own map and image"
             }
             Method::TwoLevel => {
-                "PBPM, groups of --group-size threads over random tile masks, sharing their photon maps"
+                "PBPM, equal groups of up to the group size (1, 2 or 4 threads) over random tile masks, sharing their photon maps"
             }
             Method::Combination => {
-                "PBPM, one worker process per NUMA node (and any --worker), each one synchronous group of its cores"
+                "PBPM, one worker process per NUMA node (and any remote worker), each one synchronous group of its cores"
             }
             Method::ThreeLevel => {
-                "PBPM, one worker process per NUMA node (and any --worker), each running two-level on its cores"
+                "PBPM, one worker process per NUMA node (and any remote worker), each running two-level on its cores"
             }
         }
     }
