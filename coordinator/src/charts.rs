@@ -3,15 +3,15 @@
 //! columns), where δ is meaningful. Every repeat of a series is drawn as its own line in its key's colour, so
 //! the spread between runs stays visible; only the speedup and memory lines are means over repeats.
 
+use crate::bench_tables::{read_table, ResultsRow, SeriesRow};
 use crate::cli::ChartsArgs;
 use anyhow::{anyhow, bail, Context, Result};
+use photonfarm::render::Method;
 use plotters::coord::ranged1d::{KeyPointHint, NoDefaultFormatting, ValueFormatter};
 use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
-use serde::de::DeserializeOwned;
-use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
@@ -24,33 +24,6 @@ const FONT: &str = "sans-serif";
 /// Embedded so that PNG text does not depend on the machine's fonts (see assets/README.md).
 static FONT_DATA: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
 const UNLIT: &str = "pixels that do not see a light directly";
-
-/// Columns of results.csv; all must be present (in any order), only some are drawn.
-const RESULTS_COLUMNS: &[&str] = &[
-    "scene",
-    "method",
-    "topology",
-    "processes",
-    "groups",
-    "threads_per_group",
-    "threads",
-    "repeat",
-    "wall_s",
-    "backward_rays",
-    "forward_rays",
-    "merges",
-    "phases",
-    "delta_unlit",
-    "delta_all",
-    "true_unlit",
-    "true_all",
-    "peak_memory_bytes",
-    "bytes_per_pixel",
-    "idle_fraction",
-];
-/// Columns of series.csv; all must be present (in any order), only some are drawn.
-const SERIES_COLUMNS: &[&str] =
-    &["scene", "method", "threads", "repeat", "time_s", "rays", "delta_unlit", "delta_all", "true_unlit", "true_all"];
 
 /// Line colours (matplotlib's "tab10" without its grey, which the guide lines use); they repeat after nine keys.
 const PALETTE: [RGBColor; 9] = [
@@ -66,31 +39,6 @@ const PALETTE: [RGBColor; 9] = [
 ];
 const GUIDE: RGBColor = RGBColor(90, 90, 90);
 
-/// One run of results.csv, the columns the charts use. Measured values may be empty (missing).
-#[derive(Debug, Deserialize)]
-struct ResultRow {
-    scene: String,
-    method: String,
-    threads: u32,
-    wall_s: Option<f64>,
-    backward_rays: Option<f64>,
-    forward_rays: Option<f64>,
-    peak_memory_bytes: Option<f64>,
-}
-
-/// One history entry of series.csv, the columns the charts use.
-#[derive(Debug, Deserialize)]
-struct SeriesRow {
-    scene: String,
-    method: String,
-    threads: u32,
-    repeat: u32,
-    time_s: Option<f64>,
-    rays: Option<f64>,
-    delta_unlit: Option<f64>,
-    true_unlit: Option<f64>,
-}
-
 /// `coordinator charts DIR`: draws the charts and prints the files written.
 pub fn run(args: ChartsArgs) -> Result<()> {
     for path in write_charts(&args.dir)? {
@@ -104,8 +52,8 @@ pub fn run(args: ChartsArgs) -> Result<()> {
 /// calibration; from results.csv: speedup-vs-cores and memory-vs-cores.
 pub fn write_charts(dir: &Path) -> Result<Vec<PathBuf>> {
     register_embedded_font()?;
-    let results: Vec<ResultRow> = read_table(&dir.join("results.csv"), RESULTS_COLUMNS)?;
-    let series: Vec<SeriesRow> = read_table(&dir.join("series.csv"), SERIES_COLUMNS)?;
+    let results: Vec<ResultsRow> = read_table(&dir.join("results.csv"))?;
+    let series: Vec<SeriesRow> = read_table(&dir.join("series.csv"))?;
     let out = dir.join("charts");
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
 
@@ -137,51 +85,6 @@ fn register_embedded_font() -> Result<()> {
     Ok(())
 }
 
-/// Reads a CSV table with a header line into rows, naming the file, line and column of any bad input.
-fn read_table<T: DeserializeOwned>(path: &Path, columns: &[&str]) -> Result<Vec<T>> {
-    let file = std::fs::File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
-    let mut reader = csv::ReaderBuilder::new().from_reader(std::io::BufReader::new(file));
-    let headers = reader.headers().map_err(|e| csv_error(path, &e))?.clone();
-    // Deserialising by name would quietly read a missing optional column as empty everywhere.
-    let missing: Vec<&str> = columns.iter().copied().filter(|c| !headers.iter().any(|h| h == *c)).collect();
-    if !missing.is_empty() {
-        bail!(
-            "{}, line 1: the header lacks {}; expected the columns {}",
-            path.display(),
-            missing.join(", "),
-            columns.join(",")
-        );
-    }
-    let mut rows = Vec::new();
-    let mut record = csv::StringRecord::new();
-    while reader.read_record(&mut record).map_err(|e| csv_error(path, &e))? {
-        let line = record.position().map_or(0, |p| p.line());
-        let row = record.deserialize(Some(&headers)).map_err(|e| match e.kind() {
-            csv::ErrorKind::Deserialize { err, .. } => {
-                let column = err.field().and_then(|i| headers.get(i as usize)).unwrap_or("?");
-                anyhow!("{}, line {line}, column {column}: {}", path.display(), err.kind())
-            }
-            _ => anyhow!("{}, line {line}: {e}", path.display()),
-        })?;
-        rows.push(row);
-    }
-    Ok(rows)
-}
-
-fn csv_error(path: &Path, e: &csv::Error) -> anyhow::Error {
-    let detail = match e.kind() {
-        csv::ErrorKind::UnequalLengths { expected_len, len, .. } => {
-            format!("{len} fields where the header has {expected_len}")
-        }
-        csv::ErrorKind::Utf8 { err, .. } => format!("not UTF-8 ({err})"),
-        _ => e.to_string(),
-    };
-    match e.position() {
-        Some(p) => anyhow!("{}, line {}: {detail}", path.display(), p.line()),
-        None => anyhow!("{}: {detail}", path.display()),
-    }
-}
-
 /// Distinct values in the order they first appear: the bench writes methods and thread counts in the order the
 /// user asked for them, which reads better than sorted.
 fn first_appearances<T: PartialEq>(items: impl Iterator<Item = T>) -> Vec<T> {
@@ -203,7 +106,7 @@ fn colour(i: usize) -> RGBColor {
     PALETTE[i % PALETTE.len()]
 }
 
-fn threads_label(method: &str, threads: u32) -> String {
+fn threads_label(method: Method, threads: usize) -> String {
     format!("{method}, {threads} thread{}", if threads == 1 { "" } else { "s" })
 }
 
@@ -281,7 +184,7 @@ type Curve = (Stroke, fn(&SeriesRow) -> Option<(f64, f64)>);
 fn series_lines(rows: &[&SeriesRow], curves: &[Curve]) -> (Vec<Line>, Vec<LegendEntry>) {
     let mut lines = Vec::new();
     let mut legend = Vec::new();
-    let keys = first_appearances(rows.iter().map(|r| (r.method.as_str(), r.threads)));
+    let keys = first_appearances(rows.iter().map(|r| (r.method, r.threads)));
     for (i, &(method, threads)) in keys.iter().enumerate() {
         let of_key: Vec<&SeriesRow> =
             rows.iter().copied().filter(|r| r.method == method && r.threads == threads).collect();
@@ -305,10 +208,7 @@ fn series_lines(rows: &[&SeriesRow], curves: &[Curve]) -> (Vec<Line>, Vec<Legend
 fn error_vs_time(scene: &str, rows: &[&SeriesRow]) -> Plot {
     let (lines, mut legend) = series_lines(
         rows,
-        &[
-            (Stroke::Solid, |r| Some((r.time_s?, r.delta_unlit?))),
-            (Stroke::Dashed, |r| Some((r.time_s?, r.true_unlit?))),
-        ],
+        &[(Stroke::Solid, |r| Some((r.time_s, r.delta_unlit))), (Stroke::Dashed, |r| Some((r.time_s, r.true_unlit?)))],
     );
     legend.push(LegendEntry { text: "solid: δ (estimated)".into(), colour: BLACK, stroke: Stroke::Solid });
     legend.push(LegendEntry { text: "dashed: true error".into(), colour: BLACK, stroke: Stroke::Dashed });
@@ -324,7 +224,7 @@ fn error_vs_time(scene: &str, rows: &[&SeriesRow]) -> Plot {
 }
 
 fn error_vs_rays(scene: &str, rows: &[&SeriesRow]) -> Plot {
-    let (lines, legend) = series_lines(rows, &[(Stroke::Solid, |r| Some((r.rays?, r.delta_unlit?)))]);
+    let (lines, legend) = series_lines(rows, &[(Stroke::Solid, |r| Some((r.rays as f64, r.delta_unlit)))]);
     Plot {
         title: format!("{scene}: δ against rays traced, {UNLIT}"),
         x: Axis::log("rays traced"),
@@ -338,7 +238,7 @@ fn error_vs_rays(scene: &str, rows: &[&SeriesRow]) -> Plot {
 
 fn calibration(scene: &str, rows: &[&SeriesRow]) -> Plot {
     let (lines, mut legend) =
-        series_lines(rows, &[(Stroke::Solid, |r| Some((r.time_s?, r.true_unlit? / r.delta_unlit?)))]);
+        series_lines(rows, &[(Stroke::Solid, |r| Some((r.time_s, r.true_unlit? / r.delta_unlit)))]);
     legend.push(LegendEntry { text: "δ exact".into(), colour: GUIDE, stroke: Stroke::Solid });
     legend.push(LegendEntry { text: "off by a factor of 2".into(), colour: GUIDE, stroke: Stroke::Dashed });
     Plot {
@@ -357,8 +257,8 @@ fn calibration(scene: &str, rows: &[&SeriesRow]) -> Plot {
 }
 
 /// Rays traced per second of a run, if its columns allow one.
-fn ray_rate(r: &ResultRow) -> Option<f64> {
-    let rate = (r.backward_rays? + r.forward_rays?) / r.wall_s?;
+fn ray_rate(r: &ResultsRow) -> Option<f64> {
+    let rate = (r.backward_rays + r.forward_rays) as f64 / r.wall_s;
     (rate.is_finite() && rate > 0.0).then_some(rate)
 }
 
@@ -370,17 +270,17 @@ fn mean(values: &[f64]) -> f64 {
 /// single run's value as (threads, value).
 struct ByThreads<'a> {
     scene: &'a str,
-    method: &'a str,
-    means: Vec<(u32, f64)>,
+    method: Method,
+    means: Vec<(usize, f64)>,
     runs: Vec<(f64, f64)>,
 }
 
 /// Per (scene, method), the runs' finite values of `value` against their thread counts.
-fn by_threads(results: &[ResultRow], value: fn(&ResultRow) -> Option<f64>) -> Vec<ByThreads<'_>> {
-    let keys = first_appearances(results.iter().map(|r| (r.scene.as_str(), r.method.as_str())));
+fn by_threads(results: &[ResultsRow], value: fn(&ResultsRow) -> Option<f64>) -> Vec<ByThreads<'_>> {
+    let keys = first_appearances(results.iter().map(|r| (r.scene.as_str(), r.method)));
     keys.into_iter()
         .map(|(scene, method)| {
-            let values: Vec<(u32, f64)> = results
+            let values: Vec<(usize, f64)> = results
                 .iter()
                 .filter(|r| r.scene == scene && r.method == method)
                 .filter_map(|r| value(r).filter(|v| v.is_finite()).map(|v| (r.threads, v)))
@@ -394,7 +294,7 @@ fn by_threads(results: &[ResultRow], value: fn(&ResultRow) -> Option<f64>) -> Ve
                     (t, mean(&at))
                 })
                 .collect();
-            let runs = values.iter().map(|&(t, v)| (f64::from(t), v)).collect();
+            let runs = values.iter().map(|&(t, v)| (t as f64, v)).collect();
             ByThreads { scene, method, means, runs }
         })
         .collect()
@@ -402,13 +302,13 @@ fn by_threads(results: &[ResultRow], value: fn(&ResultRow) -> Option<f64>) -> Ve
 
 /// Speedup at t threads = mean rays per second at t / the same at the smallest thread count t₀ of the same scene
 /// and method, × t₀: against one thread when there are one-thread runs, and comparable across methods otherwise.
-fn speedup_vs_cores(results: &[ResultRow]) -> Plot {
+fn speedup_vs_cores(results: &[ResultsRow]) -> Plot {
     let mut lines = Vec::new();
     let mut legend = Vec::new();
     for (i, key) in by_threads(results, ray_rate).into_iter().enumerate() {
         let Some(&(base_threads, base_rate)) = key.means.first() else { continue };
         let points: Vec<(f64, f64)> =
-            key.means.iter().map(|&(t, rate)| (f64::from(t), rate / base_rate * f64::from(base_threads))).collect();
+            key.means.iter().map(|&(t, rate)| (t as f64, rate / base_rate * base_threads as f64)).collect();
         lines.push(Line { colour: colour(i), stroke: Stroke::Solid, points: points.clone() });
         lines.push(Line { colour: colour(i), stroke: Stroke::Points, points });
         legend.push(LegendEntry {
@@ -430,15 +330,15 @@ fn speedup_vs_cores(results: &[ResultRow]) -> Plot {
 }
 
 /// `peak_memory_bytes` is read as the peak of one process (like run.json's VmHWM), not a sum over processes.
-fn memory_vs_cores(results: &[ResultRow]) -> Plot {
+fn memory_vs_cores(results: &[ResultsRow]) -> Plot {
     let mut lines = Vec::new();
     let mut legend = Vec::new();
-    let megabytes = |r: &ResultRow| r.peak_memory_bytes.map(|b| b / 1e6);
+    let megabytes = |r: &ResultsRow| r.peak_memory_bytes.map(|b| b as f64 / 1e6);
     for (i, key) in by_threads(results, megabytes).into_iter().enumerate() {
         if key.runs.is_empty() {
             continue;
         }
-        let points = key.means.iter().map(|&(t, mb)| (f64::from(t), mb)).collect();
+        let points = key.means.iter().map(|&(t, mb)| (t as f64, mb)).collect();
         lines.push(Line { colour: colour(i), stroke: Stroke::Solid, points });
         lines.push(Line { colour: colour(i), stroke: Stroke::Points, points: key.runs });
         legend.push(LegendEntry {
@@ -781,14 +681,14 @@ mod tests {
                         results.push_str(&format!(
                             "{scene},{method},in-process,1,{threads},1,{threads},{repeat},{wall},{},{},0,100,{delta},\
                              {delta},{},{},{memory},120.5,0.05\n",
-                            rate * wall * 0.7,
-                            rate * wall * 0.3,
+                            (rate * wall * 0.7).round(),
+                            (rate * wall * 0.3).round(),
                             truth(delta),
                             truth(delta),
                         ));
                         for k in 0..8 {
                             let time = 0.25 * 2f64.powi(k);
-                            let rays = rate * time;
+                            let rays = (rate * time).round();
                             let delta = error(rays);
                             series.push_str(&format!(
                                 "{scene},{method},{threads},{repeat},{time},{rays},{delta},{delta},{},{}\n",
@@ -801,7 +701,7 @@ mod tests {
             }
         }
         series.push_str("cornell,sync,1,0,0,0,0,0,0,0\n");
-        series.push_str("cornell,sync,1,0,-1,NaN,inf,-inf,-0.5,\n");
+        series.push_str("cornell,sync,1,0,-1,0,NaN,inf,-0.5,\n");
         std::fs::write(dir.join("results.csv"), results).unwrap();
         std::fs::write(dir.join("series.csv"), series).unwrap();
     }

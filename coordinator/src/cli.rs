@@ -1,6 +1,8 @@
 //! Command-line interface. Flag names are a contract: scripts depend on them.
 
+use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 use clap::{Parser, Subcommand, ValueEnum};
+use photonfarm::render::Method;
 use std::path::PathBuf;
 
 /// photonfarm: physically based rendering with progressive backward photon mapping.
@@ -31,8 +33,8 @@ pub struct ReferenceArgs {
     #[arg(long)]
     pub time: f64,
     /// The estimator: the path tracer (default), or a PBPM method where the path tracer cannot converge.
-    #[arg(long, value_enum, default_value = "path")]
-    pub method: MethodArg,
+    #[arg(long, value_parser = method_parser(), default_value = "path")]
+    pub method: Method,
     /// NUMA layout for combination and three-level (see `render --topology`).
     #[arg(long)]
     pub topology: Option<String>,
@@ -67,11 +69,11 @@ pub struct BenchArgs {
     /// Methods to run.
     #[arg(
         long,
-        value_enum,
+        value_parser = method_parser(),
         value_delimiter = ',',
         default_value = "path,pbpm,sync,async,two-level,combination,three-level"
     )]
-    pub methods: Vec<MethodArg>,
+    pub methods: Vec<Method>,
     /// Thread counts to run each parallel method at (default 1, 2, 4, … and every core); the distributed
     /// methods run one worker per synthetic NUMA node of one core, as many nodes as threads.
     #[arg(long, value_delimiter = ',')]
@@ -94,30 +96,10 @@ pub struct BenchArgs {
     pub out: Option<PathBuf>,
 }
 
-/// Estimators and parallel methods selectable with --method.
-#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum MethodArg {
-    /// Progressive backward photon mapping on one thread: the reference engine of every parallel method.
-    Pbpm,
-    /// The reference path tracer (one thread), for comparison.
-    Path,
-    /// PBPM, one synchronous group of all threads over the whole image.
-    Sync,
-    /// PBPM, one single-thread group per thread, each over the whole image with its own map and image.
-    Async,
-    /// PBPM, groups of --group-size threads over random tile masks, sharing their photon maps.
-    TwoLevel,
-    /// PBPM, one worker process per NUMA node (and any --worker), each one synchronous group of its cores.
-    Combination,
-    /// PBPM, one worker process per NUMA node (and any --worker), each running two-level on its cores.
-    ThreeLevel,
-}
-
-impl MethodArg {
-    /// Methods that run worker processes.
-    pub fn is_distributed(self) -> bool {
-        matches!(self, MethodArg::Combination | MethodArg::ThreeLevel)
-    }
+/// `--method`'s parser: the library's methods by name, each with its summary in the help.
+fn method_parser() -> impl TypedValueParser<Value = Method> {
+    PossibleValuesParser::new(Method::ALL.map(|m| PossibleValue::new(m.name()).help(m.summary())))
+        .try_map(|name| name.parse::<Method>())
 }
 
 /// Which pixels δ is computed over for --target-error and the progress display.
@@ -150,8 +132,8 @@ pub struct RenderArgs {
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// Estimator and parallel method.
-    #[arg(long, value_enum, default_value = "three-level")]
-    pub method: MethodArg,
+    #[arg(long, value_parser = method_parser(), default_value = "three-level")]
+    pub method: Method,
     /// NUMA layout for combination and three-level: an hwloc synthetic description such as
     /// "pack:1 numa:2 core:1 pu:1", or an hwloc XML file (default: this machine's). Cores of a description
     /// that is not this machine are mapped onto the real cores modulo their count.
@@ -259,7 +241,24 @@ pub fn parse_size(text: &str) -> Result<u64, String> {
 
 #[cfg(test)]
 mod tests {
-    use super::parse_size;
+    use super::*;
+
+    #[test]
+    fn every_method_is_a_value_of_method_with_its_name() {
+        for m in Method::ALL {
+            let cli = Cli::try_parse_from(["coordinator", "render", "scene.toml", "--method", m.name()]).unwrap();
+            let Command::Render(args) = cli.command else { panic!("not a render") };
+            assert_eq!(args.method, m);
+        }
+        let bench = Cli::try_parse_from(["coordinator", "bench", "--methods", "sync,three-level"]).unwrap();
+        let Command::Bench(args) = bench.command else { panic!("not a bench") };
+        assert_eq!(args.methods, [Method::Sync, Method::ThreeLevel]);
+        let default = Cli::try_parse_from(["coordinator", "bench"]).unwrap();
+        let Command::Bench(args) = default.command else { panic!("not a bench") };
+        assert_eq!(args.methods.len(), Method::ALL.len());
+        let e = Cli::try_parse_from(["coordinator", "render", "s.toml", "--method", "fast"]).unwrap_err();
+        assert!(e.to_string().contains("two-level"), "{e}");
+    }
 
     #[test]
     fn sizes_parse_with_binary_units_and_bad_ones_are_refused() {

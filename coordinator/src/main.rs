@@ -2,6 +2,7 @@
 //! and writes the image, its layers and the run record.
 
 mod bench_command;
+mod bench_tables;
 mod charts;
 mod cli;
 mod cluster;

@@ -2,9 +2,8 @@
 //! bench measure their true error. The path tracer by default; PBPM where the path tracer cannot converge
 //! (caustics seen through glass, point lights behind specular surfaces).
 
-use crate::cli::{MethodArg, ReferenceArgs};
+use crate::cli::ReferenceArgs;
 use anyhow::{bail, Context, Result};
-use clap::ValueEnum;
 use std::path::PathBuf;
 
 pub fn run(args: ReferenceArgs) -> Result<()> {
@@ -15,9 +14,8 @@ pub fn run(args: ReferenceArgs) -> Result<()> {
         bail!("no scene file {}", args.scene.display());
     }
     let stem = args.scene.file_stem().context("the scene path has no file name")?.to_string_lossy().into_owned();
-    let method = args.method.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default();
     // Named by estimator, which is what decides what the reference can show; the record keeps the method.
-    let estimator = if args.method == MethodArg::Path { "path" } else { "pbpm" };
+    let estimator = args.method.estimator().name();
     std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
     let (exr, json) =
         (args.out.join(format!("{stem}-{estimator}.exr")), args.out.join(format!("{stem}-{estimator}.json")));
@@ -30,7 +28,7 @@ pub fn run(args: ReferenceArgs) -> Result<()> {
         "render".to_string(),
         args.scene.display().to_string(),
         "--method".into(),
-        method.clone(),
+        args.method.name().into(),
         "--time".into(),
         args.time.to_string(),
         "--seed".into(),

@@ -1,16 +1,19 @@
-//! `coordinator render`: the main job.
+//! `coordinator render`: the main job, in steps: check the options against the method, settle the settings
+//! (the scene's, the overrides, or a checkpoint's), start the method's engine (in this process or as worker
+//! processes), run it until the stop rule while refreshing the outputs, and write the image and the record.
 
-use crate::cli::{ErrorOverArg, MethodArg, RenderArgs};
-use crate::cluster;
+use crate::cli::{ErrorOverArg, RenderArgs};
+use crate::cluster::launch::{self, LaunchOptions};
 use crate::output_folder::{self, Reference};
 use anyhow::{bail, Context, Result};
-use clap::ValueEnum;
 use indicatif::{ProgressBar, ProgressStyle};
 use photonfarm::render::checkpoint::Checkpoint;
-use photonfarm::render::record::{flags_of, HistoryEntry, RunRecord};
+use photonfarm::render::method::{Images, Processes};
+use photonfarm::render::record::{flags_of, HistoryEntry, RunRecord, WorkerRecord, WorkerState};
 use photonfarm::render::session::{self, ErrorOver, Progressive, StopReason, StopRule};
 use photonfarm::render::{memory, Engine, Method, RenderSettings};
 use photonfarm::scene::Scene;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -23,8 +26,54 @@ const CHECKPOINT: &str = "checkpoint.bin";
 pub fn run(args: RenderArgs) -> Result<()> {
     let stop = stop_rule(&args)?;
     let scene = Scene::load(&args.scene)?;
-    let method = if args.method == MethodArg::Path { Method::Path } else { Method::Pbpm };
-    if parallel_method(args.method).is_none() && (args.threads.is_some() || args.cores.is_some()) {
+    check_method_options(&args)?;
+    let mut settings = settings_of(&args, &scene)?;
+    let reference = match &args.reference {
+        Some(p) => Some(Reference::load(p, scene.camera.width, scene.camera.height)?),
+        None => None,
+    };
+    let checkpoint = load_checkpoint(&args, &scene)?;
+    if let Some(c) = &checkpoint {
+        settings = c.settings;
+    }
+    let dir = output_dir(&args)?;
+    let interrupted = catch_interrupts()?;
+    let bar = progress_bar(args.quiet);
+
+    let mut notes = Vec::new();
+    let (mut engine, layout) = start_engine(&args, &scene, settings, &dir, checkpoint.as_ref(), &mut notes)?;
+    let outputs = Outputs {
+        args: &args,
+        scene: &scene,
+        dir: &dir,
+        layout,
+        reference: reference.as_ref(),
+        notes,
+        session: checkpoint.as_ref().map_or(1, |c| c.session + 1),
+        elapsed_before: Duration::from_secs_f64(checkpoint.as_ref().map_or(0.0, |c| c.elapsed_s)),
+        start: Instant::now(),
+    };
+    let mut history = checkpoint.map(|c| c.history).unwrap_or_default();
+    let run = run_until_stop(engine.as_mut(), &stop, &interrupted, &outputs, &bar, &mut history);
+    bar.set_message("stopping: collecting the last completed phases");
+    finish(engine.as_mut(), &outputs, &mut history);
+    bar.finish_and_clear();
+    let reason = run.context("writing the periodic results failed; the run was stopped")?;
+    if reason == StopReason::NoWorkers && engine.sums().pixels.iter().all(|p| p.phases == 0) {
+        let why: Vec<String> =
+            engine.workers().unwrap_or_default().iter().map(|w| format!("{}: {}", w.name, w.state)).collect();
+        bail!("no worker rendered anything ({})", why.join("; "));
+    }
+    let record = outputs.save(engine.as_ref(), &history, reason.name())?;
+    print_summary(&record, reason, &dir);
+    Ok(())
+}
+
+/// Refuses options that the method does not take.
+fn check_method_options(args: &RenderArgs) -> Result<()> {
+    let layout = args.method.layout();
+    let in_process_parallel = layout.processes == Processes::One && layout.parallel.is_some();
+    if !in_process_parallel && (args.threads.is_some() || args.cores.is_some()) {
         if args.method.is_distributed() {
             bail!("--threads and --cores apply to the in-process methods; combination and three-level take their cores from the NUMA nodes (see --topology)");
         }
@@ -35,7 +84,12 @@ pub fn run(args: RenderArgs) -> Result<()> {
     {
         bail!("--worker, --listen, --remote-only and --topology apply to --method combination and three-level");
     }
-    let mut settings = RenderSettings::for_scene(&scene, method, args.seed);
+    Ok(())
+}
+
+/// The scene's settings for the method, with the command line's overrides.
+fn settings_of(args: &RenderArgs, scene: &Scene) -> Result<RenderSettings> {
+    let mut settings = RenderSettings::for_scene(scene, args.method, args.seed);
     if let Some(d) = args.max_depth {
         if d == 0 {
             bail!("--max-depth must be at least 1");
@@ -72,221 +126,292 @@ pub fn run(args: RenderArgs) -> Result<()> {
         }
         settings.spectral_bands = n;
     }
-    let reference = match &args.reference {
-        Some(p) => Some(Reference::load(p, scene.camera.width, scene.camera.height)?),
-        None => None,
-    };
-    let checkpoint = match &args.resume {
-        Some(from) => {
-            if !args.method.is_distributed() {
-                bail!(
-                    "--resume continues combination and three-level runs; --method {method_name_arg} has no checkpoint",
-                    method_name_arg =
-                        args.method.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default()
-                );
-            }
-            if args.max_depth.is_some()
-                || args.backward_diffuse_depth.is_some()
-                || args.radius_scale.is_some()
-                || args.light_paths_per_pixel.is_some()
-                || args.spectral_output.is_some()
-            {
-                bail!("a resumed run keeps the settings of its checkpoint: drop --max-depth, --backward-diffuse-depth, --radius-scale, --light-paths-per-pixel and --spectral-output");
-            }
-            let c = Checkpoint::load(&from.join(CHECKPOINT))?;
-            if c.scene_hash != scene.hash {
-                bail!(
-                    "{} was made from another scene, or the scene or its meshes changed since",
-                    from.join(CHECKPOINT).display()
-                );
-            }
-            settings = c.settings;
-            Some(c)
-        }
-        None => None,
-    };
+    Ok(settings)
+}
+
+/// The checkpoint `--resume` continues from, checked against the method, the options and the scene.
+fn load_checkpoint(args: &RenderArgs, scene: &Scene) -> Result<Option<Checkpoint>> {
+    let Some(from) = &args.resume else { return Ok(None) };
+    if !args.method.is_distributed() {
+        bail!("--resume continues combination and three-level runs; --method {} has no checkpoint", args.method);
+    }
+    if args.max_depth.is_some()
+        || args.backward_diffuse_depth.is_some()
+        || args.radius_scale.is_some()
+        || args.light_paths_per_pixel.is_some()
+        || args.spectral_output.is_some()
+    {
+        bail!("a resumed run keeps the settings of its checkpoint: drop --max-depth, --backward-diffuse-depth, --radius-scale, --light-paths-per-pixel and --spectral-output");
+    }
+    let path = from.join(CHECKPOINT);
+    let c = Checkpoint::load(&path)?;
+    if c.scene_hash != scene.hash {
+        bail!("{} was made from another scene, or the scene or its meshes changed since", path.display());
+    }
+    Ok(Some(c))
+}
+
+/// The output folder (`--out`, the resumed run's, or a new one under out/), created.
+fn output_dir(args: &RenderArgs) -> Result<PathBuf> {
     let dir =
         args.out.clone().or_else(|| args.resume.clone()).unwrap_or_else(|| output_folder::default_dir(&args.scene));
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create the output folder {}", dir.display()))?;
+    Ok(dir)
+}
 
+/// A flag that Ctrl-C sets, so the run stops after its current phase and writes what it has.
+fn catch_interrupts() -> Result<Arc<AtomicBool>> {
     let interrupted = Arc::new(AtomicBool::new(false));
-    {
-        let flag = interrupted.clone();
-        // A second Ctrl-C while results are being written still ends the process.
-        ctrlc::set_handler(move || {
-            if flag.swap(true, Ordering::SeqCst) {
-                std::process::exit(130);
-            }
-        })
-        .context("cannot install the Ctrl-C handler")?;
-    }
+    let flag = interrupted.clone();
+    // A second Ctrl-C while results are being written still ends the process.
+    ctrlc::set_handler(move || {
+        if flag.swap(true, Ordering::SeqCst) {
+            std::process::exit(130);
+        }
+    })
+    .context("cannot install the Ctrl-C handler")?;
+    Ok(interrupted)
+}
 
-    let bar = if args.quiet { ProgressBar::hidden() } else { ProgressBar::new_spinner() };
+fn progress_bar(quiet: bool) -> ProgressBar {
+    let bar = if quiet { ProgressBar::hidden() } else { ProgressBar::new_spinner() };
     bar.set_style(ProgressStyle::with_template("{spinner} [{elapsed_precise}] {msg}").expect("static template"));
     bar.enable_steady_tick(Duration::from_millis(200));
+    bar
+}
 
-    // What the run changed from what it was asked (flags of the record).
-    let mut notes: Vec<String> = Vec::new();
-    let (mut engine, layout): (Box<dyn Progressive + '_>, String) = match parallel_method(args.method) {
-        None if args.method.is_distributed() => {
-            let resume = match &checkpoint {
-                Some(c) => Some(cluster::launch::Resume {
+/// Starts the method's engine, as its table row says: worker processes, the single-threaded engine, or a
+/// parallel engine in this process. Returns it with its layout in words.
+fn start_engine<'s>(
+    args: &RenderArgs,
+    scene: &'s Scene,
+    settings: RenderSettings,
+    dir: &Path,
+    checkpoint: Option<&Checkpoint>,
+    notes: &mut Vec<String>,
+) -> Result<(Box<dyn Progressive + 's>, String)> {
+    let layout = args.method.layout();
+    match (layout.processes, layout.parallel) {
+        (Processes::PerNumaNode, _) => {
+            let resume = match checkpoint {
+                Some(c) => Some(launch::Resume {
                     session: c.session + 1,
                     sums: c.sums().map_err(|e| anyhow::anyhow!("the checkpoint's sums: {e}"))?,
                     totals: c.totals,
                 }),
                 None => None,
             };
-            let (cluster, layout, _) = cluster::launch::launch(&args, &scene, settings, &dir, resume)?;
-            (Box::new(cluster), layout)
+            let (cluster, layout) = launch::launch(&launch_options(args), scene, settings, dir, resume)?;
+            Ok((Box::new(cluster), layout))
         }
-        None => (Box::new(Engine::new(&scene, settings)), "1 thread".to_string()),
-        Some(m) => {
+        (Processes::One, None) => Ok((Box::new(Engine::new(scene, settings)), "1 thread".to_string())),
+        (Processes::One, Some(method)) => {
             let cores = match &args.cores {
                 Some(list) => machine::parse_cores(list).map_err(|e| anyhow::anyhow!("--cores: {e}"))?,
                 None => machine::all_cores(),
             };
             let mut threads = args.threads.unwrap_or(cores.len());
             if let Some(limit) = args.memory_limit {
-                threads = fit_memory(limit, m, threads, &args, &scene, &settings, &cores, &mut notes)?;
+                let base = memory::current_rss_bytes().unwrap_or(0);
+                let pixels = scene.camera.width as u64 * scene.camera.height as u64;
+                let aux = photonfarm::accumulation::AuxLayout::for_scene(scene, settings.spectral_bands);
+                let need = |t: usize| -> Result<u64> {
+                    let c = EngineConfig::for_method(method, t, args.group_size, cores.clone())?;
+                    Ok(base + (c.bytes_per_pixel(settings.backward_diffuse_depth, &aux) * pixels as f64) as u64)
+                };
+                threads = fit_memory(limit, method, threads, base, need, notes)?;
             }
-            let mut config = EngineConfig::for_method(m, threads, args.group_size, cores)?;
+            let mut config = EngineConfig::for_method(method, threads, args.group_size, cores)?;
             if let Some(t) = args.tile_size {
                 config.tile_size = t;
             }
             config.phases_per_deal = args.phases_per_deal;
             let layout = config.layout();
-            (Box::new(ParallelEngine::new(&scene, settings, config)?), layout)
+            Ok((Box::new(ParallelEngine::new(scene, settings, config)?), layout))
         }
-    };
-    let session_number = checkpoint.as_ref().map_or(1, |c| c.session + 1);
-    let elapsed_before = Duration::from_secs_f64(checkpoint.as_ref().map_or(0.0, |c| c.elapsed_s));
-    let mut history: Vec<HistoryEntry> = checkpoint.as_ref().map(|c| c.history.clone()).unwrap_or_default();
-    let distributed = args.method.is_distributed();
-    let start = Instant::now();
-    let mut last_save = Instant::now();
-    let mut save_error: Option<anyhow::Error> = None;
-    let save_interval = Duration::from_secs_f64(args.save_interval.max(0.5));
-    let method_name = args.method.to_possible_value().map(|v| v.get_name().to_string()).unwrap_or_default();
-    let record_of = |engine: &dyn Progressive, history: &[HistoryEntry], reason: &str| {
+    }
+}
+
+/// What the launcher of worker processes takes from the command line.
+fn launch_options(args: &RenderArgs) -> LaunchOptions {
+    LaunchOptions {
+        method: args.method,
+        scene_path: args.scene.clone(),
+        topology: args.topology.clone(),
+        remote_workers: args.workers.clone(),
+        listen: args.listen,
+        remote_only: args.remote_only,
+        secret_file: args.secret_file.clone(),
+        insecure: args.insecure,
+        worker_timeout_s: args.worker_timeout,
+        snapshot_interval_s: args.snapshot_interval,
+        group_size: args.group_size,
+        tile_size: args.tile_size,
+        phases_per_deal: args.phases_per_deal,
+    }
+}
+
+/// Everything the outputs are written from besides the engine and its history.
+struct Outputs<'a> {
+    args: &'a RenderArgs,
+    scene: &'a Scene,
+    dir: &'a Path,
+    /// The engine's layout in words.
+    layout: String,
+    reference: Option<&'a Reference>,
+    /// What the run changed from what it was asked (flags of the record).
+    notes: Vec<String>,
+    /// This session of the run (1 unless resumed).
+    session: u32,
+    /// Rendering time of the earlier sessions.
+    elapsed_before: Duration,
+    start: Instant,
+}
+
+impl Outputs<'_> {
+    /// Rendering time of every session so far, seconds.
+    fn elapsed_s(&self) -> f64 {
+        self.elapsed_before.as_secs_f64() + self.start.elapsed().as_secs_f64()
+    }
+
+    fn record(&self, engine: &dyn Progressive, history: &[HistoryEntry], reason: &str) -> RunRecord {
         let workers = engine.workers();
         let dropped = photonfarm::accumulation::non_finite_dropped()
             + workers.iter().flatten().map(|w| w.non_finite_dropped).sum::<u64>();
+        let scene = self.scene;
         RunRecord {
             photonfarm_version: env!("CARGO_PKG_VERSION").to_string(),
-            scene: args.scene.display().to_string(),
+            scene: self.args.scene.display().to_string(),
             scene_hash: scene.hash.clone(),
             width: scene.camera.width,
             height: scene.camera.height,
-            method: method_name.clone(),
-            layout: layout.clone(),
+            method: self.args.method,
+            layout: self.layout.clone(),
             pinned_threads: engine.pinned_threads(),
             settings: *engine.settings(),
-            radius_at_1m: engine.settings().radius_schedule(&scene).radius(1.0, 1),
+            radius_at_1m: engine.settings().radius_schedule(scene).radius(1.0, 1),
             threads: engine.threads() as u32,
             stop_reason: reason.to_string(),
             totals: engine.totals(),
             stage_seconds: engine.stage_seconds(),
-            wall_time_s: elapsed_before.as_secs_f64() + start.elapsed().as_secs_f64(),
+            wall_time_s: self.elapsed_s(),
             peak_memory_bytes: memory::peak_rss_bytes(),
             bytes_per_pixel: engine.bytes_per_pixel(),
             error: engine.sums().error(),
             pixel_phases: engine.sums().pixels.iter().map(|p| p.phases as u64).sum(),
-            session: session_number,
-            true_error: reference.as_ref().map(|r| r.compare(engine.sums())),
+            session: self.session,
+            true_error: self.reference.map(|r| r.compare(engine.sums())),
             history: history.to_vec(),
-            flags: notes.iter().cloned().chain(flags_of(&engine.totals(), dropped, workers.as_deref())).collect(),
+            flags: self.notes.iter().cloned().chain(flags_of(&engine.totals(), dropped, workers.as_deref())).collect(),
             workers,
         }
-    };
+    }
 
-    let save_all = |engine: &dyn Progressive, history: &[HistoryEntry], reason: &str| -> Result<RunRecord> {
-        if distributed {
+    /// Writes the checkpoint (distributed methods), the image and the record.
+    fn save(&self, engine: &dyn Progressive, history: &[HistoryEntry], reason: &str) -> Result<RunRecord> {
+        if self.args.method.is_distributed() {
             // The checkpoint first: it is what a resumed run needs.
-            let elapsed = elapsed_before.as_secs_f64() + start.elapsed().as_secs_f64();
             Checkpoint::new(
                 engine.sums(),
-                &scene.hash,
-                &method_name,
+                &self.scene.hash,
+                self.args.method,
                 *engine.settings(),
-                session_number,
-                elapsed,
+                self.session,
+                self.elapsed_s(),
                 engine.totals(),
                 history,
             )
-            .save(&dir.join(CHECKPOINT))?;
+            .save(&self.dir.join(CHECKPOINT))?;
         }
-        let record = record_of(engine, history, reason);
-        output_folder::save(&dir, engine.sums(), &record)?;
+        let record = self.record(engine, history, reason);
+        output_folder::save(self.dir, engine.sums(), &record)?;
         Ok(record)
-    };
-    let reason = session::run(engine.as_mut(), &stop, &interrupted, &mut history, elapsed_before, |engine, history| {
+    }
+}
+
+/// Runs the engine until the stop rule or Ctrl-C, showing progress and refreshing the outputs every
+/// `--save-interval`. A refresh that fails stops the run, and is the error returned.
+fn run_until_stop(
+    engine: &mut dyn Progressive,
+    stop: &StopRule,
+    interrupted: &AtomicBool,
+    outputs: &Outputs,
+    bar: &ProgressBar,
+    history: &mut Vec<HistoryEntry>,
+) -> Result<StopReason> {
+    let save_interval = Duration::from_secs_f64(outputs.args.save_interval.max(0.5));
+    let mut last_save = Instant::now();
+    let mut save_error: Option<anyhow::Error> = None;
+    let reason = session::run(engine, stop, interrupted, history, outputs.elapsed_before, |engine, history| {
         let Some(entry) = history.last_mut() else { return };
-        if let Some(r) = &reference {
+        if let Some(r) = outputs.reference {
             let t = r.compare(engine.sums());
             (entry.true_all, entry.true_unlit) = (Some(t.rmse_all), Some(t.rmse_unlit));
         }
-        let entry = *entry;
-        let secs = entry.time_s.max(1e-9);
-        let rays = (entry.backward_rays + entry.forward_rays) as f64;
-        let delta = match stop.error_over {
-            ErrorOver::Unlit => entry.delta_unlit,
-            ErrorOver::All => entry.delta_all,
-        };
-        let workers = engine.workers().map(|w| {
-            let count = |p: &dyn Fn(&str) -> bool| w.iter().filter(|w| p(&w.state)).count();
-            format!(
-                "  workers: {} running, {} connecting, {} finished, {} lost",
-                count(&|s| s == "running"),
-                count(&|s| s == "connecting"),
-                count(&|s| s == "finished"),
-                count(&|s| s.starts_with("lost")),
-            )
-        });
-        bar.set_message(format!(
-            "phase {}  {:.2} Mrays/s  δ {} {}{}",
-            entry.phase,
-            rays / secs / 1e6,
-            if delta.is_finite() { format!("{:.2}%", 100.0 * delta) } else { "–".to_string() },
-            if stop.error_over == ErrorOver::Unlit { "(unlit pixels)" } else { "(all pixels)" },
-            workers.unwrap_or_default(),
-        ));
+        bar.set_message(progress(entry, stop.error_over, engine.workers().as_deref()));
         if last_save.elapsed() >= save_interval && save_error.is_none() {
             last_save = Instant::now();
-            if let Err(e) = save_all(engine, history, "running") {
+            if let Err(e) = outputs.save(engine, history, "running") {
                 save_error = Some(e);
             }
         }
     });
-    bar.set_message("stopping: collecting the last completed phases");
+    match save_error {
+        Some(e) => Err(e),
+        None => Ok(reason),
+    }
+}
+
+/// The progress line after a step: phases, ray rate, δ, and the workers' states.
+fn progress(entry: &HistoryEntry, error_over: ErrorOver, workers: Option<&[WorkerRecord]>) -> String {
+    let secs = entry.time_s.max(1e-9);
+    let rays = (entry.backward_rays + entry.forward_rays) as f64;
+    let delta = match error_over {
+        ErrorOver::Unlit => entry.delta_unlit,
+        ErrorOver::All => entry.delta_all,
+    };
+    let workers = workers.map(|w| {
+        let count = |p: &dyn Fn(&WorkerState) -> bool| w.iter().filter(|w| p(&w.state)).count();
+        format!(
+            "  workers: {} running, {} connecting, {} finished, {} lost",
+            count(&|s| *s == WorkerState::Running),
+            count(&|s| *s == WorkerState::Connecting),
+            count(&|s| *s == WorkerState::Finished),
+            count(&|s| matches!(s, WorkerState::Lost(_))),
+        )
+    });
+    format!(
+        "phase {}  {:.2} Mrays/s  δ {} {}{}",
+        entry.phase,
+        rays / secs / 1e6,
+        if delta.is_finite() { format!("{:.2}%", 100.0 * delta) } else { "–".to_string() },
+        if error_over == ErrorOver::Unlit { "(unlit pixels)" } else { "(all pixels)" },
+        workers.unwrap_or_default(),
+    )
+}
+
+/// Stops the engine. Worker processes send their last snapshots only now: one more history entry for them,
+/// timed when they were merged.
+fn finish(engine: &mut dyn Progressive, outputs: &Outputs, history: &mut Vec<HistoryEntry>) {
     engine.finish();
-    if distributed {
-        // The last snapshots arrived after the run loop ended: one more history entry for them, timed when
-        // they were merged.
-        let time_s = elapsed_before.as_secs_f64() + start.elapsed().as_secs_f64();
-        let (e, t) = (engine.sums().error(), engine.totals());
-        let truth = reference.as_ref().map(|r| r.compare(engine.sums()));
-        history.push(HistoryEntry {
-            phase: t.phases,
-            time_s,
-            delta_all: e.delta_all,
-            delta_unlit: e.delta_unlit,
-            backward_rays: t.backward_rays,
-            forward_rays: t.forward_rays,
-            true_all: truth.as_ref().map(|t| t.rmse_all),
-            true_unlit: truth.as_ref().map(|t| t.rmse_unlit),
-        });
+    if !outputs.args.method.is_distributed() {
+        return;
     }
-    bar.finish_and_clear();
-    if let Some(e) = save_error {
-        return Err(e.context("writing the periodic results failed; the run was stopped"));
-    }
-    if reason == StopReason::NoWorkers && engine.sums().pixels.iter().all(|p| p.phases == 0) {
-        let why: Vec<String> =
-            engine.workers().unwrap_or_default().iter().map(|w| format!("{}: {}", w.name, w.state)).collect();
-        bail!("no worker rendered anything ({})", why.join("; "));
-    }
-    let record = save_all(engine.as_ref(), &history, reason.name())?;
+    let (e, t) = (engine.sums().error(), engine.totals());
+    let truth = outputs.reference.map(|r| r.compare(engine.sums()));
+    history.push(HistoryEntry {
+        phase: t.phases,
+        time_s: outputs.elapsed_s(),
+        delta_all: e.delta_all,
+        delta_unlit: e.delta_unlit,
+        backward_rays: t.backward_rays,
+        forward_rays: t.forward_rays,
+        true_all: truth.as_ref().map(|t| t.rmse_all),
+        true_unlit: truth.as_ref().map(|t| t.rmse_unlit),
+    });
+}
+
+fn print_summary(record: &RunRecord, reason: StopReason, dir: &Path) {
     let e = record.error;
     println!(
         "{} phases in {:.1} s ({}), {:.2} M backward + {:.2} M forward rays, δ {:.2}% (unlit pixels) / {:.2}% (all pixels)",
@@ -313,50 +438,32 @@ pub fn run(args: RenderArgs) -> Result<()> {
         println!("interrupted: the results of every completed phase were written");
     }
     println!("wrote {}", dir.display());
-    Ok(())
 }
 
-/// The parallel engine behind a method, None for the single-threaded ones.
-pub fn parallel_method(m: MethodArg) -> Option<ParallelMethod> {
-    match m {
-        MethodArg::Pbpm | MethodArg::Path | MethodArg::Combination | MethodArg::ThreeLevel => None,
-        MethodArg::Sync => Some(ParallelMethod::Sync),
-        MethodArg::Async => Some(ParallelMethod::Async),
-        MethodArg::TwoLevel => Some(ParallelMethod::TwoLevel),
-    }
-}
-
-/// The threads an in-process method may use under `--memory-limit`: memory in use now (the scene loaded) plus
-/// the engine's buffers must fit. `async` gives up threads to fit (and `notes` says so); the others refuse.
-#[allow(clippy::too_many_arguments)]
+/// The threads an in-process method may use under `--memory-limit`, where `need(t)` is the memory a run of `t`
+/// threads needs (`base` in use now, the scene loaded, plus the engine's buffers). A method whose groups each
+/// keep their own image (async) gives up threads to fit, and `notes` says so; the others refuse.
 fn fit_memory(
     limit: u64,
     method: ParallelMethod,
     threads: usize,
-    args: &RenderArgs,
-    scene: &Scene,
-    settings: &RenderSettings,
-    cores: &[usize],
+    base: u64,
+    need: impl Fn(usize) -> Result<u64>,
     notes: &mut Vec<String>,
 ) -> Result<usize> {
-    let base = memory::current_rss_bytes().unwrap_or(0);
-    let pixels = scene.camera.width as u64 * scene.camera.height as u64;
-    let need = |t: usize| -> Result<u64> {
-        let c = EngineConfig::for_method(method, t, args.group_size, cores.to_vec())?;
-        let aux = photonfarm::accumulation::AuxLayout::for_scene(scene, settings.spectral_bands);
-        Ok(base + (c.bytes_per_pixel(settings.backward_diffuse_depth, &aux) * pixels as f64) as u64)
-    };
     let mb = |b: u64| format!("{:.0} MiB", b as f64 / (1u64 << 20) as f64);
     let asked = need(threads)?;
     if asked <= limit {
         return Ok(threads);
     }
-    if method == ParallelMethod::Async {
+    let grows_with_threads = Method::from(method).layout().images == Images::PerGroup;
+    if grows_with_threads {
         if let Some(t) = (1..threads).rev().find(|&t| need(t).is_ok_and(|n| n <= limit)) {
             notes.push(format!(
-                "--memory-limit {}: async needs about {} at {threads} threads (its buffers grow with its threads), \
+                "--memory-limit {}: {} needs about {} at {threads} threads (its buffers grow with its threads), \
                  so it ran with {t}",
                 mb(limit),
+                method.name(),
                 mb(asked)
             ));
             return Ok(t);
@@ -366,9 +473,9 @@ fn fit_memory(
         "--memory-limit {} is too small: this render needs about {} ({} in use after loading the scene, plus the \
          engine's buffers){}",
         mb(limit),
-        mb(need(if method == ParallelMethod::Async { 1 } else { threads })?),
+        mb(need(if grows_with_threads { 1 } else { threads })?),
         mb(base),
-        if method == ParallelMethod::Async { " even with one thread" } else { "" }
+        if grows_with_threads { " even with one thread" } else { "" }
     )
 }
 

@@ -1,6 +1,6 @@
 //! `coordinator bench` and `coordinator reference` as a user runs them: every bench configuration becomes a real
 //! render process, and the bench folder gets one results row per run, the runs' error against time, and the
-//! report with its tables and goals.
+//! report with its tables and comparisons.
 
 use end_to_end::{binary, repo_root, scratch_dir};
 use std::process::Command;
@@ -76,7 +76,8 @@ fn bench_writes_a_row_per_run_their_error_series_and_the_report() {
     let report = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(report.contains("| cornell | two-level | 2 | 1×2×1 |") && report.contains("tracing speedup"), "{report}");
     assert!(report.contains("maps per light path"), "{report}");
-    assert!(report.contains("Goals") && report.contains("cornell: path tracer"), "{report}");
+    assert!(report.contains("PBPM against the path tracer") && report.contains("cornell: path tracer"), "{report}");
+    assert!(report.contains("Two-level against sync and async"), "{report}");
     assert!(report.contains("- cornell, 2 threads: two-level tracing speedup"), "{report}");
 }
 

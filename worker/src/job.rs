@@ -2,9 +2,9 @@
 //! hands over a snapshot of the phases completed since the previous one. Only whole rounds are sent, so
 //! every snapshot is a consistent estimate.
 
-use crate::parallel::{EngineConfig, ParallelEngine};
 use crate::machine;
 use crate::memory_binding::{self, MemoryBinding};
+use crate::parallel::{EngineConfig, ParallelEngine};
 use photonfarm::accumulation::delta::{encode_delta, Compression};
 use photonfarm::protocol::{Job, Snapshot, WorkerInfo};
 use photonfarm::render::session::Progressive;
@@ -63,9 +63,9 @@ pub fn engine_config(job: &Job) -> Result<EngineConfig, String> {
     if let Some(k) = spec.phases_per_deal {
         config.phases_per_deal = k;
     }
-    config.process_sharers = spec.radius_sharers.max(1);
-    config.process_index = spec.radius_index.min(config.process_sharers - 1);
-    config.phase_offset = spec.phase_offset;
+    config.processes_per_pixel = spec.processes_per_pixel.max(1);
+    config.process_rank = spec.process_rank.min(config.processes_per_pixel - 1);
+    config.resumed_phases = spec.resumed_phases;
     Ok(config)
 }
 

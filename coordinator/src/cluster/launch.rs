@@ -2,18 +2,54 @@
 //! the job each of them gets.
 
 use super::network::{FileStore, NetworkPlan, Planned, Timing};
-use super::topology::{self, MachineTopology};
+use super::numa_nodes::{self, NumaNode, NumaNodes};
 use super::{Cluster, Member};
-use crate::cli::{MethodArg, RenderArgs};
 use anyhow::{bail, Context, Result};
 use photonfarm::protocol::auth::SECRET_ENV;
 use photonfarm::protocol::{EngineSpec, FileRef, Job, Secret};
-use photonfarm::render::{ParallelMethod, RenderSettings};
+use photonfarm::render::method::Grouping;
+use photonfarm::render::{Method, RenderSettings};
 use photonfarm::scene::Scene;
+use std::net::{SocketAddr, TcpListener};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::process::{Child, Command, Stdio};
 use std::sync::Arc;
 use std::time::Duration;
+
+/// What a distributed render takes from the command line.
+#[derive(Clone, Debug)]
+pub struct LaunchOptions {
+    /// A method that runs worker processes: combination or three-level.
+    pub method: Method,
+    pub scene_path: PathBuf,
+    /// A synthetic description or an hwloc XML file to take the NUMA nodes from instead of this machine's.
+    pub topology: Option<String>,
+    /// `worker serve` daemons to dial, as HOST:PORT.
+    pub remote_workers: Vec<String>,
+    /// Where workers may dial in (`worker join ADDR`).
+    pub listen: Option<SocketAddr>,
+    /// Start no local worker.
+    pub remote_only: bool,
+    /// The shared secret for remote workers (otherwise the environment's).
+    pub secret_file: Option<PathBuf>,
+    /// Allow remote links without a secret.
+    pub insecure: bool,
+    /// Seconds of silence after which a worker is presumed hung.
+    pub worker_timeout_s: f64,
+    /// Seconds between a worker's snapshots (remote workers lengthen it on slow links).
+    pub snapshot_interval_s: f64,
+    /// Most threads per group where workers run two-level.
+    pub group_size: usize,
+    pub tile_size: Option<u32>,
+    pub phases_per_deal: u32,
+}
+
+/// What a resumed run continues from.
+pub struct Resume {
+    pub session: u32,
+    pub sums: photonfarm::accumulation::Accumulator,
+    pub totals: photonfarm::render::RayTotals,
+}
 
 /// The `worker` program next to this one.
 pub fn worker_program() -> Result<PathBuf> {
@@ -28,12 +64,66 @@ pub fn worker_program() -> Result<PathBuf> {
     Ok(path)
 }
 
-fn inner_group_size_is_invalid(args: &RenderArgs) -> bool {
-    args.method == MethodArg::ThreeLevel && ![1, 2, 4].contains(&args.group_size)
+/// Launches the local workers and the network, and returns the cluster with a description of its layout.
+pub fn launch(
+    options: &LaunchOptions,
+    scene: &Scene,
+    settings: RenderSettings,
+    dir: &Path,
+    resume: Option<Resume>,
+) -> Result<(Cluster, String)> {
+    let timing = check(options)?;
+    let nodes = numa_nodes::detect(options.topology.as_deref(), &worker::machine::all_cores())?;
+    let remote_secret = remote_secret(options)?;
+    let template = JobTemplate::new(options, scene, settings, &nodes, resume.as_ref())?;
+    let (members, jobs) = plan_workers(options, &nodes, &template);
+    if members.is_empty() && options.listen.is_none() {
+        bail!("--remote-only needs --worker HOST:PORT or --listen ADDR");
+    }
+    let local_secret = Secret::random();
+    let any_local = members.iter().any(|m| matches!(m.planned, Planned::Local { .. }));
+    let local = if any_local { Some(listen("127.0.0.1:0".parse()?, "a loopback port for the workers")?) } else { None };
+    let public = options.listen.map(|addr| listen(addr, &addr.to_string())).transpose()?;
+    let children = match &local {
+        Some(listener) => start_local_workers(&members, listener.local_addr()?.port(), &local_secret, dir)?,
+        None => Vec::new(),
+    };
+    let layout = describe(options, &members, &nodes);
+    let plan = NetworkPlan {
+        planned: members.iter().map(|m| m.planned.clone()).collect(),
+        jobs,
+        join_template: template.job(0, None, template.remote_interval),
+        files: Arc::new(template.store.clone()),
+        local: local.map(|l| (l, local_secret)),
+        public: public.map(|l| (l, remote_secret.clone())),
+        remote_secret,
+        timing,
+    };
+    let initial = resume.map(|r| (r.sums, r.totals));
+    let aux = photonfarm::accumulation::AuxLayout::for_scene(scene, settings.spectral_bands);
+    let cluster =
+        Cluster::start(members, plan, children, scene.camera.width, scene.camera.height, aux, settings, initial)?;
+    Ok((cluster, layout))
 }
 
-fn remote_secret(args: &RenderArgs) -> Result<Secret> {
-    if let Some(f) = &args.secret_file {
+/// Refuses options no worker could run with, and gives the links' timing.
+fn check(options: &LaunchOptions) -> Result<Timing> {
+    if !options.method.is_distributed() {
+        bail!("--method {} runs no worker processes", options.method);
+    }
+    // The group size is checked here, before any worker starts, rather than by every worker.
+    options.method.layout().grouping.split(1, options.group_size)?;
+    if !(options.snapshot_interval_s.is_finite() && options.snapshot_interval_s > 0.0) {
+        bail!("--snapshot-interval must be a positive number of seconds");
+    }
+    if !(options.worker_timeout_s.is_finite() && options.worker_timeout_s >= 2.0) {
+        bail!("--worker-timeout must be at least 2 seconds (workers send a heartbeat every second)");
+    }
+    Ok(Timing { heartbeat: Duration::from_secs(1), peer_timeout: Duration::from_secs_f64(options.worker_timeout_s) })
+}
+
+fn remote_secret(options: &LaunchOptions) -> Result<Secret> {
+    if let Some(f) = &options.secret_file {
         return Ok(Secret::from_file(f)?);
     }
     if let Some(s) = Secret::from_env()? {
@@ -43,8 +133,9 @@ fn remote_secret(args: &RenderArgs) -> Result<Secret> {
         use std::net::ToSocketAddrs;
         w.to_socket_addrs().map(|mut a| a.all(|a| a.ip().is_loopback())).unwrap_or(false)
     };
-    let loopback_only = args.workers.iter().all(is_loopback) && args.listen.is_none_or(|l| l.ip().is_loopback());
-    if args.insecure || loopback_only {
+    let loopback_only =
+        options.remote_workers.iter().all(is_loopback) && options.listen.is_none_or(|l| l.ip().is_loopback());
+    if options.insecure || loopback_only {
         return Ok(Secret::insecure());
     }
     bail!(
@@ -53,77 +144,100 @@ fn remote_secret(args: &RenderArgs) -> Result<Secret> {
     )
 }
 
-/// What a resumed run continues from.
-pub struct Resume {
-    pub session: u32,
-    pub sums: photonfarm::accumulation::Accumulator,
-    pub totals: photonfarm::render::RayTotals,
+/// What every worker's job shares: the scene, its meshes, the settings and the engine of each process.
+struct JobTemplate {
+    scene_name: String,
+    scene_text: String,
+    files: Vec<FileRef>,
+    /// The meshes by content hash, for workers that ask for them.
+    store: FileStore,
+    scene_hash: String,
+    settings: RenderSettings,
+    engine: EngineSpec,
+    /// Added to every worker's stream: a resumed run's streams never repeat an earlier session's.
+    stream_base: usize,
+    /// The nodes are a synthetic topology's, mapped onto the real cores.
+    synthetic_nodes: bool,
+    local_interval: Duration,
+    /// Remote workers start at the local interval and lengthen it on slow links (see worker::link).
+    remote_interval: Duration,
 }
 
-/// Launches the local workers and the network, and returns the cluster with a description of its layout.
-pub fn launch(
-    args: &RenderArgs,
-    scene: &Scene,
-    settings: RenderSettings,
-    dir: &Path,
-    resume: Option<Resume>,
-) -> Result<(Cluster, String, MachineTopology)> {
-    // Streams of a resumed run never repeat an earlier session's.
-    let session = resume.as_ref().map_or(1, |r| r.session);
-    let stream_base = (session as usize - 1) << 16;
-    let phase_offset = resume.as_ref().map_or(0, |r| {
-        let n = r.sums.pixels.len().max(1) as u64;
-        (r.sums.pixels.iter().map(|p| p.phases as u64).sum::<u64>() / n) as u32
-    });
-    if inner_group_size_is_invalid(args) {
-        bail!("the group size must be 1, 2 or 4, got {}", args.group_size);
+impl JobTemplate {
+    fn new(
+        options: &LaunchOptions,
+        scene: &Scene,
+        settings: RenderSettings,
+        nodes: &NumaNodes,
+        resume: Option<&Resume>,
+    ) -> Result<Self> {
+        let path = &options.scene_path;
+        let scene_text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        let session = resume.map_or(1, |r| r.session);
+        let resumed_phases = resume.map_or(0, |r| {
+            let n = r.sums.pixels.len().max(1) as u64;
+            (r.sums.pixels.iter().map(|p| p.phases as u64).sum::<u64>() / n) as u32
+        });
+        let method =
+            options.method.layout().parallel.context("a distributed method names the method of its workers")?;
+        let interval = Duration::from_secs_f64(options.snapshot_interval_s);
+        Ok(JobTemplate {
+            scene_name: path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
+            scene_text,
+            files: scene.mesh_files.iter().map(|(p, h)| FileRef { path: p.clone(), sha256: h.clone() }).collect(),
+            store: scene.mesh_files.iter().map(|(p, h)| (h.clone(), base.join(p))).collect(),
+            scene_hash: scene.hash.clone(),
+            settings,
+            engine: EngineSpec {
+                method,
+                group_size: options.group_size,
+                tile_size: options.tile_size,
+                phases_per_deal: Some(options.phases_per_deal),
+                cores: None,
+                numa_node: None,
+                synthetic_topology: false,
+                processes_per_pixel: 1,
+                process_rank: 0,
+                resumed_phases,
+            },
+            stream_base: (session as usize - 1) << 16,
+            synthetic_nodes: nodes.synthetic,
+            local_interval: interval,
+            remote_interval: interval,
+        })
     }
-    let real_cores = worker::machine::all_cores();
-    let machine = topology::detect(args.topology.as_deref(), &real_cores)?;
-    let secret = remote_secret(args)?;
-    let inner = if args.method == MethodArg::Combination { ParallelMethod::Sync } else { ParallelMethod::TwoLevel };
-    let scene_text =
-        std::fs::read_to_string(&args.scene).with_context(|| format!("cannot read {}", args.scene.display()))?;
-    let base = args.scene.parent().unwrap_or(Path::new("."));
-    let files: Vec<FileRef> =
-        scene.mesh_files.iter().map(|(p, h)| FileRef { path: p.clone(), sha256: h.clone() }).collect();
-    let store: FileStore = scene.mesh_files.iter().map(|(p, h)| (h.clone(), base.join(p))).collect();
-    if !(args.snapshot_interval.is_finite() && args.snapshot_interval > 0.0) {
-        bail!("--snapshot-interval must be a positive number of seconds");
+
+    /// The job of the worker with random stream `stream`, on `node`'s cores (a local worker) or on every core
+    /// of its machine.
+    fn job(&self, stream: usize, node: Option<&NumaNode>, interval: Duration) -> Job {
+        Job {
+            scene_name: self.scene_name.clone(),
+            scene_text: self.scene_text.clone(),
+            files: self.files.clone(),
+            scene_hash: self.scene_hash.clone(),
+            settings: self.settings,
+            stream: (self.stream_base + stream) as u64,
+            engine: EngineSpec {
+                cores: node.map(|n| n.cores.clone()),
+                numa_node: node.map(|n| n.index),
+                synthetic_topology: self.synthetic_nodes && node.is_some(),
+                ..self.engine.clone()
+            },
+            snapshot_interval_ms: interval.as_millis() as u64,
+        }
     }
-    if !(args.worker_timeout.is_finite() && args.worker_timeout >= 2.0) {
-        bail!("--worker-timeout must be at least 2 seconds (workers send a heartbeat every second)");
-    }
-    let job = |stream: usize, cores: Option<Vec<usize>>, node: Option<u32>, interval: Duration| Job {
-        scene_name: args.scene.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
-        scene_text: scene_text.clone(),
-        files: files.clone(),
-        scene_hash: scene.hash.clone(),
-        settings,
-        stream: (stream_base + stream) as u64,
-        engine: EngineSpec {
-            method: inner,
-            group_size: args.group_size,
-            tile_size: args.tile_size,
-            phases_per_deal: Some(args.phases_per_deal),
-            cores,
-            numa_node: node,
-            synthetic_topology: machine.synthetic && node.is_some(),
-            radius_sharers: 1,
-            radius_index: 0,
-            phase_offset,
-        },
-        snapshot_interval_ms: interval.as_millis() as u64,
-    };
-    let local_interval = Duration::from_secs_f64(args.snapshot_interval);
-    // Remote workers start at the same interval and lengthen it on slow links (see worker::link).
-    let remote_interval = local_interval;
+}
+
+/// The workers the run starts with, one local one per NUMA node (unless remote only) and the remote ones, with
+/// their jobs.
+fn plan_workers(options: &LaunchOptions, nodes: &NumaNodes, template: &JobTemplate) -> (Vec<Member>, Vec<Job>) {
     let mut members = Vec::new();
     let mut jobs = Vec::new();
-    if !args.remote_only {
-        for node in &machine.nodes {
+    if !options.remote_only {
+        for node in &nodes.nodes {
             let name = format!("node{}", node.index);
-            jobs.push(job(members.len(), Some(node.cores.clone()), Some(node.index), local_interval));
+            jobs.push(template.job(members.len(), Some(node), template.local_interval));
             members.push(Member {
                 planned: Planned::Local { name: name.clone() },
                 name,
@@ -132,101 +246,73 @@ pub fn launch(
             });
         }
     }
-    for w in &args.workers {
-        jobs.push(job(members.len(), None, None, remote_interval));
+    for address in &options.remote_workers {
+        jobs.push(template.job(members.len(), None, template.remote_interval));
         members.push(Member {
-            planned: Planned::Remote { address: w.clone() },
-            name: w.clone(),
+            planned: Planned::Remote { address: address.clone() },
+            name: address.clone(),
             numa_node: None,
             cores: vec![],
         });
     }
-    if members.is_empty() && args.listen.is_none() {
-        bail!("--remote-only needs --worker HOST:PORT or --listen ADDR");
-    }
-    // Every planned worker renders the whole image: the radius schedule counts all their phases.
-    let sharers = jobs.len().max(1) as u32;
+    // Every planned worker renders every pixel: a pixel's radius schedule counts the phases of them all.
+    let processes_per_pixel = jobs.len().max(1) as u32;
     for (i, j) in jobs.iter_mut().enumerate() {
-        j.engine.radius_sharers = sharers;
-        j.engine.radius_index = i as u32;
+        j.engine.processes_per_pixel = processes_per_pixel;
+        j.engine.process_rank = i as u32;
     }
-    let local_secret = Secret::random();
-    let local = if members.iter().any(|m| matches!(m.planned, Planned::Local { .. })) {
-        let l = std::net::TcpListener::bind("127.0.0.1:0").context("cannot open a loopback port for the workers")?;
-        l.set_nonblocking(true)?;
-        Some((l, local_secret.clone()))
-    } else {
-        None
-    };
-    let public = match args.listen {
-        Some(addr) => {
-            let l = std::net::TcpListener::bind(addr).with_context(|| format!("cannot listen on {addr}"))?;
-            l.set_nonblocking(true)?;
-            Some((l, secret.clone()))
-        }
-        None => None,
-    };
+    (members, jobs)
+}
+
+/// A non-blocking listener (the network thread adopts it).
+fn listen(addr: SocketAddr, what: &str) -> Result<TcpListener> {
+    let l = TcpListener::bind(addr).with_context(|| format!("cannot listen on {what}"))?;
+    l.set_nonblocking(true)?;
+    Ok(l)
+}
+
+/// Starts one `worker join` process per local member, dialling the loopback `port`; each logs into
+/// `dir/workers/NAME.log`.
+fn start_local_workers(members: &[Member], port: u16, secret: &Secret, dir: &Path) -> Result<Vec<Child>> {
+    let program = worker_program()?;
+    let logs = dir.join("workers");
+    std::fs::create_dir_all(&logs).with_context(|| format!("cannot create {}", logs.display()))?;
     let mut children = Vec::new();
-    if let Some((listener, _)) = &local {
-        let port = listener.local_addr()?.port();
-        let program = worker_program()?;
-        let logs = dir.join("workers");
-        std::fs::create_dir_all(&logs).with_context(|| format!("cannot create {}", logs.display()))?;
-        for m in members.iter().filter(|m| matches!(m.planned, Planned::Local { .. })) {
-            let log_path = logs.join(format!("{}.log", m.name));
-            let log =
-                std::fs::File::create(&log_path).with_context(|| format!("cannot create {}", log_path.display()))?;
-            let child = Command::new(&program)
-                .args(["join", &format!("127.0.0.1:{port}"), "--name", &m.name])
-                .env(SECRET_ENV, String::from_utf8_lossy(local_secret.expose_for_child()).into_owned())
-                .stdin(Stdio::null())
-                .stdout(Stdio::null())
-                .stderr(log)
-                .spawn()
-                .with_context(|| format!("cannot start {}", program.display()))?;
-            children.push(child);
-        }
+    for m in members.iter().filter(|m| matches!(m.planned, Planned::Local { .. })) {
+        let log_path = logs.join(format!("{}.log", m.name));
+        let log = std::fs::File::create(&log_path).with_context(|| format!("cannot create {}", log_path.display()))?;
+        let child = Command::new(&program)
+            .args(["join", &format!("127.0.0.1:{port}"), "--name", &m.name])
+            .env(SECRET_ENV, String::from_utf8_lossy(secret.expose_for_child()).into_owned())
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(log)
+            .spawn()
+            .with_context(|| format!("cannot start {}", program.display()))?;
+        children.push(child);
     }
-    let layout = format!(
-        "{} worker process{} ({}{}{}), {} inside each",
-        members.len(),
-        if members.len() == 1 { "" } else { "es" },
-        if args.remote_only {
-            "remote only".to_string()
-        } else {
-            format!(
-                "{} NUMA node{} of {}",
-                machine.nodes.len(),
-                if machine.nodes.len() == 1 { "" } else { "s" },
-                machine.source
-            )
-        },
-        if args.workers.is_empty() { String::new() } else { format!(", {} remote", args.workers.len()) },
-        if args.listen.is_some() { ", accepting joins" } else { "" },
-        if inner == ParallelMethod::Sync {
-            "one synchronous group".to_string()
-        } else {
-            format!("two-level with groups of at most {}", args.group_size)
-        },
-    );
-    let mut join_template = job(0, None, None, remote_interval);
-    join_template.engine.synthetic_topology = false;
-    let plan = NetworkPlan {
-        planned: members.iter().map(|m| m.planned.clone()).collect(),
-        jobs,
-        join_template,
-        files: Arc::new(store),
-        local,
-        public,
-        remote_secret: secret,
-        timing: Timing {
-            heartbeat: Duration::from_secs(1),
-            peer_timeout: Duration::from_secs_f64(args.worker_timeout),
-        },
+    Ok(children)
+}
+
+/// The layout in words, e.g. "2 worker processes (2 NUMA nodes of this machine), one synchronous group inside
+/// each".
+fn describe(options: &LaunchOptions, members: &[Member], nodes: &NumaNodes) -> String {
+    let plural = |n: usize, suffix: &'static str| if n == 1 { "" } else { suffix };
+    let origin = if options.remote_only {
+        "remote only".to_string()
+    } else {
+        format!("{} NUMA node{} of {}", nodes.nodes.len(), plural(nodes.nodes.len(), "s"), nodes.source)
     };
-    let initial = resume.map(|r| (r.sums, r.totals));
-    let aux = photonfarm::accumulation::AuxLayout::for_scene(scene, settings.spectral_bands);
-    let cluster =
-        Cluster::start(members, plan, children, scene.camera.width, scene.camera.height, aux, settings, initial)?;
-    Ok((cluster, layout, machine))
+    let remote = options.remote_workers.len();
+    let inside = match options.method.layout().grouping {
+        Grouping::GroupsOfSize => format!("two-level with groups of at most {}", options.group_size),
+        _ => "one synchronous group".to_string(),
+    };
+    format!(
+        "{} worker process{} ({origin}{}{}), {inside} inside each",
+        members.len(),
+        plural(members.len(), "es"),
+        if remote == 0 { String::new() } else { format!(", {remote} remote") },
+        if options.listen.is_some() { ", accepting joins" } else { "" },
+    )
 }

@@ -4,13 +4,13 @@
 
 pub mod launch;
 pub mod network;
-pub mod topology;
+pub mod numa_nodes;
 
 use anyhow::{Context, Result};
 use network::{Control, Event, NetworkPlan, Planned};
 use photonfarm::accumulation::delta::apply_delta;
 use photonfarm::accumulation::{Accumulator, AuxLayout};
-use photonfarm::render::record::WorkerRecord;
+use photonfarm::render::record::{WorkerRecord, WorkerState};
 use photonfarm::render::session::Progressive;
 use photonfarm::render::{RayTotals, RenderSettings};
 use std::process::Child;
@@ -19,26 +19,10 @@ use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 use tokio::sync::mpsc::UnboundedSender;
 
-/// Where a worker is in its life.
-#[derive(Clone, Debug, PartialEq)]
-pub enum WorkerState {
-    Connecting,
-    Running,
-    Finished,
-    Lost(String),
-}
-
-impl WorkerState {
-    fn ended(&self) -> bool {
-        matches!(self, WorkerState::Finished | WorkerState::Lost(_))
-    }
-}
-
-/// The coordinator's view of one worker.
+/// The coordinator's view of one worker: its record (with its state) and the last snapshot merged.
 #[derive(Clone, Debug)]
 pub struct WorkerView {
     pub record: WorkerRecord,
-    pub state: WorkerState,
     last_seq: u64,
 }
 
@@ -115,10 +99,9 @@ impl Cluster {
                     },
                     numa_node: m.numa_node,
                     cores: m.cores,
-                    state: "connecting".into(),
+                    state: WorkerState::Connecting,
                     ..WorkerRecord::default()
                 },
-                state: WorkerState::Connecting,
                 last_seq: 0,
             })
             .collect();
@@ -144,20 +127,14 @@ impl Cluster {
     }
 
     fn set_state(&mut self, w: usize, state: WorkerState) {
-        let v = &mut self.workers[w];
-        if v.state.ended() {
+        let r = &mut self.workers[w].record;
+        if r.state.ended() {
             return;
         }
-        v.record.state = match &state {
-            WorkerState::Connecting => "connecting".into(),
-            WorkerState::Running => "running".into(),
-            WorkerState::Finished => "finished".into(),
-            WorkerState::Lost(r) => format!("lost: {r}"),
-        };
-        if let WorkerState::Lost(r) = &state {
-            eprintln!("coordinator: worker {} lost ({r}); the run goes on with the others", v.record.name);
+        if let WorkerState::Lost(why) = &state {
+            eprintln!("coordinator: worker {} lost ({why}); the run goes on with the others", r.name);
         }
-        v.state = state;
+        r.state = state;
     }
 
     /// Handles one event; true when a snapshot was merged.
@@ -165,11 +142,7 @@ impl Cluster {
         match event {
             Event::Joined { worker, name, address } => {
                 while self.workers.len() <= worker {
-                    self.workers.push(WorkerView {
-                        record: WorkerRecord { state: "connecting".into(), ..WorkerRecord::default() },
-                        state: WorkerState::Connecting,
-                        last_seq: 0,
-                    });
+                    self.workers.push(WorkerView { record: WorkerRecord::default(), last_seq: 0 });
                 }
                 self.workers[worker].record.name = name;
                 self.workers[worker].record.address = address;
@@ -192,7 +165,7 @@ impl Cluster {
             }
             Event::Snapshot { worker, snapshot, frame_bytes } => {
                 let v = &mut self.workers[worker];
-                if v.state.ended() {
+                if v.record.state.ended() {
                     return false;
                 }
                 if snapshot.seq != v.last_seq + 1 {
@@ -229,7 +202,7 @@ impl Cluster {
     }
 
     fn all_ended(&self) -> bool {
-        self.workers.iter().all(|w| w.state.ended())
+        self.workers.iter().all(|w| w.record.state.ended())
     }
 
     /// Stops every worker and merges their last snapshots (waiting up to `limit`): after this the image is
@@ -248,7 +221,7 @@ impl Cluster {
             }
         }
         for w in 0..self.workers.len() {
-            if !self.workers[w].state.ended() {
+            if !self.workers[w].record.state.ended() {
                 self.set_state(w, WorkerState::Lost(format!("did not finish within {limit:?} of the stop")));
             }
         }

@@ -92,8 +92,13 @@ pub struct PhaseBuffers {
     camera: Vec<LayerValues>,
     /// The camera pass's auxiliary values, channels per local pixel (empty without auxiliary layers).
     aux_camera: Vec<f32>,
-    /// The camera pass's photons, one list per `PIXEL_CHUNK` local pixels, in pixel order.
+    /// The camera pass's photons, one list per `chunk` local pixels, in pixel order.
     photon_lists: Vec<Vec<BackwardPhoton>>,
+    /// Local pixels per unit of work: `PIXEL_CHUNK`, or every pixel on the calling thread, whose one list then
+    /// becomes the map's photons without a copy (and takes the map's buffer back for the next phase), so that
+    /// the single-threaded engine holds its photons once.
+    chunk: usize,
+    single_list: bool,
 }
 
 /// One chunk's auxiliary values, or None for every chunk when there are no auxiliary channels, so that an image
@@ -102,23 +107,26 @@ fn aux_chunks<T: Send>(
     buffer: &mut [T],
     channels: usize,
     pixels: usize,
+    chunk: usize,
 ) -> impl IndexedParallelIterator<Item = Option<&mut [T]>> {
     if channels == 0 {
-        Either::Right((0..pixels.div_ceil(PIXEL_CHUNK)).into_par_iter().map(|_| None))
+        Either::Right((0..pixels.div_ceil(chunk)).into_par_iter().map(|_| None))
     } else {
-        Either::Left(buffer.par_chunks_mut(PIXEL_CHUNK * channels).map(Some))
+        Either::Left(buffer.par_chunks_mut(chunk * channels).map(Some))
     }
 }
 
 impl PhaseBuffers {
-    /// Empty buffers for an image with the auxiliary layers of `aux`.
-    pub fn new(aux: AuxLayout) -> Self {
+    /// Empty buffers for an image with the auxiliary layers of `aux`, for stages that `exec` runs.
+    pub fn new(aux: AuxLayout, exec: Executor) -> Self {
         PhaseBuffers {
             ghost: aux.offset(crate::ghost::GHOST_LAYER),
             aux,
             camera: Vec::new(),
             aux_camera: Vec::new(),
             photon_lists: Vec::new(),
+            chunk: PIXEL_CHUNK,
+            single_list: exec == Executor::CallingThread,
         }
     }
 
@@ -133,12 +141,8 @@ impl PhaseBuffers {
         self.camera.resize(pixels, [Rgb::ZERO; 4]);
         self.aux_camera.clear();
         self.aux_camera.resize(pixels * self.aux.channels(), 0.0);
-        self.photon_lists.resize_with(pixels.div_ceil(PIXEL_CHUNK), Vec::new);
-    }
-
-    /// Photons the last camera pass stored.
-    pub fn photons(&self) -> u64 {
-        self.photon_lists.iter().map(|l| l.len() as u64).sum()
+        self.chunk = if self.single_list { pixels.max(1) } else { PIXEL_CHUNK };
+        self.photon_lists.resize_with(pixels.div_ceil(self.chunk), Vec::new);
     }
 
     /// Bytes held.
@@ -149,23 +153,29 @@ impl PhaseBuffers {
     }
 
     /// Stage 1: one camera path per local pixel; `pixels[i]` is local pixel i's image pixel, and `next_phase(i)`
-    /// its phase number j for the radius schedule. Returns the rays traced.
+    /// its phase number j for the radius schedule. `map` is the previous phase's, whose photon buffer a single
+    /// list takes back. Returns the rays traced and the photons stored.
     pub fn camera_pass(
         &mut self,
         exec: Executor,
         phase: &Phase,
         pixels: &[u32],
         next_phase: impl Fn(usize) -> u64 + Sync,
-    ) -> u64 {
+        map: &mut PhotonMap,
+    ) -> BackwardStats {
         assert_eq!(pixels.len(), self.camera.len(), "camera pass over pixels the buffers were not sized for");
+        if let ([list], true) = (&mut self.photon_lists[..], self.single_list) {
+            *list = map.take_photons();
+        }
+        let chunk_len = self.chunk;
         let cam = &phase.scene.camera;
         let (channels, ghost_offset) = (self.aux.channels(), self.ghost);
         let bdd = phase.backward_diffuse_depth;
         let chunks = pixels
-            .par_chunks(PIXEL_CHUNK)
-            .zip(self.camera.par_chunks_mut(PIXEL_CHUNK))
+            .par_chunks(chunk_len)
+            .zip(self.camera.par_chunks_mut(chunk_len))
             .zip(self.photon_lists.par_iter_mut())
-            .zip(aux_chunks(&mut self.aux_camera, channels, pixels.len()))
+            .zip(aux_chunks(&mut self.aux_camera, channels, pixels.len(), chunk_len))
             .enumerate();
         exec.run(chunks)
             .map(|(chunk, (((pixels, values), photons), mut aux))| {
@@ -175,7 +185,7 @@ impl PhaseBuffers {
                 photons.reserve_exact(pixels.len() * bdd as usize);
                 let mut stats = BackwardStats::default();
                 for (i, (&pixel, out)) in pixels.iter().zip(values.iter_mut()).enumerate() {
-                    let local = chunk * PIXEL_CHUNK + i;
+                    let local = chunk * chunk_len + i;
                     let bs = BackwardSettings {
                         max_depth: phase.max_depth,
                         backward_diffuse_depth: bdd,
@@ -195,14 +205,20 @@ impl PhaseBuffers {
                         start_aux(&mut aux[i * channels..(i + 1) * channels], ghost_offset, ghost);
                     }
                 }
-                stats.rays
+                stats
             })
-            .sum()
+            .reduce(BackwardStats::default, |a, b| BackwardStats {
+                rays: a.rays + b.rays,
+                photons: a.photons + b.photons,
+            })
     }
 
     /// Stage 2: the photon map of the camera pass's photons, in pixel order.
-    pub fn build_map(&self, exec: Executor, map: &mut PhotonMap) {
-        map.build_from_lists(&self.photon_lists, exec);
+    pub fn build_map(&mut self, exec: Executor, map: &mut PhotonMap) {
+        match (&mut self.photon_lists[..], self.single_list) {
+            ([list], true) => map.build_from(std::mem::take(list), exec),
+            (lists, _) => map.build_from_lists(lists, exec),
+        }
     }
 
     /// Stage 4: closes the phase at every local pixel into `sums` and `aux_sums`, with the gathered light divided
@@ -221,17 +237,18 @@ impl PhaseBuffers {
         let stride = gathered.stride();
         let closing = Closing { inv_n: 1.0 / light_paths.max(1) as f32, bands: self.aux.bands() };
         let channels = self.aux.channels();
+        let chunk_len = self.chunk;
         let chunks = self
             .camera
-            .par_chunks(PIXEL_CHUNK)
-            .zip(sums.par_chunks_mut(PIXEL_CHUNK))
-            .zip(gathered.values_mut().par_chunks_mut(PIXEL_CHUNK * stride))
-            .zip(aux_chunks(&mut self.aux_camera, channels, pixels))
-            .zip(aux_chunks(aux_sums.values_mut(), channels, pixels))
+            .par_chunks(chunk_len)
+            .zip(sums.par_chunks_mut(chunk_len))
+            .zip(gathered.values_mut().par_chunks_mut(chunk_len * stride))
+            .zip(aux_chunks(&mut self.aux_camera, channels, pixels, chunk_len))
+            .zip(aux_chunks(aux_sums.values_mut(), channels, pixels, chunk_len))
             .enumerate();
         exec.run(chunks).for_each(|(chunk, ((((camera, sums), gathered), mut aux), mut aux_sums))| {
             for (i, (value, sums)) in camera.iter().zip(sums).enumerate() {
-                let local = chunk * PIXEL_CHUNK + i;
+                let local = chunk * chunk_len + i;
                 let aux =
                     aux.as_deref_mut().map(|a| (&mut a[i * channels..(i + 1) * channels], phase.wavelength_of(local)));
                 let aux_sums = aux_sums.as_deref_mut().map(|s| &mut s[i * channels..(i + 1) * channels]);

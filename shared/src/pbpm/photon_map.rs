@@ -113,6 +113,20 @@ impl PhotonMap {
         self.build_with(exec.threads());
     }
 
+    /// Takes `photons` as the map's own and builds the grid over them with `exec`'s threads.
+    pub fn build_from(&mut self, photons: Vec<BackwardPhoton>, exec: Executor) {
+        self.photons = photons;
+        self.build_with(exec.threads());
+    }
+
+    /// Hands the photon buffer over, emptied but with its room, for the next phase's camera pass to fill.
+    pub fn take_photons(&mut self) -> Vec<BackwardPhoton> {
+        self.built = false;
+        let mut photons = std::mem::take(&mut self.photons);
+        photons.clear();
+        photons
+    }
+
     fn copy_lists(&mut self, lists: &[Vec<BackwardPhoton>], exec: Executor) {
         self.built = false;
         let total = lists.iter().map(Vec::len).sum();

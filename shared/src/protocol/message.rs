@@ -2,7 +2,8 @@
 //! change of codec touches one file).
 
 use super::error::ProtocolError;
-use crate::render::settings::{ParallelMethod, RenderSettings};
+use crate::render::method::ParallelMethod;
+use crate::render::settings::RenderSettings;
 use crate::render::totals::RayTotals;
 use serde::{Deserialize, Serialize};
 
@@ -42,10 +43,10 @@ pub struct EngineSpec {
     pub synthetic_topology: bool,
     /// Worker processes rendering the image, and this one's index: the radius schedule of a pixel counts
     /// every process's phases (DESIGN §1), assuming they progress alike.
-    pub radius_sharers: u32,
-    pub radius_index: u32,
+    pub processes_per_pixel: u32,
+    pub process_rank: u32,
     /// Phases the image already has from earlier sessions (a resumed run), added to the radius schedule's j.
-    pub phase_offset: u32,
+    pub resumed_phases: u32,
 }
 
 /// What a worker renders.

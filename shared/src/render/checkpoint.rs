@@ -1,6 +1,7 @@
 //! Checkpoints: the merged sums of a run with what is needed to continue it (`coordinator render --resume`),
 //! written atomically beside the image so that a crash loses at most the phases since the last one.
 
+use super::method::Method;
 use super::record::HistoryEntry;
 use super::settings::RenderSettings;
 use super::totals::RayTotals;
@@ -20,7 +21,7 @@ pub struct Checkpoint {
     pub scene_hash: String,
     pub width: u32,
     pub height: u32,
-    pub method: String,
+    pub method: Method,
     pub settings: RenderSettings,
     /// Sessions of this run so far (the first run is session 1); a resumed run draws from new streams.
     pub session: u32,
@@ -51,7 +52,7 @@ impl Checkpoint {
     pub fn new(
         sums: &Accumulator,
         scene_hash: &str,
-        method: &str,
+        method: Method,
         settings: RenderSettings,
         session: u32,
         elapsed_s: f64,
@@ -64,7 +65,7 @@ impl Checkpoint {
             scene_hash: scene_hash.into(),
             width: sums.width,
             height: sums.height,
-            method: method.into(),
+            method,
             settings,
             session,
             elapsed_s,
@@ -113,7 +114,7 @@ impl Checkpoint {
 mod tests {
     use super::*;
     use crate::color::Rgb;
-    use crate::render::Method;
+    use crate::render::Estimator;
 
     #[test]
     fn a_checkpoint_gives_back_its_sums_and_auxiliary_layers_exactly() {
@@ -124,7 +125,7 @@ mod tests {
             a.aux.add_phase(i, &[0.01 * i as f32, 0.5, 0.25]);
         }
         let settings = RenderSettings {
-            method: Method::Pbpm,
+            estimator: Estimator::Pbpm,
             seed: 1,
             max_depth: 8,
             backward_diffuse_depth: 2,
@@ -144,7 +145,7 @@ mod tests {
                 ..HistoryEntry::default()
             },
         ];
-        let c = Checkpoint::new(&a, "abc", "three-level", settings, 1, 2.5, RayTotals::default(), &history);
+        let c = Checkpoint::new(&a, "abc", Method::ThreeLevel, settings, 1, 2.5, RayTotals::default(), &history);
         let dir = std::env::temp_dir().join(format!("pf-checkpoint-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("checkpoint.bin");

@@ -1,6 +1,7 @@
 //! The single-threaded progressive engine: the reference every parallel method must agree with.
 
-use super::settings::{Method, RenderSettings};
+use super::method::Estimator;
+use super::settings::RenderSettings;
 use super::totals::{PhaseReport, RayTotals};
 use crate::accumulation::{Accumulator, AuxLayout};
 use crate::integrator::path_tracer;
@@ -29,17 +30,20 @@ impl<'s> Engine<'s> {
     pub fn new(scene: &'s Scene, settings: RenderSettings) -> Self {
         let pixels = scene.camera.pixel_count();
         let aux = AuxLayout::for_scene(scene, settings.spectral_bands);
-        let mut buffers = PhaseBuffers::new(aux.clone());
+        let mut buffers = PhaseBuffers::new(aux.clone(), Executor::CallingThread);
         buffers.resize(pixels);
         let mut gathered = GatherBuffer::default();
         gathered.reset(pixels, &aux);
+        // At most one photon per diffuse vertex of each camera path: room made once, so memory stays flat.
+        let mut map = PhotonMap::new();
+        map.reserve(pixels * settings.backward_diffuse_depth as usize);
         Engine {
             scene,
             settings,
             sums: Accumulator::with_aux(scene.camera.width, scene.camera.height, aux),
             pixels: (0..pixels as u32).collect(),
             buffers,
-            map: PhotonMap::new(),
+            map,
             gathered,
             totals: RayTotals::default(),
         }
@@ -74,9 +78,9 @@ impl<'s> Engine<'s> {
 
     /// Renders one more phase and closes it into the sums.
     pub fn run_phase(&mut self) -> PhaseReport {
-        let report = match self.settings.method {
-            Method::Pbpm => self.pbpm_phase(),
-            Method::Path => self.path_phase(),
+        let report = match self.settings.estimator {
+            Estimator::Pbpm => self.pbpm_phase(),
+            Estimator::Path => self.path_phase(),
         };
         self.totals.phases += 1;
         self.totals.backward_rays += report.backward_rays;
@@ -126,16 +130,16 @@ impl<'s> Engine<'s> {
         let exec = Executor::CallingThread;
         let phase = self.settings.phase(self.scene, number);
         // Every pixel has had the same phases: j is the engine's phase count plus one.
-        let backward_rays = self.buffers.camera_pass(exec, &phase, &self.pixels, |_| number);
+        let backward = self.buffers.camera_pass(exec, &phase, &self.pixels, |_| number, &mut self.map);
         self.buffers.build_map(exec, &mut self.map);
         let n = self.settings.light_paths_per_phase(self.pixels.len());
         let forward = phase.forward_pass(0..n, &self.map, &mut self.gathered);
         self.buffers.close(exec, &phase, &mut self.gathered, n, &mut self.sums.pixels, &mut self.sums.aux);
-        self.totals.backward_photons += self.buffers.photons();
+        self.totals.backward_photons += backward.photons;
         self.totals.capped_light_paths += forward.capped;
         PhaseReport {
             phase: number,
-            backward_rays,
+            backward_rays: backward.rays,
             forward_rays: forward.rays,
             light_paths: forward.light_paths,
             merges: forward.merges,

@@ -5,11 +5,13 @@ pub mod checkpoint;
 pub mod engine;
 pub mod images;
 pub mod memory;
+pub mod method;
 pub mod record;
 pub mod session;
 pub mod settings;
 pub mod totals;
 
 pub use engine::Engine;
-pub use settings::{Method, ParallelMethod, RenderSettings};
+pub use method::{Estimator, Layout, Method, ParallelMethod};
+pub use settings::RenderSettings;
 pub use totals::{PhaseReport, RayTotals};

@@ -1,10 +1,13 @@
 //! The JSON record of a run: enough to reproduce it (scene hash, settings, seed) and to chart its speed against
 //! its accuracy (rays and δ after every phase).
 
+use super::method::Method;
 use super::settings::RenderSettings;
 use super::totals::RayTotals;
 use crate::accumulation::ErrorEstimate;
-use serde::{Deserialize, Serialize};
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
+use std::fmt;
+use std::str::FromStr;
 
 /// δ and ray counts after one step (a phase, a round, or a merged snapshot), and the true error when the run
 /// has a reference: the points of the error-against-time charts.
@@ -70,8 +73,7 @@ pub struct WorkerRecord {
     /// The pinning the worker obtained, in its words.
     pub binding: String,
     pub layout: String,
-    /// "connecting", "running", "finished", "lost: …" or "failed: …".
-    pub state: String,
+    pub state: WorkerState,
     /// Snapshots merged, and the bytes of their frames.
     pub snapshots: u64,
     pub snapshot_bytes: u64,
@@ -95,6 +97,70 @@ pub struct WorkerRecord {
     pub non_finite_dropped: u64,
 }
 
+/// Where a worker of a distributed run is in its life: "connecting", "running", "finished" or "lost: why" in
+/// the record.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub enum WorkerState {
+    #[default]
+    Connecting,
+    Running,
+    Finished,
+    /// Dropped from the run (its link broke, it failed, hung or sent a bad snapshot): why, in words.
+    Lost(String),
+}
+
+impl WorkerState {
+    /// The worker will send nothing more: it finished or was lost.
+    pub fn ended(&self) -> bool {
+        matches!(self, WorkerState::Finished | WorkerState::Lost(_))
+    }
+}
+
+impl fmt::Display for WorkerState {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            WorkerState::Connecting => f.write_str("connecting"),
+            WorkerState::Running => f.write_str("running"),
+            WorkerState::Finished => f.write_str("finished"),
+            WorkerState::Lost(why) => write!(f, "lost: {why}"),
+        }
+    }
+}
+
+/// Text that is not a worker state.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("'{0}' is not a worker state (connecting, running, finished or lost: why)")]
+pub struct UnknownWorkerState(pub String);
+
+impl FromStr for WorkerState {
+    type Err = UnknownWorkerState;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "connecting" => Ok(WorkerState::Connecting),
+            "running" => Ok(WorkerState::Running),
+            "finished" => Ok(WorkerState::Finished),
+            _ => match s.strip_prefix("lost: ") {
+                Some(why) => Ok(WorkerState::Lost(why.to_string())),
+                None => Err(UnknownWorkerState(s.to_string())),
+            },
+        }
+    }
+}
+
+// The record keeps the state as one string, the reason of a lost worker included.
+impl Serialize for WorkerState {
+    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.collect_str(self)
+    }
+}
+
+impl<'de> Deserialize<'de> for WorkerState {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        String::deserialize(deserializer)?.parse().map_err(serde::de::Error::custom)
+    }
+}
+
 fn first_session() -> u32 {
     1
 }
@@ -107,8 +173,8 @@ pub struct RunRecord {
     pub scene_hash: String,
     pub width: u32,
     pub height: u32,
-    /// The method as the user named it (pbpm, path, sync, async, two-level).
-    pub method: String,
+    /// The method the user asked for.
+    pub method: Method,
     /// How the threads were laid out, e.g. "2 groups × 1 thread, tile masks, shared maps".
     pub layout: String,
     /// Threads whose pinning to a core the OS accepted.
@@ -162,9 +228,42 @@ pub fn flags_of(totals: &RayTotals, non_finite_dropped: u64, workers: Option<&[W
         ));
     }
     for w in workers.unwrap_or_default() {
-        if w.state.starts_with("lost") || w.state.starts_with("failed") {
+        if let WorkerState::Lost(_) = w.state {
             flags.push(format!("worker {} {}; its merged phases stay in the image", w.name, w.state));
         }
     }
     flags
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn worker_states_are_the_words_of_the_record() {
+        let states = [
+            (WorkerState::Connecting, "connecting"),
+            (WorkerState::Running, "running"),
+            (WorkerState::Finished, "finished"),
+            (WorkerState::Lost("presumed hung".into()), "lost: presumed hung"),
+        ];
+        for (state, text) in states {
+            assert_eq!(serde_json::to_value(&state).unwrap(), serde_json::Value::String(text.into()));
+            assert_eq!(serde_json::from_value::<WorkerState>(text.into()).unwrap(), state);
+            assert_eq!(state.ended(), matches!(state, WorkerState::Finished | WorkerState::Lost(_)));
+        }
+        assert!("stopped".parse::<WorkerState>().is_err());
+    }
+
+    #[test]
+    fn a_lost_worker_is_flagged_with_why() {
+        let lost = WorkerRecord {
+            name: "node1".into(),
+            state: WorkerState::Lost("its link broke".into()),
+            ..WorkerRecord::default()
+        };
+        let finished = WorkerRecord { name: "node0".into(), state: WorkerState::Finished, ..WorkerRecord::default() };
+        let flags = flags_of(&RayTotals::default(), 0, Some(&[finished, lost]));
+        assert_eq!(flags, ["worker node1 lost: its link broke; its merged phases stay in the image"]);
+    }
 }

@@ -1,35 +1,18 @@
 //! Settings of one rendering run.
 
+use super::method::{Estimator, Method};
 use crate::pbpm::{Phase, RadiusSchedule};
 use crate::sampling::{Pass, Sampler};
 use crate::scene::{Scene, SceneRenderSettings};
 use crate::spectrum::PhaseSpectrum;
 use serde::{Deserialize, Serialize};
 
-/// The estimator a run uses.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Method {
-    /// Progressive backward photon mapping, single thread.
-    Pbpm,
-    /// The reference path tracer (one sample per pixel per phase).
-    Path,
-}
-
-impl Method {
-    /// The name used on the command line and in records.
-    pub fn name(self) -> &'static str {
-        match self {
-            Method::Pbpm => "pbpm",
-            Method::Path => "path",
-        }
-    }
-}
-
 /// Everything that, with the scene, determines a run's result.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RenderSettings {
-    pub method: Method,
+    /// Named "method" in records and jobs: it is the method's estimator.
+    #[serde(rename = "method")]
+    pub estimator: Estimator,
     /// Job seed: with the phase and the pixel or light-path index it seeds every random stream.
     pub seed: u64,
     pub max_depth: u32,
@@ -46,12 +29,12 @@ pub struct RenderSettings {
 }
 
 impl RenderSettings {
-    /// The scene's own settings with the given method and seed.
+    /// The scene's own settings for a run of `method` (its estimator) with the given seed.
     pub fn for_scene(scene: &Scene, method: Method, seed: u64) -> Self {
         let SceneRenderSettings { max_depth, backward_diffuse_depth, radius_scale, light_paths_per_pixel } =
             scene.render;
         RenderSettings {
-            method,
+            estimator: method.estimator(),
             seed,
             max_depth,
             backward_diffuse_depth,
@@ -97,28 +80,5 @@ impl RenderSettings {
     /// Light paths traced per phase for an image of `pixels` pixels.
     pub fn light_paths_per_phase(&self, pixels: usize) -> u64 {
         ((self.light_paths_per_pixel as f64 * pixels as f64).round() as u64).max(1)
-    }
-}
-
-/// The parallel methods of DESIGN §2 that run inside one process.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum ParallelMethod {
-    /// One group of n threads over the whole image.
-    Sync,
-    /// n groups of one thread, each over the whole image with a private map and image.
-    Async,
-    /// n/g groups of g threads over random tile masks, sharing their maps.
-    TwoLevel,
-}
-
-impl ParallelMethod {
-    /// The name used on the command line and in records.
-    pub fn name(self) -> &'static str {
-        match self {
-            ParallelMethod::Sync => "sync",
-            ParallelMethod::Async => "async",
-            ParallelMethod::TwoLevel => "two-level",
-        }
     }
 }

@@ -35,10 +35,10 @@ pub struct EngineConfig {
     /// Cores to pin to; thread t of group k runs on `cores[(k · g + t) mod len]`.
     pub cores: Vec<usize>,
     /// Worker processes rendering the same image, and this one's index (for the radius schedule).
-    pub process_sharers: u32,
-    pub process_index: u32,
+    pub processes_per_pixel: u32,
+    pub process_rank: u32,
     /// Phases every pixel had before this run (a resumed run), for the radius schedule.
-    pub phase_offset: u32,
+    pub resumed_phases: u32,
 }
 
 /// Why an engine configuration cannot run.
@@ -51,51 +51,31 @@ pub enum ConfigError {
 }
 
 impl EngineConfig {
-    /// The configuration of `method` on `threads` threads, `group_size` threads per group for two-level (or the
-    /// largest of group_size, 2 and 1 that divides the thread count into at least two groups, so that every
-    /// core is used and the groups share their maps).
+    /// The configuration of `method` on `threads` threads: its row of the methods' table
+    /// ([`photonfarm::render::method`]), with `group_size` the most threads per group for two-level.
     pub fn for_method(
         method: ParallelMethod,
         threads: usize,
         group_size: usize,
         cores: Vec<usize>,
     ) -> Result<Self, ConfigError> {
-        if threads == 0 {
-            return Err(ConfigError::Invalid("at least one thread is needed".into()));
-        }
         if cores.is_empty() {
             return Err(ConfigError::Invalid("the core list is empty".into()));
         }
-        let (groups, per_group, masks, shared) = match method {
-            ParallelMethod::Sync => (1, threads, false, false),
-            ParallelMethod::Async => (threads, 1, false, false),
-            ParallelMethod::TwoLevel => {
-                if ![1, 2, 4].contains(&group_size) {
-                    return Err(ConfigError::Invalid(format!("the group size must be 1, 2 or 4, got {group_size}")));
-                }
-                // Groups must be equal: fall back to the largest of g, 2, 1 that divides the thread count. And
-                // two threads or more make at least two groups: one group is `sync` with masks, without the
-                // semi-synchronous level whose shared maps let one light path serve several groups' phases.
-                let g = [group_size, 2, 1]
-                    .into_iter()
-                    .filter(|&g| g <= group_size && threads.is_multiple_of(g) && (threads == 1 || threads / g >= 2))
-                    .max()
-                    .unwrap_or(1);
-                (threads / g, g, true, true)
-            }
-        };
+        let layout = photonfarm::render::Method::from(method).layout();
+        let groups = layout.grouping.split(threads, group_size).map_err(|e| ConfigError::Invalid(e.to_string()))?;
         Ok(EngineConfig {
             method,
-            groups,
-            threads_per_group: per_group,
-            masks,
-            shared_maps: shared,
-            tile_size: if groups > 16 { 64 } else { 32 },
+            groups: groups.groups,
+            threads_per_group: groups.threads_per_group,
+            masks: layout.masks,
+            shared_maps: layout.shared_maps,
+            tile_size: if groups.groups > 16 { 64 } else { 32 },
             phases_per_deal: 6,
             cores,
-            process_sharers: 1,
-            process_index: 0,
-            phase_offset: 0,
+            processes_per_pixel: 1,
+            process_rank: 0,
+            resumed_phases: 0,
         })
     }
 
@@ -254,9 +234,9 @@ impl<'s> ParallelEngine<'s> {
             stop: &stop,
             deal: self.deals,
             numbering: PhaseNumbering {
-                processes: self.config.process_sharers.max(1) as u64,
-                process: self.config.process_index as u64,
-                resumed: self.config.phase_offset as u64,
+                processes: self.config.processes_per_pixel.max(1) as u64,
+                process: self.config.process_rank as u64,
+                resumed: self.config.resumed_phases as u64,
                 ..PhaseNumbering::ALONE
             },
         };
@@ -395,5 +375,18 @@ mod tests {
         assert_eq!((one.groups, one.threads_per_group), (1, 1));
         assert!(EngineConfig::for_method(ParallelMethod::TwoLevel, 4, 3, vec![0]).is_err());
         assert!(EngineConfig::for_method(ParallelMethod::Sync, 0, 1, vec![0]).is_err());
+        // Every configuration is its method's row of the table.
+        for m in [ParallelMethod::Sync, ParallelMethod::Async, ParallelMethod::TwoLevel] {
+            let row = photonfarm::render::Method::from(m).layout();
+            for (t, g) in [(1, 2), (2, 2), (3, 2), (4, 2), (4, 4), (6, 2), (6, 4), (8, 1), (8, 2), (8, 4)] {
+                let config = c(m, t, g);
+                let groups = row.grouping.split(t, g).unwrap();
+                assert_eq!(
+                    (config.groups, config.threads_per_group, config.masks, config.shared_maps),
+                    (groups.groups, groups.threads_per_group, row.masks, row.shared_maps),
+                    "{m:?} on {t} threads, group size {g}"
+                );
+            }
+        }
     }
 }

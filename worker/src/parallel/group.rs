@@ -173,7 +173,7 @@ pub struct Group {
     phases_this_deal: u64,
     /// Groups that render the same pixels in a deal (all of them without masks): the radius schedule counts
     /// their phases too, so that j tracks the pixel's total phase count as in a single-threaded run.
-    pixel_sharers: u32,
+    groups_per_pixel: u32,
     pub stats: GroupStats,
 }
 
@@ -203,12 +203,12 @@ impl Group {
             token,
             mask: Vec::new(),
             phases_before: Vec::new(),
-            buffers: PhaseBuffers::new(aux.clone()),
+            buffers: PhaseBuffers::new(aux.clone(), Executor::CurrentPool),
             gathered: GatherBuffer::default(),
             sums: Vec::new(),
             aux_sums: AuxSums::new(aux, 0),
             phases_this_deal: 0,
-            pixel_sharers: 1,
+            groups_per_pixel: 1,
             stats: GroupStats::default(),
         })
     }
@@ -247,8 +247,8 @@ impl Group {
     }
 
     /// Takes a new mask for the next deal; `phases_before[i]` is how many phases mask pixel i already had.
-    pub fn start_deal(&mut self, mask: Vec<u32>, phases_before: Vec<u32>, pixel_sharers: u32) {
-        self.pixel_sharers = pixel_sharers.max(1);
+    pub fn start_deal(&mut self, mask: Vec<u32>, phases_before: Vec<u32>, groups_per_pixel: u32) {
+        self.groups_per_pixel = groups_per_pixel.max(1);
         self.buffers.resize(mask.len());
         self.gathered.reset(mask.len(), self.buffers.aux());
         self.sums.clear();
@@ -291,17 +291,19 @@ impl Group {
         let exec = Executor::CurrentPool;
         // Wavelengths per group phase: its camera and light paths join only among themselves.
         let phase = ctx.settings.phase(ctx.scene, self.phase_key(ctx.deal));
-        let sharers = self.pixel_sharers as u64;
+        let sharers = self.groups_per_pixel as u64;
         let numbering =
             PhaseNumbering { groups: sharers, group: if sharers > 1 { self.index as u64 } else { 0 }, ..ctx.numbering };
 
         // 1. Camera pass over the mask.
         let t0 = Instant::now();
+        let slot = &ctx.slots[self.index];
         let (phases_before, sums) = (&self.phases_before, &self.sums);
-        self.stats.backward_rays += self.buffers.camera_pass(exec, &phase, &self.mask, |local| {
-            numbering.next_phase(phases_before[local] as u64, sums[local].phases as u64)
-        });
-        self.stats.backward_photons += self.buffers.photons();
+        let next_phase = |local: usize| numbering.next_phase(phases_before[local] as u64, sums[local].phases as u64);
+        let map = &mut slot.data_mut(&mut self.token).photons;
+        let backward = self.buffers.camera_pass(exec, &phase, &self.mask, next_phase, map);
+        self.stats.backward_rays += backward.rays;
+        self.stats.backward_photons += backward.photons;
         self.stats.nanos.backward += nanos_since(t0);
 
         // 2. Build the map while it is closed. The phase's quota counts every light path traced against the map,
@@ -310,7 +312,6 @@ impl Group {
         // same light per pixel.
         let required = ctx.settings.light_paths_per_phase(self.mask.len());
         let t0 = Instant::now();
-        let slot = &ctx.slots[self.index];
         // One thread adds its own paths' light without atomics; several share the map's atomic buffer.
         let one_thread = rayon::current_num_threads() == 1;
         let uses_shared = ctx.shared_maps || !one_thread;

@@ -19,9 +19,9 @@ pub struct NumaNode {
     pub cores: Vec<usize>,
 }
 
-/// The nodes a coordinator starts workers on.
+/// The nodes a coordinator starts workers on, and where their description came from.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize)]
-pub struct MachineTopology {
+pub struct NumaNodes {
     pub nodes: Vec<NumaNode>,
     /// "this machine", "synthetic: …" or "xml: …".
     pub source: String,
@@ -29,9 +29,9 @@ pub struct MachineTopology {
     pub synthetic: bool,
 }
 
-/// Reads the topology: this machine's, or `spec`, an hwloc synthetic description (e.g.
+/// Finds the NUMA nodes of a topology: this machine's, or `spec`, an hwloc synthetic description (e.g.
 /// `"pack:1 numa:2 core:1 pu:1"`) or the path of an hwloc XML file.
-pub fn detect(spec: Option<&str>, real_cores: &[usize]) -> Result<MachineTopology> {
+pub fn detect(spec: Option<&str>, real_cores: &[usize]) -> Result<NumaNodes> {
     if real_cores.is_empty() {
         bail!("no usable core on this machine");
     }
@@ -79,7 +79,7 @@ pub fn detect(spec: Option<&str>, real_cores: &[usize]) -> Result<MachineTopolog
         // Machines without NUMA information: one node with every core.
         nodes.push(NumaNode { index: 0, topology_cores: real_cores.to_vec(), cores: real_cores.to_vec() });
     }
-    Ok(MachineTopology { nodes, source, synthetic })
+    Ok(NumaNodes { nodes, source, synthetic })
 }
 
 #[cfg(test)]
