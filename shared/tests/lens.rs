@@ -350,8 +350,13 @@ fn phase_image_sums(scene: &Scene, method: Method, seed: u64, phases: usize) -> 
 /// Asserts that PBPM and the path tracer agree on the mean image ghost sum per phase within four combined
 /// standard errors, and returns (PBPM, path) as (mean, SEM) pairs.
 fn assert_methods_agree_on_the_ghost(scene: &Scene, phases: usize, what: &str) -> [(f64, f64); 2] {
-    let [pbpm, path] = [Method::Pbpm, Method::Path].map(|m| {
-        let (ghost, total) = phase_image_sums(scene, m, 11, phases);
+    // The two methods' renders are independent single-threaded engines: run side by side.
+    let renders = std::thread::scope(|s| {
+        [Method::Pbpm, Method::Path]
+            .map(|m| s.spawn(move || (m, phase_image_sums(scene, m, 11, phases))))
+            .map(|h| h.join().unwrap())
+    });
+    let [pbpm, path] = renders.map(|(m, (ghost, total))| {
         let (g, t) = (common::mean_sem(&ghost), common::mean_sem(&total));
         println!(
             "{what}, {m:?}, {phases} phases: ghost {:.4e} ± {:.2e} per phase, {:.2} % of the total {:.4e}",
