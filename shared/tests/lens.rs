@@ -233,8 +233,7 @@ fn on_axis_point_at_the_focus_distance_images_to_a_spot_below_one_pixel_rms() {
 
 /// Mean luminance of the visible-lights layer (E S* L: the light seen through the lens surfaces, directly or
 /// after reflections between them) per pixel.
-fn visible_lights(engine: &Engine) -> Vec<f64> {
-    let sums = engine.sums();
+fn visible_lights(sums: &Accumulator) -> Vec<f64> {
     (0..sums.pixels.len()).map(|p| photonfarm::color::luminance_f64(sums.mean(p, Layer::VisibleLights))).collect()
 }
 
@@ -246,26 +245,55 @@ fn render(scene: &Scene, method: Method, phases: usize) -> Engine<'_> {
     engine
 }
 
+/// The lens scene at 72 × 48 pixels rendered once for the tests that share it: both coatings with both
+/// methods, 64 phases each.
+struct LensRenders {
+    /// (anti-reflection coated, method, sums) for each of the four renders.
+    runs: Vec<(bool, Method, Accumulator)>,
+    /// Non-finite phase values the sums dropped while the renders ran.
+    dropped: u64,
+}
+
+impl LensRenders {
+    fn sums(&self, coated: bool, method: Method) -> &Accumulator {
+        let run = self.runs.iter().find(|(c, m, _)| *c == coated && *m == method);
+        &run.expect("every coating and method is rendered").2
+    }
+}
+
+fn lens_renders() -> &'static LensRenders {
+    static RENDERS: OnceLock<LensRenders> = OnceLock::new();
+    RENDERS.get_or_init(|| {
+        let dropped_before = non_finite_dropped();
+        let mut runs = Vec::new();
+        for coated in [false, true] {
+            let scene = lens_scene(Some((72, 48)), coated);
+            for method in [Method::Pbpm, Method::Path] {
+                runs.push((coated, method, render(&scene, method, 64).sums().clone()));
+            }
+        }
+        LensRenders { runs, dropped: non_finite_dropped() - dropped_before }
+    })
+}
+
 #[test]
 fn both_methods_render_the_lens_scene_finite_with_ghosts_outside_the_direct_image_of_the_light() {
     let (w, h) = (72u32, 48u32);
-    let dropped_before = non_finite_dropped();
-    let coated = lens_scene(Some((w, h)), true);
-    let uncoated = lens_scene(Some((w, h)), false);
+    let renders = lens_renders();
     for method in [Method::Pbpm, Method::Path] {
         let phases = 64;
-        let plain = render(&coated, method, phases);
-        let ghosts = render(&uncoated, method, phases);
-        for engine in [&plain, &ghosts] {
+        let (plain, ghosts) = (renders.sums(true, method), renders.sums(false, method));
+        assert_eq!((plain.width, plain.height), (w, h));
+        for sums in [plain, ghosts] {
             for p in 0..(w * h) as usize {
                 for l in Layer::ALL {
-                    assert!(engine.sums().mean(p, l).iter().all(|v| v.is_finite()), "{method:?}: pixel {p} {l:?}");
+                    assert!(sums.mean(p, l).iter().all(|v| v.is_finite()), "{method:?}: pixel {p} {l:?}");
                 }
             }
         }
         // The direct image of the light: where the coated lens shows it, widened by two pixels for the pixels
         // whose share of the image this run did not sample.
-        let direct = visible_lights(&plain);
+        let direct = visible_lights(plain);
         let near_direct = |p: usize| {
             let (x, y) = ((p as u32 % w) as i64, (p as u32 / w) as i64);
             (-2..=2i64).any(|dy| {
@@ -276,7 +304,7 @@ fn both_methods_render_the_lens_scene_finite_with_ghosts_outside_the_direct_imag
             })
         };
         let direct_pixels = (0..direct.len()).filter(|&p| direct[p] > 0.0).count();
-        let with_ghosts = visible_lights(&ghosts);
+        let with_ghosts = visible_lights(ghosts);
         let ghost_pixels: Vec<usize> =
             (0..with_ghosts.len()).filter(|&p| with_ghosts[p] > 0.0 && !near_direct(p)).collect();
         let ghost_light: f64 = ghost_pixels.iter().map(|&p| with_ghosts[p]).sum();
@@ -290,7 +318,7 @@ fn both_methods_render_the_lens_scene_finite_with_ghosts_outside_the_direct_imag
         assert!(direct_pixels > 0, "{method:?}: the light is not in the picture");
         assert!(ghost_pixels.len() >= 10, "{method:?}: only {} ghost pixels", ghost_pixels.len());
     }
-    assert_eq!(non_finite_dropped(), dropped_before, "non-finite values were dropped");
+    assert_eq!(renders.dropped, 0, "non-finite values were dropped");
 }
 
 /// Luminance of a pixel's mean ghost layer.
@@ -322,8 +350,13 @@ fn phase_image_sums(scene: &Scene, method: Method, seed: u64, phases: usize) -> 
 /// Asserts that PBPM and the path tracer agree on the mean image ghost sum per phase within four combined
 /// standard errors, and returns (PBPM, path) as (mean, SEM) pairs.
 fn assert_methods_agree_on_the_ghost(scene: &Scene, phases: usize, what: &str) -> [(f64, f64); 2] {
-    let [pbpm, path] = [Method::Pbpm, Method::Path].map(|m| {
-        let (ghost, total) = phase_image_sums(scene, m, 11, phases);
+    // The two methods' renders are independent single-threaded engines: run side by side.
+    let renders = std::thread::scope(|s| {
+        [Method::Pbpm, Method::Path]
+            .map(|m| s.spawn(move || (m, phase_image_sums(scene, m, 11, phases))))
+            .map(|h| h.join().unwrap())
+    });
+    let [pbpm, path] = renders.map(|(m, (ghost, total))| {
         let (g, t) = (common::mean_sem(&ghost), common::mean_sem(&total));
         println!(
             "{what}, {m:?}, {phases} phases: ghost {:.4e} ± {:.2e} per phase, {:.2} % of the total {:.4e}",
@@ -345,25 +378,9 @@ fn assert_methods_agree_on_the_ghost(scene: &Scene, phases: usize, what: &str) -
     [pbpm, path]
 }
 
-/// The sums the ghost-layer tests share, rendered once: (anti-reflection coated, method, sums) for both
-/// coatings and methods, 72 × 48 pixels, 64 phases.
-fn ghost_renders() -> &'static [(bool, Method, Accumulator)] {
-    static RENDERS: OnceLock<Vec<(bool, Method, Accumulator)>> = OnceLock::new();
-    RENDERS.get_or_init(|| {
-        let mut out = Vec::new();
-        for coated in [false, true] {
-            let scene = lens_scene(Some((72, 48)), coated);
-            for method in [Method::Pbpm, Method::Path] {
-                out.push((coated, method, render(&scene, method, 64).sums().clone()));
-            }
-        }
-        out
-    })
-}
-
 #[test]
 fn the_ghost_layer_is_non_zero_through_the_uncoated_lens_and_exactly_zero_through_the_coated_one() {
-    for (coated, method, sums) in ghost_renders() {
+    for (coated, method, sums) in &lens_renders().runs {
         assert!(sums.aux.layout().offset(GHOST_LAYER).is_some(), "{method:?}: no ghost layer");
         let pixels = (0..sums.pixels.len()).filter(|&p| ghost_luminance(sums, p) > 0.0).count();
         let (ghost, total) = image_sums(sums);
@@ -386,7 +403,7 @@ fn the_ghost_layer_is_non_zero_through_the_uncoated_lens_and_exactly_zero_throug
 
 #[test]
 fn the_ghost_layer_never_exceeds_the_total_in_any_pixel() {
-    for (_, method, sums) in ghost_renders().iter().filter(|(coated, _, _)| !coated) {
+    for (_, method, sums) in lens_renders().runs.iter().filter(|(coated, _, _)| !coated) {
         let mut largest: f64 = 0.0;
         for p in 0..sums.pixels.len() {
             // In luminance: the lens disperses, and a pure spectral colour has a negative channel (outside the

@@ -82,15 +82,20 @@ fn with_a_dispersive_sphere_pbpm_and_the_path_tracer_converge_to_the_same_spectr
 }
 
 fn check_partition(sc: &photonfarm::scene::Scene, pbpm_phases: usize, path_phases: usize) {
-    let mut pbpm = Engine::new(sc, settings(sc, Method::Pbpm, 1));
-    let mut path = Engine::new(sc, settings(sc, Method::Path, 2));
-    for _ in 0..pbpm_phases {
-        pbpm.run_phase();
-    }
-    for _ in 0..path_phases {
-        path.run_phase();
-    }
-    let (a, b) = (pbpm.sums(), path.sums());
+    // Two independent single-threaded engines, run side by side.
+    let render = |method, seed, phases| {
+        let mut engine = Engine::new(sc, settings(sc, method, seed));
+        for _ in 0..phases {
+            engine.run_phase();
+        }
+        engine.sums().clone()
+    };
+    let (pbpm, path) = std::thread::scope(|s| {
+        let pbpm = s.spawn(|| render(Method::Pbpm, 1, pbpm_phases));
+        let path = render(Method::Path, 2, path_phases);
+        (pbpm.join().unwrap(), path)
+    });
+    let (a, b) = (&pbpm, &path);
     let pixels = a.pixels.len();
     for layer in Layer::ALL {
         let mean = |s: &photonfarm::accumulation::Accumulator| {

@@ -9,20 +9,28 @@ pub fn repo_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("tests/ lives in the repository").to_path_buf()
 }
 
-/// Path of a workspace binary, built once per test process with the same cargo that runs the tests.
+/// Path of a workspace binary, built once per test process by the cargo that runs the tests, with the profile
+/// the tests were built with. `--workspace --bins --tests` resolves the features as `cargo test --workspace`
+/// does (dev-dependencies included), so after scripts/test's build this only links the programs: no
+/// dependency is built a second time.
 pub fn binary(name: &str) -> PathBuf {
-    static BUILT: OnceLock<()> = OnceLock::new();
-    BUILT.get_or_init(|| {
+    static PROFILE_DIR: OnceLock<PathBuf> = OnceLock::new();
+    let dir = PROFILE_DIR.get_or_init(|| {
+        // A test program lives in <target dir>/<profile dir>/deps/: `release` for `cargo test --release`,
+        // `debug` for the test profile.
+        let exe = std::env::current_exe().expect("the test program's own path");
+        let profile_dir = exe.parent().and_then(Path::parent).expect("a test program lives in <profile dir>/deps");
+        let profile = if profile_dir.ends_with("release") { "release" } else { "test" };
         let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
         let status = Command::new(cargo)
-            .args(["build", "--quiet", "--release", "-p", "coordinator", "-p", "worker"])
+            .args(["build", "--quiet", "--profile", profile, "--workspace", "--bins", "--tests"])
             .current_dir(repo_root())
             .status()
             .expect("cannot run cargo to build the programs under test");
         assert!(status.success(), "building the programs under test failed");
+        profile_dir.to_path_buf()
     });
-    let target = std::env::var_os("CARGO_TARGET_DIR").map(PathBuf::from).unwrap_or_else(|| repo_root().join("target"));
-    target.join("release").join(name)
+    dir.join(name)
 }
 
 /// A fresh, empty folder for one test's outputs.
