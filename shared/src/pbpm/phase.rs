@@ -152,18 +152,19 @@ impl PhaseBuffers {
             + self.photon_lists.iter().map(Vec::capacity).sum::<usize>() * std::mem::size_of::<BackwardPhoton>()
     }
 
-    /// Stage 1: one camera path per local pixel; `pixels[i]` is local pixel i's image pixel, and `next_phase(i)`
-    /// its phase number j for the radius schedule. `map` is the previous phase's, whose photon buffer a single
+    /// Stage 1: one camera path per local pixel; `pixels[i]` is local pixel i's image pixel (None: the whole
+    /// image, local pixel i being image pixel i), and `next_phase(i)` its phase number j for the radius schedule. `map` is the previous phase's, whose photon buffer a single
     /// list takes back. Returns the rays traced and the photons stored.
     pub fn camera_pass(
         &mut self,
         exec: Executor,
         phase: &Phase,
-        pixels: &[u32],
+        pixels: Option<&[u32]>,
         next_phase: impl Fn(usize) -> u64 + Sync,
         map: &mut PhotonMap,
     ) -> BackwardStats {
-        assert_eq!(pixels.len(), self.camera.len(), "camera pass over pixels the buffers were not sized for");
+        let count = pixels.map_or(phase.scene.camera.pixel_count(), <[u32]>::len);
+        assert_eq!(count, self.camera.len(), "camera pass over pixels the buffers were not sized for");
         if let ([list], true) = (&mut self.photon_lists[..], self.single_list) {
             *list = map.take_photons();
         }
@@ -171,21 +172,22 @@ impl PhaseBuffers {
         let cam = &phase.scene.camera;
         let (channels, ghost_offset) = (self.aux.channels(), self.ghost);
         let bdd = phase.backward_diffuse_depth;
-        let chunks = pixels
-            .par_chunks(chunk_len)
-            .zip(self.camera.par_chunks_mut(chunk_len))
+        let chunks = self
+            .camera
+            .par_chunks_mut(chunk_len)
             .zip(self.photon_lists.par_iter_mut())
-            .zip(aux_chunks(&mut self.aux_camera, channels, pixels.len(), chunk_len))
+            .zip(aux_chunks(&mut self.aux_camera, channels, count, chunk_len))
             .enumerate();
         exec.run(chunks)
-            .map(|(chunk, (((pixels, values), photons), mut aux))| {
+            .map(|(chunk, ((values, photons), mut aux))| {
                 photons.clear();
                 // A camera path stores at most one photon per diffuse vertex it continues from: at full size
                 // from the first phase, a list never grows, and holds what `--memory-limit` assumed.
-                photons.reserve_exact(pixels.len() * bdd as usize);
+                photons.reserve_exact(values.len() * bdd as usize);
                 let mut stats = BackwardStats::default();
-                for (i, (&pixel, out)) in pixels.iter().zip(values.iter_mut()).enumerate() {
+                for (i, out) in values.iter_mut().enumerate() {
                     let local = chunk * chunk_len + i;
+                    let pixel = pixels.map_or(local as u32, |p| p[local]);
                     let bs = BackwardSettings {
                         max_depth: phase.max_depth,
                         backward_diffuse_depth: bdd,

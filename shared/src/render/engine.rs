@@ -17,8 +17,6 @@ pub struct Engine<'s> {
     scene: &'s Scene,
     settings: RenderSettings,
     sums: Accumulator,
-    /// Every pixel of the image, in order: the pixels the phases render.
-    pixels: Vec<u32>,
     buffers: PhaseBuffers,
     map: PhotonMap,
     gathered: GatherBuffer,
@@ -41,7 +39,6 @@ impl<'s> Engine<'s> {
             scene,
             settings,
             sums: Accumulator::with_aux(scene.camera.width, scene.camera.height, aux),
-            pixels: (0..pixels as u32).collect(),
             buffers,
             map,
             gathered,
@@ -66,13 +63,10 @@ impl<'s> Engine<'s> {
 
     /// Bytes held per pixel by the sums, the phase buffers and the photon map.
     pub fn bytes_per_pixel(&self) -> f64 {
-        let pixels = self.pixels.len().max(1);
+        let pixels = self.scene.camera.pixel_count().max(1);
         let sums = self.sums.pixels.capacity() * std::mem::size_of::<crate::accumulation::PixelSums>()
             + self.sums.aux.capacity_bytes();
-        let phase = self.pixels.capacity() * 4
-            + self.buffers.capacity_bytes()
-            + self.gathered.capacity_bytes()
-            + self.map.capacity_bytes();
+        let phase = self.buffers.capacity_bytes() + self.gathered.capacity_bytes() + self.map.capacity_bytes();
         (sums + phase) as f64 / pixels as f64
     }
 
@@ -130,9 +124,9 @@ impl<'s> Engine<'s> {
         let exec = Executor::CallingThread;
         let phase = self.settings.phase(self.scene, number);
         // Every pixel has had the same phases: j is the engine's phase count plus one.
-        let backward = self.buffers.camera_pass(exec, &phase, &self.pixels, |_| number, &mut self.map);
+        let backward = self.buffers.camera_pass(exec, &phase, None, |_| number, &mut self.map);
         self.buffers.build_map(exec, &mut self.map);
-        let n = self.settings.light_paths_per_phase(self.pixels.len());
+        let n = self.settings.light_paths_per_phase(self.scene.camera.pixel_count());
         let forward = phase.forward_pass(0..n, &self.map, &mut self.gathered);
         self.buffers.close(exec, &phase, &mut self.gathered, n, &mut self.sums.pixels, &mut self.sums.aux);
         self.totals.backward_photons += backward.photons;

@@ -301,7 +301,7 @@ impl Group {
         let (phases_before, sums) = (&self.phases_before, &self.sums);
         let next_phase = |local: usize| numbering.next_phase(phases_before[local] as u64, sums[local].phases as u64);
         let map = &mut slot.data_mut(&mut self.token).photons;
-        let backward = self.buffers.camera_pass(exec, &phase, &self.mask, next_phase, map);
+        let backward = self.buffers.camera_pass(exec, &phase, Some(&self.mask), next_phase, map);
         self.stats.backward_rays += backward.rays;
         self.stats.backward_photons += backward.photons;
         self.stats.nanos.backward += nanos_since(t0);
