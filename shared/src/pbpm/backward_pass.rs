@@ -35,6 +35,15 @@ pub struct BackwardStats {
     pub photons: u64,
 }
 
+impl std::ops::Add for BackwardStats {
+    type Output = Self;
+
+    /// The counts of two shares of a backward pass together.
+    fn add(self, o: Self) -> Self {
+        BackwardStats { rays: self.rays + o.rays, photons: self.photons + o.photons }
+    }
+}
+
 /// Traces one camera path for `pixel`, returns its visible-light and next-event contributions per layer with
 /// the part of them that is ghost light (`crate::ghost`), and hands every backward photon to `store`. The
 /// camera ray's weight starts the path throughput, so that it also reaches the photons' filter τ and with them

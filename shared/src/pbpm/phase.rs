@@ -153,8 +153,9 @@ impl PhaseBuffers {
     }
 
     /// Stage 1: one camera path per local pixel; `pixels[i]` is local pixel i's image pixel (None: the whole
-    /// image, local pixel i being image pixel i), and `next_phase(i)` its phase number j for the radius schedule. `map` is the previous phase's, whose photon buffer a single
-    /// list takes back. Returns the rays traced and the photons stored.
+    /// image, local pixel i being image pixel i), and `next_phase(i)` its phase number j for the radius
+    /// schedule. `map` is the previous phase's, whose photon buffer a single list takes back. Returns the rays
+    /// traced and the photons stored.
     pub fn camera_pass(
         &mut self,
         exec: Executor,
@@ -209,10 +210,7 @@ impl PhaseBuffers {
                 }
                 stats
             })
-            .reduce(BackwardStats::default, |a, b| BackwardStats {
-                rays: a.rays + b.rays,
-                photons: a.photons + b.photons,
-            })
+            .reduce(BackwardStats::default, |a, b| a + b)
     }
 
     /// Stage 2: the photon map of the camera pass's photons, in pixel order.
