@@ -44,6 +44,16 @@ pub struct ScatterSample {
     pub pdf: f32,
     /// True for specular (delta) events.
     pub delta: bool,
+    /// The (η_o/η_t)² factor that `weight` holds for a camera path refracted across an interface (1 otherwise):
+    /// it rescales radiance rather than losing energy, so Russian roulette must not read it as a loss.
+    pub radiance_scale: f32,
+}
+
+impl ScatterSample {
+    /// A delta event in direction `wi` with weight `weight` that rescales no radiance.
+    fn specular(wi: Vec3, weight: Rgb) -> Self {
+        ScatterSample { wi, weight, pdf: 0.0, delta: true, radiance_scale: 1.0 }
+    }
 }
 
 impl Material {
@@ -76,11 +86,9 @@ impl Material {
                 if wi.dot(ng) <= 0.0 || local.z <= 0.0 {
                     return None;
                 }
-                ScatterSample { wi, weight: albedo, pdf: local.z * FRAC_1_PI, delta: false }
+                ScatterSample { wi, weight: albedo, pdf: local.z * FRAC_1_PI, delta: false, radiance_scale: 1.0 }
             }
-            Material::Mirror { reflectance } => {
-                ScatterSample { wi: reflect(wo, ns), weight: reflectance, pdf: 0.0, delta: true }
-            }
+            Material::Mirror { reflectance } => ScatterSample::specular(reflect(wo, ns), reflectance),
             Material::Coating { reflectance, transmittance } => {
                 let (lr, lt) = (luminance(reflectance), luminance(transmittance));
                 if lr + lt <= 0.0 {
@@ -88,9 +96,9 @@ impl Material {
                 }
                 let p_reflect = lr / (lr + lt);
                 if u.x < p_reflect {
-                    ScatterSample { wi: reflect(wo, ns), weight: reflectance / p_reflect, pdf: 0.0, delta: true }
+                    ScatterSample::specular(reflect(wo, ns), reflectance / p_reflect)
                 } else {
-                    ScatterSample { wi: -wo, weight: transmittance / (1.0 - p_reflect), pdf: 0.0, delta: true }
+                    ScatterSample::specular(-wo, transmittance / (1.0 - p_reflect))
                 }
             }
             Material::Dielectric { ior, ext_ior, anti_reflection } => {
@@ -101,7 +109,7 @@ impl Material {
                 // A coating cannot undo total internal reflection (f = 1): there is no transmitted wave.
                 let f = if anti_reflection && f < 1.0 { 0.0 } else { f };
                 if u.x < f {
-                    ScatterSample { wi: reflect(wo, ns), weight: Rgb::ONE, pdf: 0.0, delta: true }
+                    ScatterSample::specular(reflect(wo, ns), Rgb::ONE)
                 } else {
                     let eta = eta_o / eta_t;
                     let sin2_t = eta * eta * (1.0 - cos_o * cos_o);
@@ -113,7 +121,7 @@ impl Material {
                         Transport::Radiance => eta * eta,
                         Transport::Importance => 1.0,
                     };
-                    ScatterSample { wi, weight: Rgb::splat(scale), pdf: 0.0, delta: true }
+                    ScatterSample { radiance_scale: scale, ..ScatterSample::specular(wi, Rgb::splat(scale)) }
                 }
             }
         };

@@ -239,6 +239,52 @@ fn glass_slab_transmits_the_fresnel_fraction_of_a_seen_emitter() {
 }
 
 #[test]
+fn roulette_keeps_camera_paths_through_a_pile_of_glass_plates() {
+    // The camera looks at an emitter through three glass plates. Refraction rescales a camera path's radiance
+    // by (η_o/η_t)² = 1/2.25 inside each plate and back on leaving it: no energy is lost, so roulette must let
+    // such a path live. A path is then lost only to Fresnel reflection, and a pixel's phase values are Le or
+    // 0: relative variance (1 − T)/T = 0.25 at the pile's transmittance T = 0.8. Read as a loss, the factor
+    // kills 56% of paths inside the second or third plate and the relative variance is about 1.8.
+    let toml = "[render]\nmax_depth = 60\n\
+        [camera]\nposition = [0.0, 0.0, 0.0]\nlook_at = [0.0, 0.0, 1.0]\nfov_y_deg = 6\nwidth = 16\nheight = 16\n\
+        [materials.black]\ntype = \"diffuse\"\nalbedo = [0.0, 0.0, 0.0]\n\
+        [materials.glass]\ntype = \"dielectric\"\nior = 1.5\n\
+        [[objects]]\nmaterial = \"black\"\nemission = [1.0, 1.0, 1.0]\nquad = { corner = [-2.0, -2.0, 1.0], edge1 = [0.0, 4.0, 0.0], edge2 = [4.0, 0.0, 0.0] }\n\
+        [[objects]]\nmaterial = \"glass\"\nbox = { min = [-5.0, -5.0, 0.2], max = [5.0, 5.0, 0.3] }\n\
+        [[objects]]\nmaterial = \"glass\"\nbox = { min = [-5.0, -5.0, 0.45], max = [5.0, 5.0, 0.55] }\n\
+        [[objects]]\nmaterial = \"glass\"\nbox = { min = [-5.0, -5.0, 0.7], max = [5.0, 5.0, 0.8] }\n";
+    let sc = scene(toml);
+    // Stokes' pile of m non-absorbing plates: T = (1 − R) / (1 + (2m − 1) R).
+    let r = fresnel_dielectric(1.0, 1.0, 1.5) as f64;
+    let expect = (1.0 - r) / (1.0 + 5.0 * r);
+    for method in [Method::Pbpm, Method::Path] {
+        let mut engine = Engine::new(&sc, settings(&sc, method, 31));
+        let samples = region_phase_means(&mut engine, 200, Some(Layer::VisibleLights), &|_, _| true);
+        let (mean, sem) = mean_sem(&samples);
+        let err = (mean - expect).abs();
+        assert!(
+            err <= 4.0 * sem + 1e-3 * expect,
+            "{method:?}: radiance through the pile {mean:.5} ± {sem:.5}, analytic {expect:.5}"
+        );
+        // Every pixel's phase values: the relative variance of one camera path's estimate.
+        let sums = engine.sums();
+        let relative_variance = (0..sums.pixels.len())
+            .map(|i| {
+                let px = &sums.pixels[i];
+                let n = px.phases as f64;
+                let m = photonfarm::color::luminance_f64(sums.mean(i, Layer::VisibleLights));
+                (px.sum_sq[Layer::VisibleLights as usize] / n - m * m) / (m * m)
+            })
+            .sum::<f64>()
+            / sums.pixels.len() as f64;
+        assert!(
+            (0.15..0.4).contains(&relative_variance),
+            "{method:?}: relative variance of a camera path through the pile {relative_variance:.3}, expected 0.25"
+        );
+    }
+}
+
+#[test]
 fn photons_on_the_dark_side_of_a_lit_wall_gather_nothing() {
     // A two-sided diffuse wall at x = 0 separates a point light and a floor at x > 0 from a camera at x < 0
     // that sees only the wall's dark face. Light bouncing off the floor onto the lit face must never reach

@@ -76,6 +76,8 @@ fn trace_in<const S: bool>(
     }
     let mut ray = camera_ray.ray;
     let mut beta = Rgb::splat(weight);
+    // Roulette's unit: the camera ray's weight times the radiance rescalings of the refractions so far.
+    let mut roulette_unit = weight;
     let mut path = PathSpectrum::<S>::start(spectrum, 0, &mut beta);
     let mut previous = Previous::Specular;
     let mut diffuse_vertices = 0u32;
@@ -129,10 +131,12 @@ fn trace_in<const S: bool>(
             ghost = Some(Rgb::ZERO);
         }
         beta *= s.weight;
+        roulette_unit *= s.radiance_scale;
         previous = if s.delta { Previous::Specular } else { Previous::Diffuse { p: hit.p, pdf: s.pdf } };
         if segments >= 3 {
-            // Relative to the camera ray's weight, a unit of measurement rather than a loss.
-            let q = (beta.max_element() / weight).min(1.0);
+            // Relative to the camera ray's weight and the refractions' (η_o/η_t)², which are units of
+            // measurement rather than losses.
+            let q = (beta.max_element() / roulette_unit).min(1.0);
             if sampler.next_f32() >= q {
                 break;
             }

@@ -84,6 +84,8 @@ fn camera_path<const S: bool>(
     }
     let mut ray = camera_ray.ray;
     let mut beta = Rgb::splat(weight);
+    // Roulette's unit: the camera ray's weight times the radiance rescalings of the refractions so far.
+    let mut roulette_unit = weight;
     let mut path = PathSpectrum::<S>::start(&settings.spectrum, PhaseSpectrum::class_of(pixel as u64), &mut beta);
     let mut k = 0u32; // diffuse vertices so far
     let mut segments = 0u32;
@@ -157,11 +159,14 @@ fn camera_path<const S: bool>(
             ghost = Some(Rgb::ZERO);
         }
         beta *= s.weight;
+        roulette_unit *= s.radiance_scale;
         from_diffuse = (!s.delta).then_some((hit.p, s.pdf));
         if segments >= 4 {
             // Long specular chains (light trapped in glass) end by roulette, unbiased. Relative to the camera
-            // ray's weight, which is a unit of measurement (a sensor camera's is far below one), not a loss.
-            let q = (beta.max_element() / weight).min(1.0);
+            // ray's weight, which is a unit of measurement (a sensor camera's is far below one), and to the
+            // (η_o/η_t)² of refractions, which rescale radiance without losing energy (pbrt-v4's etaScale):
+            // glass would otherwise kill most paths inside it.
+            let q = (beta.max_element() / roulette_unit).min(1.0);
             if sampler.next_f32() >= q {
                 break;
             }
