@@ -9,7 +9,7 @@ use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use photonfarm::accumulation::delta::{apply_delta, encode_delta, Compression};
 use photonfarm::accumulation::Accumulator;
 use photonfarm::color::Rgb;
-use photonfarm::sampling::{Pass, Sampler};
+use photonfarm::sampling::{Pass, Sampler, REPLICATES};
 use std::hint::black_box;
 
 /// Sums of `phases` random phases per pixel.
@@ -17,9 +17,9 @@ fn sums(width: u32, height: u32, phases: u32, seed: u64) -> Accumulator {
     let mut a = Accumulator::new(width, height);
     let mut s = Sampler::new(seed, Pass::Camera, 0, 0);
     for i in 0..(width * height) as usize {
-        for _ in 0..phases {
+        for j in 0..phases as usize {
             let v = Rgb::new(s.next_f32(), s.next_f32(), s.next_f32());
-            a.add_phase(i, &[Rgb::ZERO, v * 0.6, v * 0.3 * s.next_f32(), v * 0.1 * s.next_f32()], 1);
+            a.add_phase(i, &[Rgb::ZERO, v * 0.6, v * 0.3 * s.next_f32(), v * 0.1 * s.next_f32()], 1, j % REPLICATES);
         }
     }
     a

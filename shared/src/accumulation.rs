@@ -11,6 +11,7 @@ pub use non_finite::non_finite_dropped;
 use crate::color::{luminance, luminance_f64, Rgb};
 use crate::ghost::GHOST_LAYER;
 use crate::integrator::{Layer, LayerValues};
+use crate::sampling::REPLICATES;
 use non_finite::sanitize;
 use serde::{Deserialize, Serialize};
 
@@ -21,17 +22,21 @@ pub struct PixelSums {
     pub sum: [[f64; 3]; 4],
     /// Σ_j L_ij² of each layer's luminance, then of the total's.
     pub sum_sq: [f64; 5],
+    /// Σ_j of the total's luminance over the phases of each replicate of the pixel's quasi-random sequences.
+    pub replicate_sum: [f64; REPLICATES],
     /// Phases closed at this pixel.
     pub phases: u32,
     /// Camera rays started at this pixel.
     pub camera_rays: u32,
+    /// Phases of each replicate.
+    pub replicate_phases: [u32; REPLICATES],
 }
 
 impl PixelSums {
-    /// Closes one phase: adds the phase value L_ij of every layer and the squared luminance of each layer and
-    /// of the total.
+    /// Closes one phase drawn from `replicate`: adds the phase value L_ij of every layer and the squared
+    /// luminance of each layer and of the total.
     #[inline]
-    pub fn add_phase(&mut self, value: &LayerValues, camera_rays: u32) {
+    pub fn add_phase(&mut self, value: &LayerValues, camera_rays: u32, replicate: usize) {
         let mut total = Rgb::ZERO;
         for (l, v) in value.iter().enumerate() {
             let v = sanitize(*v);
@@ -44,6 +49,8 @@ impl PixelSums {
         }
         let y = luminance(total) as f64;
         self.sum_sq[4] += y * y;
+        self.replicate_sum[replicate] += y;
+        self.replicate_phases[replicate] += 1;
         self.phases += 1;
         self.camera_rays += camera_rays;
     }
@@ -57,6 +64,10 @@ impl PixelSums {
         }
         for i in 0..5 {
             self.sum_sq[i] += other.sum_sq[i];
+        }
+        for r in 0..REPLICATES {
+            self.replicate_sum[r] += other.replicate_sum[r];
+            self.replicate_phases[r] += other.replicate_phases[r];
         }
         self.phases += other.phases;
         self.camera_rays += other.camera_rays;
@@ -96,10 +107,11 @@ impl Accumulator {
         Accumulator { width, height, pixels: vec![PixelSums::default(); n], aux: AuxSums::new(aux, n) }
     }
 
-    /// Closes one phase at one pixel: adds the phase value L_ij of every layer and of the total.
+    /// Closes one phase drawn from `replicate` at one pixel: adds the phase value L_ij of every layer and of
+    /// the total.
     #[inline]
-    pub fn add_phase(&mut self, pixel: usize, value: &LayerValues, camera_rays: u32) {
-        self.pixels[pixel].add_phase(value, camera_rays);
+    pub fn add_phase(&mut self, pixel: usize, value: &LayerValues, camera_rays: u32, replicate: usize) {
+        self.pixels[pixel].add_phase(value, camera_rays, replicate);
     }
 
     /// Adds sums kept for a subset of pixels (a group's mask: `local[i]` and `local_aux`'s pixel i belong to
@@ -151,7 +163,10 @@ impl Accumulator {
         t
     }
 
-    /// Squared standard error of the mean of the total luminance at a pixel (paper eq. 7).
+    /// Squared standard error of the mean of the total luminance at a pixel from its phases as independent
+    /// samples (paper eq. 7). Phases of one quasi-random sequence are not independent: their mean is usually
+    /// more accurate than this says, so δ uses `replicate_sem2`; this per-pixel figure, with all its phases'
+    /// degrees of freedom, is the steadier one for per-pixel comparisons and the SEM layer.
     pub fn sem2(&self, pixel: usize) -> f64 {
         let px = &self.pixels[pixel];
         if px.phases < 2 {
@@ -162,19 +177,46 @@ impl Accumulator {
         ((px.sum_sq[4] / n - mean * mean) / n).max(0.0)
     }
 
+    /// Squared standard error of the mean of the total luminance at a pixel from the spread of its replicate
+    /// means, which are independent (random groups: SEM² = Σ_r (m_r − m̄)² / (R (R − 1)) over the R replicates
+    /// that have phases). It replaces eq. 7 where phases share a quasi-random sequence; with pseudo-random
+    /// phases both estimate the same variance.
+    pub fn replicate_sem2(&self, pixel: usize) -> f64 {
+        let px = &self.pixels[pixel];
+        if px.phases < 2 {
+            return f64::INFINITY;
+        }
+        let mut means = [0.0; REPLICATES];
+        let mut r = 0;
+        for (s, &n) in px.replicate_sum.iter().zip(&px.replicate_phases) {
+            if n > 0 {
+                means[r] = s / n as f64;
+                r += 1;
+            }
+        }
+        if r < 2 {
+            // Every phase came from one replicate (a merge of renderers that skipped the others): only the
+            // per-phase spread is left.
+            return self.sem2(pixel);
+        }
+        let means = &means[..r];
+        let mean = means.iter().sum::<f64>() / r as f64;
+        means.iter().map(|m| (m - mean) * (m - mean)).sum::<f64>() / (r * (r - 1)) as f64
+    }
+
     /// True when the pixel sees an emitter directly (its visible-lights layer is not zero).
     pub fn sees_light(&self, pixel: usize) -> bool {
         self.pixels[pixel].sum[Layer::VisibleLights as usize].iter().any(|&v| v > 0.0)
     }
 
-    /// δ (paper eq. 6) over all pixels and over unlit pixels.
+    /// δ (paper eq. 6, with `replicate_sem2` for the SEM) over all pixels and over unlit pixels.
     pub fn error(&self) -> ErrorEstimate {
         let (mut num_all, mut den_all, mut num_unlit, mut den_unlit) = (0.0, 0.0, 0.0, 0.0);
         let mut min_phases = u32::MAX;
         for i in 0..self.pixels.len() {
             min_phases = min_phases.min(self.pixels[i].phases);
             let l = luminance_f64(self.mean_total(i));
-            let s = self.sem2(i);
+            let s = self.replicate_sem2(i);
             num_all += s;
             den_all += l * l;
             if !self.sees_light(i) {
@@ -237,13 +279,15 @@ mod tests {
     fn sem_of_known_samples_matches_the_textbook_formula() {
         let mut acc = Accumulator::new(1, 1);
         let samples = [1.0f32, 2.0, 3.0, 6.0];
-        for s in samples {
-            acc.add_phase(0, &[Rgb::ZERO, Rgb::splat(s), Rgb::ZERO, Rgb::ZERO], 1);
+        for (j, s) in samples.into_iter().enumerate() {
+            acc.add_phase(0, &[Rgb::ZERO, Rgb::splat(s), Rgb::ZERO, Rgb::ZERO], 1, j % REPLICATES);
         }
         // Luminance of grey s is s. Population variance of {1,2,3,6} = 3.5, SEM² = 3.5 / 4.
         assert!((acc.sem2(0) - 3.5 / 4.0).abs() < 1e-6);
+        // One phase per replicate: the replicate means are the samples, SEM² = Σ (x − 3)² / (4 · 3) = 14 / 12.
+        assert!((acc.replicate_sem2(0) - 14.0 / 12.0).abs() < 1e-6);
         let e = acc.error();
-        assert!((e.delta_all - (3.5f64 / 4.0).sqrt() / 3.0).abs() < 1e-6);
+        assert!((e.delta_all - (14.0f64 / 12.0).sqrt() / 3.0).abs() < 1e-6);
         assert_eq!(e.min_phases, 4);
     }
 
@@ -254,8 +298,8 @@ mod tests {
         let mut b = Accumulator::new(2, 1);
         let mut all = Accumulator::new(2, 1);
         for (i, x) in [0.5f32, 1.5, 2.5, 4.0].iter().enumerate() {
-            if i % 2 == 0 { &mut a } else { &mut b }.add_phase(1, &v(*x), 1);
-            all.add_phase(1, &v(*x), 1);
+            if i % 2 == 0 { &mut a } else { &mut b }.add_phase(1, &v(*x), 1, i % REPLICATES);
+            all.add_phase(1, &v(*x), 1, i % REPLICATES);
         }
         a.merge(&b);
         assert_eq!(a, all);
@@ -264,7 +308,7 @@ mod tests {
     #[test]
     fn non_finite_samples_never_reach_the_sums() {
         let mut acc = Accumulator::new(1, 1);
-        acc.add_phase(0, &[Rgb::splat(f32::NAN), Rgb::splat(f32::INFINITY), Rgb::ONE, Rgb::ZERO], 1);
+        acc.add_phase(0, &[Rgb::splat(f32::NAN), Rgb::splat(f32::INFINITY), Rgb::ONE, Rgb::ZERO], 1, 0);
         assert!(acc.pixels[0].sum.iter().flatten().all(|v| v.is_finite()));
         assert_eq!(acc.mean_total(0), [1.0, 1.0, 1.0]);
     }
@@ -272,13 +316,13 @@ mod tests {
     #[test]
     fn unlit_delta_ignores_pixels_that_see_a_light() {
         let mut acc = Accumulator::new(2, 1);
-        for x in [1.0f32, 3.0] {
-            acc.add_phase(0, &[Rgb::splat(100.0), Rgb::ZERO, Rgb::ZERO, Rgb::ZERO], 1);
-            acc.add_phase(1, &[Rgb::ZERO, Rgb::splat(x), Rgb::ZERO, Rgb::ZERO], 1);
+        for (j, x) in [1.0f32, 3.0].into_iter().enumerate() {
+            acc.add_phase(0, &[Rgb::splat(100.0), Rgb::ZERO, Rgb::ZERO, Rgb::ZERO], 1, j);
+            acc.add_phase(1, &[Rgb::ZERO, Rgb::splat(x), Rgb::ZERO, Rgb::ZERO], 1, j);
         }
         let e = acc.error();
-        // Pixel 1 alone: mean 2, SEM² = 1/2.
-        assert!((e.delta_unlit - (0.5f64).sqrt() / 2.0).abs() < 1e-9);
+        // Pixel 1 alone: replicate means 1 and 3, SEM² = (1 + 1) / (2 · 1) = 1.
+        assert!((e.delta_unlit - 1.0 / 2.0).abs() < 1e-9);
         assert!(e.delta_all < e.delta_unlit);
     }
 }

@@ -6,9 +6,40 @@ use rand_pcg::Pcg32;
 use std::f32::consts::PI;
 
 /// One deterministic random stream; every (job seed, pass, phase, item) gets its own, so that results do not
-/// depend on how work is split between threads.
+/// depend on how work is split between threads. A quasi-random stream draws its first numbers from one point
+/// of an Owen-scrambled Sobol sequence (`with_sobol`) and the rest from its pseudo-random stream.
 pub struct Sampler {
     rng: Pcg32,
+    sobol: Option<SobolPoint>,
+}
+
+/// The numbers of a path drawn from its Sobol point: a camera path's pixel jitter, lens, first next-event
+/// sample and first BSDF samples; a light path's light choice, position, direction and first bounces. Further
+/// numbers come from the pseudo-random stream: their dimensions gain little from stratification.
+pub const SOBOL_DIMENSIONS: u32 = 12;
+
+/// Independent scramblings of a pixel's Sobol sequence. Phases of one sequence are not independent, so a
+/// pixel's phases are dealt among the replicates and its standard error comes from the spread of the replicate
+/// means (`crate::accumulation`), which are independent.
+pub const REPLICATES: usize = 4;
+
+/// sobol_burley's points per sequence: past them a stream takes a fresh scrambling.
+const SOBOL_POINTS: u64 = 1 << 16;
+
+/// Point `index` of the Sobol sequence scrambled by `seed`, and how many of its coordinates were drawn.
+#[derive(Clone, Copy, Debug)]
+struct SobolPoint {
+    index: u32,
+    seed: u32,
+    dimension: u32,
+}
+
+/// Where phase `j` (1-based) of a pixel lies in its quasi-random sequences: its replicate and its index in
+/// that replicate's sequence.
+#[inline]
+pub fn replicate_of(j: u64) -> (usize, u64) {
+    let i = j.saturating_sub(1);
+    ((i % REPLICATES as u64) as usize, i / REPLICATES as u64)
 }
 
 /// Which part of a phase a stream feeds, so that camera and light streams never overlap.
@@ -33,12 +64,51 @@ impl Sampler {
     pub fn new(seed: u64, pass: Pass, phase: u64, item: u64) -> Self {
         let state = splitmix64(seed ^ splitmix64(phase.wrapping_mul(0x1000_0000_01B3) ^ pass as u64));
         let stream = splitmix64(item ^ (pass as u64) << 56);
-        Sampler { rng: Pcg32::new(state, stream) }
+        Sampler { rng: Pcg32::new(state, stream), sobol: None }
+    }
+
+    /// The same stream with its first `SOBOL_DIMENSIONS` numbers taken from point `index` of the
+    /// Owen-scrambled Sobol sequence `sequence` (any 64-bit key; distinct keys give independent scramblings).
+    pub fn with_sobol(self, sequence: u64, index: u64) -> Self {
+        // Every 2^16 points the sequence continues with a fresh scrambling: still uniform, still unbiased.
+        let seed = splitmix64(sequence ^ splitmix64(index / SOBOL_POINTS)) as u32;
+        Sampler { sobol: Some(SobolPoint { index: (index % SOBOL_POINTS) as u32, seed, dimension: 0 }), ..self }
+    }
+
+    /// The camera stream of phase `j` (1-based) of `pixel`: pseudo-random as `new(seed, Pass::Camera, key,
+    /// pixel)`, its first numbers from the pixel's Sobol sequence of replicate `replicate_of(j)`.
+    pub fn camera(seed: u64, key: u64, pixel: u64, j: u64) -> Self {
+        Self::pixel(seed, Pass::Camera, key, pixel, j)
+    }
+
+    /// The path tracer's stream of phase `j` of `pixel`, quasi-random as the camera stream.
+    pub fn path(seed: u64, pixel: u64, j: u64) -> Self {
+        Self::pixel(seed, Pass::Path, j, pixel, j)
+    }
+
+    fn pixel(seed: u64, pass: Pass, key: u64, pixel: u64, j: u64) -> Self {
+        let (replicate, index) = replicate_of(j);
+        let sequence = splitmix64(seed ^ splitmix64(pixel ^ (pass as u64) << 56) ^ replicate as u64);
+        Self::new(seed, pass, key, pixel).with_sobol(sequence, index)
+    }
+
+    /// The stream of light path `index` of the phase with random key `key`: the phase's light paths are the
+    /// points of one Sobol sequence, scrambled anew in every phase so that phases stay independent.
+    pub fn light(seed: u64, key: u64, index: u64) -> Self {
+        let sequence = splitmix64(seed ^ splitmix64(key.wrapping_mul(0x1000_0000_01B3) ^ Pass::Light as u64));
+        Self::new(seed, Pass::Light, key, index).with_sobol(sequence, index)
     }
 
     /// Uniform in [0, 1).
     #[inline]
     pub fn next_f32(&mut self) -> f32 {
+        if let Some(p) = &mut self.sobol {
+            if p.dimension < SOBOL_DIMENSIONS {
+                let u = sobol_burley::sample(p.index, p.dimension, p.seed);
+                p.dimension += 1;
+                return u;
+            }
+        }
         (self.rng.next_u32() >> 8) as f32 * (1.0 / 16_777_216.0)
     }
 

@@ -44,7 +44,7 @@ fn check_calibration(scene_file: &str, reference_file: &str) {
             }
             let mine = luminance_f64(sums.mean_total(i));
             let theirs = luminance_of(reference.rgb[i]);
-            sem2 += sums.sem2(i);
+            sem2 += sums.replicate_sem2(i);
             ref_sem2 += luminance_of(ref_sem.rgb[i]).powi(2);
             err2 += (mine - theirs).powi(2);
             norm += theirs * theirs;

@@ -25,16 +25,17 @@ fn rgb_scene_bytes_per_pixel_are_those_of_the_rgb_only_build() {
     // The sizes before spectral rendering existed (commit ed1faf8), in both builds: the photon keeps its
     // colour state in its padding, and no per-pixel buffer gained a field.
     assert_eq!(std::mem::size_of::<BackwardPhoton>(), 48);
-    assert_eq!(std::mem::size_of::<PixelSums>(), 144);
+    assert_eq!(std::mem::size_of::<PixelSums>(), 192);
     assert_eq!(std::mem::size_of::<LayerValues>(), 48);
     let scene = common::shipped("cornell.toml");
     let settings = common::settings(&scene, Method::Pbpm, 3);
     assert_eq!(settings.phase_spectrum(&scene, 1), PhaseSpectrum::RGB, "cornell has no dispersive glass");
     let engine = Engine::new(&scene, settings);
-    // Sums, the phase's layer values, two gathered layers and the map's reserve of one photon per diffuse
-    // vertex allowed to store one (backward_diffuse_depth 2): 144 + 48 + 24 + 2 × 48, as before.
+    // Sums with their four replicates, the phase's layer values and replicate, two gathered layers and the map's
+    // reserve of one photon per diffuse vertex allowed to store one (backward_diffuse_depth 2):
+    // 192 + 48 + 1 + 24 + 2 × 48.
     assert_eq!(settings.backward_diffuse_depth, 2);
-    assert_eq!(engine.bytes_per_pixel(), 312.0, "cornell's bytes per pixel (spectral code compiled in: {ENABLED})");
+    assert_eq!(engine.bytes_per_pixel(), 361.0, "cornell's bytes per pixel (spectral code compiled in: {ENABLED})");
 }
 
 #[cfg(not(feature = "spectral"))]

@@ -5,12 +5,17 @@
 //! from zero.
 
 use super::{Accumulator, AuxLayout, PixelSums};
+use crate::sampling::REPLICATES;
 
-const MAGIC: &[u8; 4] = b"PFD2";
-/// f64 planes: 12 layer sums (4 layers × RGB), then 5 squared-luminance sums.
-const F64_PLANES: usize = 17;
-/// Bytes per pixel before compression: two u32 counts and the f64 planes (auxiliary planes not included).
-const BYTES_PER_PIXEL: usize = 8 + 8 * F64_PLANES;
+const MAGIC: &[u8; 4] = b"PFD3";
+/// f64 planes: 12 layer sums (4 layers × RGB), 5 squared-luminance sums, then the replicates' luminance sums.
+const F64_PLANES: usize = 17 + REPLICATES;
+/// The squared-luminance planes, which no sum of phases can make negative.
+const SQUARE_PLANES: std::ops::Range<usize> = 12..17;
+/// u32 planes: phases, camera rays, then the replicates' phases.
+const U32_PLANES: usize = 2 + REPLICATES;
+/// Bytes per pixel before compression: the u32 counts and the f64 planes (auxiliary planes not included).
+const BYTES_PER_PIXEL: usize = 4 * U32_PLANES + 8 * F64_PLANES;
 
 /// The header's description of the auxiliary layers: their count, then per layer its channels, the length of
 /// its name and the name.
@@ -31,18 +36,34 @@ fn layout_names(layout: &AuxLayout) -> String {
 }
 
 fn f64_plane(p: &PixelSums, k: usize) -> f64 {
-    if k < 12 {
-        p.sum[k / 3][k % 3]
-    } else {
-        p.sum_sq[k - 12]
+    match k {
+        0..12 => p.sum[k / 3][k % 3],
+        12..17 => p.sum_sq[k - 12],
+        _ => p.replicate_sum[k - 17],
     }
 }
 
 fn f64_plane_mut(p: &mut PixelSums, k: usize) -> &mut f64 {
-    if k < 12 {
-        &mut p.sum[k / 3][k % 3]
-    } else {
-        &mut p.sum_sq[k - 12]
+    match k {
+        0..12 => &mut p.sum[k / 3][k % 3],
+        12..17 => &mut p.sum_sq[k - 12],
+        _ => &mut p.replicate_sum[k - 17],
+    }
+}
+
+fn u32_plane(p: &PixelSums, k: usize) -> u32 {
+    match k {
+        0 => p.phases,
+        1 => p.camera_rays,
+        _ => p.replicate_phases[k - 2],
+    }
+}
+
+fn u32_plane_mut(p: &mut PixelSums, k: usize) -> &mut u32 {
+    match k {
+        0 => &mut p.phases,
+        1 => &mut p.camera_rays,
+        _ => &mut p.replicate_phases[k - 2],
     }
 }
 
@@ -110,10 +131,11 @@ pub fn encode_delta(current: &Accumulator, base: &Accumulator, compression: Comp
     raw.extend_from_slice(&(n as u32).to_le_bytes());
     raw.extend_from_slice(&layout);
     let pairs = current.pixels.iter().zip(&base.pixels);
-    let counts: Vec<[u8; 4]> = pairs.clone().map(|(c, b)| (c.phases - b.phases).to_le_bytes()).collect();
-    push_shuffled(&mut raw, &counts);
-    let counts: Vec<[u8; 4]> = pairs.clone().map(|(c, b)| (c.camera_rays - b.camera_rays).to_le_bytes()).collect();
-    push_shuffled(&mut raw, &counts);
+    for k in 0..U32_PLANES {
+        let counts: Vec<[u8; 4]> =
+            pairs.clone().map(|(c, b)| (u32_plane(c, k) - u32_plane(b, k)).to_le_bytes()).collect();
+        push_shuffled(&mut raw, &counts);
+    }
     let mut plane: Vec<[u8; 8]> = Vec::with_capacity(n);
     for k in 0..F64_PLANES {
         plane.clear();
@@ -165,14 +187,15 @@ pub fn apply_delta(bytes: &[u8], sums: &mut Accumulator) -> Result<DeltaSummary,
         )));
     }
     let body = &raw[8 + layout.len()..];
-    let (phases, rest) = body.split_at(4 * n);
-    let (rays, rest) = rest.split_at(4 * n);
+    let (counts, rest) = body.split_at(4 * n * U32_PLANES);
     let (planes, aux_planes) = rest.split_at(8 * n * F64_PLANES);
     let values: Vec<Vec<f64>> = (0..F64_PLANES)
         .map(|k| unshuffle::<8>(&planes[8 * n * k..8 * n * (k + 1)], n).into_iter().map(f64::from_le_bytes).collect())
         .collect();
     for (k, plane) in values.iter().enumerate() {
-        if let Some((i, v)) = plane.iter().enumerate().find(|(_, v)| !v.is_finite() || (k >= 12 && **v < 0.0)) {
+        if let Some((i, v)) =
+            plane.iter().enumerate().find(|(_, v)| !v.is_finite() || (SQUARE_PLANES.contains(&k) && **v < 0.0))
+        {
             return Err(DeltaError(format!("pixel {i} has an invalid sum ({v})")));
         }
     }
@@ -186,7 +209,9 @@ pub fn apply_delta(bytes: &[u8], sums: &mut Accumulator) -> Result<DeltaSummary,
             return Err(DeltaError(format!("pixel {i} has an invalid auxiliary sum ({v})")));
         }
     }
-    let (phases, rays) = (unshuffle::<4>(phases, n), unshuffle::<4>(rays, n));
+    let counts: Vec<Vec<u32>> = (0..U32_PLANES)
+        .map(|k| unshuffle::<4>(&counts[4 * n * k..4 * n * (k + 1)], n).into_iter().map(u32::from_le_bytes).collect())
+        .collect();
     let aux = sums.aux.values_mut();
     for (k, plane) in aux_values.iter().enumerate() {
         for (i, v) in plane.iter().enumerate() {
@@ -195,10 +220,10 @@ pub fn apply_delta(bytes: &[u8], sums: &mut Accumulator) -> Result<DeltaSummary,
     }
     let mut pixel_phases = 0u64;
     for (i, p) in sums.pixels.iter_mut().enumerate() {
-        let dp = u32::from_le_bytes(phases[i]);
-        p.phases += dp;
-        p.camera_rays += u32::from_le_bytes(rays[i]);
-        pixel_phases += dp as u64;
+        pixel_phases += counts[0][i] as u64;
+        for (k, plane) in counts.iter().enumerate() {
+            *u32_plane_mut(p, k) += plane[i];
+        }
         for (k, plane) in values.iter().enumerate() {
             *f64_plane_mut(p, k) += plane[i];
         }
@@ -222,7 +247,7 @@ mod tests {
         for i in 0..n {
             for j in 0..phases {
                 let v = Rgb::splat(seed + (i as f32 * 0.37 + j as f32 * 1.3).sin().abs());
-                a.add_phase(i, &[v, v * 0.5, v * 0.25, Rgb::ZERO], 1);
+                a.add_phase(i, &[v, v * 0.5, v * 0.25, Rgb::ZERO], 1, j as usize % REPLICATES);
                 let part: Vec<f32> = (0..aux.channels()).map(|c| v.x * 0.1 * (c + 1) as f32).collect();
                 a.aux.add_phase(i, &part);
             }
@@ -239,7 +264,9 @@ mod tests {
             let summary = apply_delta(&encode_delta(&current, &base, compression), &mut receiver).unwrap();
             assert_eq!(summary.pixel_phases, 200);
             for (r, c) in receiver.pixels.iter().zip(&current.pixels) {
-                assert_eq!((r.phases, r.camera_rays), (c.phases, c.camera_rays));
+                for k in 0..U32_PLANES {
+                    assert_eq!(u32_plane(r, k), u32_plane(c, k));
+                }
                 for k in 0..F64_PLANES {
                     assert!((f64_plane(r, k) - f64_plane(c, k)).abs() <= 1e-12 * f64_plane(c, k).abs().max(1.0));
                 }

@@ -20,7 +20,7 @@ use super::radius::RadiusSchedule;
 use crate::accumulation::{auxiliary::add_phase_to, AuxLayout, AuxSums, PixelSums};
 use crate::color::Rgb;
 use crate::integrator::{Layer, LayerValues};
-use crate::sampling::{Pass, Sampler};
+use crate::sampling::{replicate_of, Sampler};
 use crate::scene::Scene;
 use crate::spectrum::{band_values, PhaseSpectrum, Wavelength};
 use rayon::iter::Either;
@@ -50,7 +50,7 @@ impl Phase<'_> {
     /// to `visit`.
     #[inline]
     pub fn trace_light_path(&self, index: u64, stats: &mut ForwardStats, visit: &mut impl FnMut(&LightVertex)) {
-        let mut s = Sampler::new(self.seed, Pass::Light, self.key, index);
+        let mut s = Sampler::light(self.seed, self.key, index);
         trace_light_path(self.scene, self.max_depth, &self.spectrum, index, &mut s, stats, visit);
     }
 
@@ -90,6 +90,8 @@ pub struct PhaseBuffers {
     ghost: Option<usize>,
     /// The camera pass's layer values per local pixel.
     camera: Vec<LayerValues>,
+    /// The replicate of each local pixel's quasi-random sequence its phase was drawn from.
+    replicates: Vec<u8>,
     /// The camera pass's auxiliary values, channels per local pixel (empty without auxiliary layers).
     aux_camera: Vec<f32>,
     /// The camera pass's photons, one list per `chunk` local pixels, in pixel order.
@@ -123,6 +125,7 @@ impl PhaseBuffers {
             ghost: aux.offset(crate::ghost::GHOST_LAYER),
             aux,
             camera: Vec::new(),
+            replicates: Vec::new(),
             aux_camera: Vec::new(),
             photon_lists: Vec::new(),
             chunk: PIXEL_CHUNK,
@@ -139,6 +142,8 @@ impl PhaseBuffers {
     pub fn resize(&mut self, pixels: usize) {
         self.camera.clear();
         self.camera.resize(pixels, [Rgb::ZERO; 4]);
+        self.replicates.clear();
+        self.replicates.resize(pixels, 0);
         self.aux_camera.clear();
         self.aux_camera.resize(pixels * self.aux.channels(), 0.0);
         self.chunk = if self.single_list { pixels.max(1) } else { PIXEL_CHUNK };
@@ -148,14 +153,15 @@ impl PhaseBuffers {
     /// Bytes held.
     pub fn capacity_bytes(&self) -> usize {
         self.camera.capacity() * std::mem::size_of::<LayerValues>()
+            + self.replicates.capacity()
             + self.aux_camera.capacity() * 4
             + self.photon_lists.iter().map(Vec::capacity).sum::<usize>() * std::mem::size_of::<BackwardPhoton>()
     }
 
     /// Stage 1: one camera path per local pixel; `pixels[i]` is local pixel i's image pixel (None: the whole
-    /// image, local pixel i being image pixel i), and `next_phase(i)` its phase number j for the radius
-    /// schedule. `map` is the previous phase's, whose photon buffer a single list takes back. Returns the rays
-    /// traced and the photons stored.
+    /// image, local pixel i being image pixel i), and `next_phase(i)` its phase number j, which sets the radius
+    /// and the point and replicate of the pixel's quasi-random sequences. `map` is the previous phase's, whose
+    /// photon buffer a single list takes back. Returns the rays traced and the photons stored.
     pub fn camera_pass(
         &mut self,
         exec: Executor,
@@ -176,11 +182,12 @@ impl PhaseBuffers {
         let chunks = self
             .camera
             .par_chunks_mut(chunk_len)
+            .zip(self.replicates.par_chunks_mut(chunk_len))
             .zip(self.photon_lists.par_iter_mut())
             .zip(aux_chunks(&mut self.aux_camera, channels, count, chunk_len))
             .enumerate();
         exec.run(chunks)
-            .map(|(chunk, ((values, photons), mut aux))| {
+            .map(|(chunk, (((values, replicate), photons), mut aux))| {
                 photons.clear();
                 // A camera path stores at most one photon per diffuse vertex it continues from: at full size
                 // from the first phase, a list never grows, and holds what `--memory-limit` assumed.
@@ -189,15 +196,17 @@ impl PhaseBuffers {
                 for (i, out) in values.iter_mut().enumerate() {
                     let local = chunk * chunk_len + i;
                     let pixel = pixels.map_or(local as u32, |p| p[local]);
+                    let j = next_phase(local);
+                    replicate[i] = replicate_of(j).0 as u8;
                     let bs = BackwardSettings {
                         max_depth: phase.max_depth,
                         backward_diffuse_depth: bdd,
                         radius: phase.radius,
-                        phase: next_phase(local),
+                        phase: j,
                         spectrum: phase.spectrum,
                     };
                     let (x, y) = (pixel % cam.width, pixel / cam.width);
-                    let mut s = Sampler::new(phase.seed, Pass::Camera, phase.key, pixel as u64);
+                    let mut s = Sampler::camera(phase.seed, phase.key, pixel as u64, j);
                     let ray = cam.generate_ray(x, y, s.next_2d(), s.next_2d());
                     let (v, ghost) =
                         trace_camera_path(phase.scene, &bs, local as u32, ray, &mut s, &mut stats, &mut |b| {
@@ -241,18 +250,20 @@ impl PhaseBuffers {
         let chunks = self
             .camera
             .par_chunks(chunk_len)
+            .zip(self.replicates.par_chunks(chunk_len))
             .zip(sums.par_chunks_mut(chunk_len))
             .zip(gathered.values_mut().par_chunks_mut(chunk_len * stride))
             .zip(aux_chunks(&mut self.aux_camera, channels, pixels, chunk_len))
             .zip(aux_chunks(aux_sums.values_mut(), channels, pixels, chunk_len))
             .enumerate();
-        exec.run(chunks).for_each(|(chunk, ((((camera, sums), gathered), mut aux), mut aux_sums))| {
-            for (i, (value, sums)) in camera.iter().zip(sums).enumerate() {
+        exec.run(chunks).for_each(|(chunk, (((((camera, replicates), sums), gathered), mut aux), mut aux_sums))| {
+            for (i, ((value, &replicate), sums)) in camera.iter().zip(replicates).zip(sums).enumerate() {
                 let local = chunk * chunk_len + i;
                 let aux =
                     aux.as_deref_mut().map(|a| (&mut a[i * channels..(i + 1) * channels], phase.wavelength_of(local)));
                 let aux_sums = aux_sums.as_deref_mut().map(|s| &mut s[i * channels..(i + 1) * channels]);
-                closing.close_pixel(value, Some(&mut gathered[i * stride..(i + 1) * stride]), aux, sums, aux_sums);
+                let gathered = Some(&mut gathered[i * stride..(i + 1) * stride]);
+                closing.close_pixel(value, replicate as usize, gathered, aux, sums, aux_sums);
             }
         });
     }
@@ -278,13 +289,14 @@ pub struct Closing {
 
 impl Closing {
     /// Closes one pixel: its phase value L_ij is the camera pass's `value` plus the `gathered` light over the
-    /// light paths (DESIGN §1 step 4); the auxiliary channels (`aux`, started by `start_aux`, and the pixel's
-    /// wavelength) get their gathered light too and the spectral bands of the phase total. Leaves `gathered`
-    /// zero.
+    /// light paths (DESIGN §1 step 4), counted in the pixel's `replicate`; the auxiliary channels (`aux`,
+    /// started by `start_aux`, and the pixel's wavelength) get their gathered light too and the spectral bands
+    /// of the phase total. Leaves `gathered` zero.
     #[inline]
     pub fn close_pixel(
         &self,
         value: &LayerValues,
+        replicate: usize,
         gathered: Option<&mut [f32]>,
         aux: Option<(&mut [f32], Option<Wavelength>)>,
         sums: &mut PixelSums,
@@ -297,7 +309,7 @@ impl Closing {
             v[Layer::Caustic as usize] += Rgb::new(g[3], g[4], g[5]) * self.inv_n;
             gathered_aux = &g[6..];
         }
-        sums.add_phase(&v, 1);
+        sums.add_phase(&v, 1, replicate);
         if let (Some((aux, wavelength)), Some(aux_sums)) = (aux, aux_sums) {
             for (a, g) in aux.iter_mut().zip(gathered_aux) {
                 *a += g * self.inv_n;

@@ -11,8 +11,8 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// 2: the sums' auxiliary layers (the ghost layer) are kept. 3: the settings hold the spectral-output bands.
-/// 4: the totals count the light paths counted against photon maps.
-const FORMAT: u32 = 4;
+/// 4: the totals count the light paths counted against photon maps. 5: the sums keep their replicates.
+const FORMAT: u32 = 5;
 
 /// Everything a resumed run continues from.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -121,7 +121,7 @@ mod tests {
         let ghost = AuxLayout::new(vec![crate::accumulation::AuxLayer { name: "ghost".into(), channels: 3 }]);
         let mut a = Accumulator::with_aux(8, 4, ghost);
         for i in 0..32 {
-            a.add_phase(i, &[Rgb::splat(i as f32 * 0.1), Rgb::ONE, Rgb::ZERO, Rgb::splat(0.3)], 1);
+            a.add_phase(i, &[Rgb::splat(i as f32 * 0.1), Rgb::ONE, Rgb::ZERO, Rgb::splat(0.3)], 1, i % 4);
             a.aux.add_phase(i, &[0.01 * i as f32, 0.5, 0.25]);
         }
         let settings = RenderSettings {

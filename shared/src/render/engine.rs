@@ -7,7 +7,7 @@ use crate::accumulation::{Accumulator, AuxLayout};
 use crate::integrator::path_tracer;
 use crate::pbpm::phase::{start_aux, Closing};
 use crate::pbpm::{Executor, GatherBuffer, PhaseBuffers, PhotonMap};
-use crate::sampling::{Pass, Sampler};
+use crate::sampling::{replicate_of, Sampler};
 use crate::scene::Scene;
 use crate::spectrum::PhaseSpectrum;
 
@@ -95,9 +95,10 @@ impl<'s> Engine<'s> {
         let (channels, ghost_offset) = (aux.channels(), aux.offset(crate::ghost::GHOST_LAYER));
         let closing = Closing { inv_n: 0.0, bands: aux.bands() };
         let mut aux_phase = vec![0.0; channels];
+        let (replicate, _) = replicate_of(phase);
         for pixel in 0..cam.pixel_count() {
             let (x, y) = ((pixel % cam.width as usize) as u32, (pixel / cam.width as usize) as u32);
-            let mut s = Sampler::new(self.settings.seed, Pass::Path, phase, pixel as u64);
+            let mut s = Sampler::path(self.settings.seed, pixel as u64, phase);
             let ray = cam.generate_ray(x, y, s.next_2d(), s.next_2d());
             // Paths of a path tracer never join: each draws its own wavelength.
             let spectrum = if spectral {
@@ -114,7 +115,7 @@ impl<'s> Engine<'s> {
             } else {
                 (Some((&mut aux_phase[..], spectrum.wavelength(0))), Some(aux_sums))
             };
-            closing.close_pixel(&v, None, aux, &mut self.sums.pixels[pixel], aux_sums);
+            closing.close_pixel(&v, replicate, None, aux, &mut self.sums.pixels[pixel], aux_sums);
         }
         PhaseReport { phase, backward_rays: stats.rays, ..Default::default() }
     }

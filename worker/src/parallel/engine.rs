@@ -102,8 +102,10 @@ impl EngineConfig {
         // threads add into it; each holds (indirect, caustic) RGB in f32 and the auxiliary channels.
         let gather_buffers = 1 + (self.shared_maps || self.threads_per_group > 1) as usize;
         let gathered = gather_buffers * (6 * 4 + aux.phase_bytes_per_pixel());
-        // The camera pass's values and the sums; the mask and the phases before the deal take 8 bytes.
+        // The camera pass's values and replicate, and the sums; the mask and the phases before the deal take 8
+        // bytes.
         let per_pixel = std::mem::size_of::<LayerValues>()
+            + 1
             + std::mem::size_of::<PixelSums>()
             + 8
             + gathered
