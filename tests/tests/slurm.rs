@@ -42,10 +42,13 @@ impl Job {
         let script = repo_root().join("deploy/slurm/photonfarm.sbatch");
         let mut args = vec!["--parsable", "--nodes=1", "--time=5", script.to_str().unwrap(), "cornell.toml"];
         args.extend_from_slice(render_args);
+        // A port free now rather than the script's default, which another program on this machine may hold.
+        let port = std::net::TcpListener::bind("0.0.0.0:0").unwrap().local_addr().unwrap().port();
         let o = Command::new("sbatch")
             .args(&args)
             .current_dir(dir)
             .env("PHOTONFARM_BIN", &bin)
+            .env("PHOTONFARM_PORT", port.to_string())
             .env("HWLOC_SYNTHETIC", TWO_NODES)
             .env("HWLOC_THISSYSTEM", "1")
             .output()
