@@ -2,9 +2,10 @@
 //! single-process engine, a worker killed or frozen mid-run is reported and the run completes with the rest,
 //! and hostile connections to the coordinator are refused without disturbing the job.
 
+mod common;
+
+use common::{assert_same_image, record};
 use end_to_end::{binary, cornell_at, repo_root, scratch_dir};
-use photonfarm::image_io::exr_file::{find_layer, read_exr};
-use photonfarm::render::images::luminance_of;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -21,39 +22,6 @@ fn run_ok(mut c: Command) -> std::process::Output {
     let o = c.output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     o
-}
-
-fn record(dir: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(dir.join("run.json")).unwrap()).unwrap()
-}
-
-/// Mean over pixels of (Y_a − Y_b)² / (SEM_a² + SEM_b²) from two outputs' `total` and `sem` layers: about 1
-/// when both estimate the same image.
-fn mean_z2(a: &Path, b: &Path) -> f64 {
-    let (pa, pb) = (a.join("image.exr"), b.join("image.exr"));
-    let (la, lb) = (read_exr(&pa).unwrap(), read_exr(&pb).unwrap());
-    let (ta, sa) = (find_layer(&la, &pa, "total").unwrap(), find_layer(&la, &pa, "sem").unwrap());
-    let (tb, sb) = (find_layer(&lb, &pb, "total").unwrap(), find_layer(&lb, &pb, "sem").unwrap());
-    let n = ta.rgb.len();
-    (0..n)
-        .map(|i| {
-            let d = luminance_of(ta.rgb[i]) - luminance_of(tb.rgb[i]);
-            let s2 = (sa.rgb[i][0] as f64).powi(2) + (sb.rgb[i][0] as f64).powi(2);
-            if s2 > 0.0 {
-                d * d / s2
-            } else {
-                0.0
-            }
-        })
-        .sum::<f64>()
-        / n as f64
-}
-
-/// Asserts that two outputs estimate the same image: mean z² below 1.5 (about 1 when they agree).
-fn assert_same_image(a: &Path, b: &Path, what: &str) {
-    let z2 = mean_z2(a, b);
-    eprintln!("{what}: mean z² {z2:.3}");
-    assert!(z2 < 1.5, "{what}: mean z² {z2:.3}, the images disagree beyond their error estimates");
 }
 
 #[test]
