@@ -448,13 +448,13 @@ fn ghost_light_gathered_into_ghost_photons_reaches_the_ghost_layer_as_the_path_t
     println!("room behind a window: PBPM's ghost / the path tracer's = {:.4}", pbpm / path);
 }
 
-/// The bytes per pixel the single-threaded engine reported before auxiliary layers existed: sums, phase
-/// values, gathered light, and a photon map reserved for one photon per diffuse vertex of each camera path.
+/// The bytes per pixel the single-threaded engine holds without auxiliary layers: sums, phase values and
+/// replicate, gathered light, and a photon map reserved for one photon per diffuse vertex of each camera path.
 fn bytes_per_pixel_without_auxiliary_layers(scene: &Scene) -> f64 {
     let pixels = scene.camera.pixel_count();
     let mut map = PhotonMap::new();
     map.reserve(pixels * scene.render.backward_diffuse_depth as usize);
-    let per_pixel = std::mem::size_of::<PixelSums>() + std::mem::size_of::<LayerValues>() + 2 * 12;
+    let per_pixel = std::mem::size_of::<PixelSums>() + std::mem::size_of::<LayerValues>() + 1 + 2 * 12;
     assert_eq!(std::mem::size_of::<[Rgb; 2]>(), 2 * 12);
     (pixels * per_pixel + map.capacity_bytes()) as f64 / pixels as f64
 }

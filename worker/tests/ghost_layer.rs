@@ -134,7 +134,9 @@ fn gather_buffers(config: &EngineConfig) -> usize {
 fn estimate_without_auxiliary_layers(config: &EngineConfig, backward_diffuse_depth: u32) -> f64 {
     let coverage = if config.masks { 1 } else { config.groups };
     let photon = 2 * std::mem::size_of::<photonfarm::pbpm::BackwardPhoton>() + 2 * 8 * (4 + 8) + 2;
+    // The camera pass's values and replicate, the sums, the mask and the phases before the deal.
     let per_pixel = std::mem::size_of::<photonfarm::integrator::LayerValues>()
+        + 1
         + std::mem::size_of::<PixelSums>()
         + 8
         + 24 * gather_buffers(config)

