@@ -750,7 +750,8 @@ fn save(plot: &Plot, dir: &Path, name: &str) -> Result<[PathBuf; 2]> {
         draw(plot, &root)?;
         root.present().map_err(drawing)?;
     }
-    std::fs::write(&svg_path, svg).with_context(|| format!("cannot write {}", svg_path.display()))?;
+    write_atomically(&svg_path, |path| Ok(std::fs::write(path, &svg)?))
+        .with_context(|| format!("cannot write {}", svg_path.display()))?;
 
     let png_path = dir.join(format!("{name}.png"));
     let (width, height) = CHART_SIZE;
@@ -760,8 +761,20 @@ fn save(plot: &Plot, dir: &Path, name: &str) -> Result<[PathBuf; 2]> {
         draw(plot, &root)?;
         root.present().map_err(drawing)?;
     }
-    write_png(&png_path, &rgb).with_context(|| format!("cannot write {}", png_path.display()))?;
+    write_atomically(&png_path, |path| write_png(path, &rgb))
+        .with_context(|| format!("cannot write {}", png_path.display()))?;
     Ok([svg_path, png_path])
+}
+
+/// Writes `path` through `write` into a temporary file beside it, then renames it into place: the bench's live
+/// page serves the charts while they are redrawn, and must never send half a file.
+fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = PathBuf::from(tmp);
+    write(&tmp)?;
+    std::fs::rename(&tmp, path)?;
+    Ok(())
 }
 
 /// plotters' own PNG encoder would pull in the `image` crate; the workspace already has `png`.

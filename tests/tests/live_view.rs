@@ -399,3 +399,51 @@ fn a_headless_browser_shows_the_image_and_the_error_chart_of_a_running_render() 
     assert!(blue > 250 && orange > 250, "the chart is not drawn: {blue} blue and {orange} orange pixels");
     let _ = std::fs::remove_dir_all(dir);
 }
+
+#[test]
+fn the_bench_page_lists_the_runs_and_serves_each_chart_once_drawn() {
+    let out = scratch_dir("live-bench");
+    let mut child = Command::new(binary("coordinator"))
+        .args(["bench", "--time", "1", "--scenes", "cornell", "--methods", "pbpm,sync", "--threads", "1", "--serve"])
+        .arg("--out")
+        .arg(&out)
+        .current_dir(repo_root())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
+    let first = lines.next().unwrap().unwrap();
+    let port: u16 = first
+        .strip_prefix("live page: http://127.0.0.1:")
+        .and_then(|rest| rest.split('/').next()?.parse().ok())
+        .unwrap_or_else(|| panic!("the first line gives the page's URL: {first}"));
+    let drain = std::thread::spawn(move || lines.map_while(Result::ok).count());
+    assert!(http(port, "GET", "/", &[], "").text().contains("photonfarm: bench"));
+    let deadline = Instant::now() + Duration::from_secs(120);
+    let mut seen_running = false;
+    let state = loop {
+        let s = http(port, "GET", "/state.json", &[], "").json();
+        let runs = s["runs"].as_array().unwrap().clone();
+        assert_eq!(runs.len(), 2, "{s}");
+        assert_eq!(runs[0]["label"], "cornell pbpm 1 threads, run 1");
+        seen_running |= runs.iter().any(|r| r["state"] == "running");
+        if s["finished"] == true {
+            break s;
+        }
+        assert!(s["failed"].is_null() && Instant::now() < deadline, "{s}");
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    assert!(seen_running, "a run was shown running");
+    assert!(state["runs"].as_array().unwrap().iter().all(|r| r["state"] == "done" && r["result"].is_string()));
+    let charts: Vec<&str> = state["charts"].as_array().unwrap().iter().map(|c| c.as_str().unwrap()).collect();
+    assert!(charts.contains(&"error-vs-time-cornell.png"), "{charts:?}");
+    for c in &charts {
+        let reply = http(port, "GET", &format!("/charts/{c}"), &[], "");
+        assert_eq!((reply.status, decode_png(&reply.body).0), (200, 1024), "{c}");
+    }
+    assert_eq!(http(port, "GET", "/charts/results.csv", &[], "").status, 404, "only the charts are served");
+    assert!(child.wait().unwrap().success());
+    drain.join().unwrap();
+    let _ = std::fs::remove_dir_all(out);
+}
