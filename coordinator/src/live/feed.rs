@@ -17,8 +17,7 @@ const MIN_INTERVAL: Duration = Duration::from_millis(250);
 const COPY_COST_FACTOR: u32 = 50;
 
 /// Where the run is.
-#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub enum RunState {
     Running,
     /// Stopped by its stop rule, Ctrl-C or the page: the last phases are being collected and written.
