@@ -5,8 +5,10 @@
 
 use crate::bench_tables::{write_table, ResultsRow, SeriesRow};
 use crate::cli::BenchArgs;
+use crate::live::bench_page::BenchLive;
 use crate::output_folder;
 use anyhow::{bail, Context, Result};
+use photonfarm::protocol::Secret;
 use photonfarm::render::method::Processes;
 use photonfarm::render::{Estimator, Method};
 use std::fmt::Write as _;
@@ -15,6 +17,8 @@ use worker::machine;
 
 /// Seconds per run and the methods of `--quick`: every method once on both scenes in under five minutes.
 const QUICK_TIME: f64 = 8.0;
+/// How long the live page stays up after the bench, so an open page shows its end.
+const PAGE_LINGER: std::time::Duration = std::time::Duration::from_secs(2);
 
 /// One benchmark run, read back from its `run.json`: its row of results.csv, its steps for series.csv and,
 /// for distributed runs, its traffic.
@@ -41,21 +45,22 @@ impl Run {
         (r.light_paths > 0 && r.map_light_paths > 0).then(|| r.map_light_paths as f64 / r.light_paths as f64)
     }
 
-    /// One progress line per finished run.
-    fn announce(&self, done: usize, runs: usize) {
+    /// What the run gave, in one line.
+    fn summary(&self) -> String {
         let r = &self.row;
-        eprintln!(
-            "[{done}/{runs}] {} {} {} threads, run {}: {:.2} M rays in {:.1} s, δ unlit {:.2}%{}",
-            r.scene,
-            r.method,
-            r.threads,
-            r.repeat + 1,
+        format!(
+            "{:.2} M rays in {:.1} s, δ unlit {:.2}%{}",
             self.rays() / 1e6,
             r.wall_s,
             100.0 * r.delta_unlit,
             r.true_unlit.map(|t| format!(", true error {:.2}%", 100.0 * t)).unwrap_or_default()
-        );
+        )
     }
+}
+
+/// A run of the plan in words: scene, method, threads and repeat.
+fn label(scene: &str, method: Method, threads: usize, repeat: u32) -> String {
+    format!("{scene} {method} {threads} threads, run {}", repeat + 1)
 }
 
 /// The scene's reference image, if one is shipped: the path tracer's, or PBPM's where the path tracer cannot
@@ -296,17 +301,24 @@ pub fn run(mut args: BenchArgs) -> Result<()> {
         plan.len() as f64 * (args.time + 0.7) / 60.0,
         dir.display()
     );
-    let mut runs: Vec<Run> = Vec::new();
-    for (i, (scene, method, t, repeat)) in plan.iter().enumerate() {
-        let Some(run) = run_one(scene, *method, *t, *repeat, &args, &dir)? else { continue };
-        run.announce(i + 1, plan.len());
-        runs.push(run);
-        // Written after every run, so an interrupted bench keeps what it measured.
-        let rows: Vec<&ResultsRow> = runs.iter().map(|r| &r.row).collect();
-        write_table(&dir.join("results.csv"), &rows)?;
-        let steps: Vec<&SeriesRow> = runs.iter().flat_map(|r| &r.series).collect();
-        write_table(&dir.join("series.csv"), &steps)?;
+    let page = match args.serve {
+        Some(addr) => {
+            let secret = match &args.secret_file {
+                Some(f) => Some(Secret::from_file(f)?),
+                None => Secret::from_env()?,
+            };
+            let labels = plan.iter().map(|(s, m, t, r)| label(s, *m, *t, *r)).collect();
+            let page = BenchLive::start(addr, secret, labels, dir.join("charts"))?;
+            println!("live page: {}  (results in {})", page.url, dir.display());
+            Some(page)
+        }
+        None => None,
+    };
+    let result = run_plan(&plan, &args, &dir, page.as_ref());
+    if let Some(page) = &page {
+        page.end(result.as_ref().err().map(|e| format!("{e:#}")));
     }
+    let runs = result?;
     let report = report(&runs, &args, &threads);
     println!("{report}");
     let path = dir.join("report.md");
@@ -314,7 +326,45 @@ pub fn run(mut args: BenchArgs) -> Result<()> {
     let charts = crate::charts::write_charts(&dir)?;
     println!("{} charts in {}", charts.len(), dir.join("charts").display());
     println!("wrote {}", dir.display());
+    if page.is_some() {
+        std::thread::sleep(PAGE_LINGER);
+    }
     Ok(())
+}
+
+/// Runs every configuration of `plan` in turn, writing results.csv and series.csv after each; with a live page,
+/// shows each run's state and redraws the charts after each.
+fn run_plan(
+    plan: &[(String, Method, usize, u32)],
+    args: &BenchArgs,
+    dir: &Path,
+    page: Option<&BenchLive>,
+) -> Result<Vec<Run>> {
+    let mut runs: Vec<Run> = Vec::new();
+    for (i, (scene, method, t, repeat)) in plan.iter().enumerate() {
+        if let Some(p) = page {
+            p.running(i);
+        }
+        let Some(run) = run_one(scene, *method, *t, *repeat, args, dir)? else { continue };
+        eprintln!("[{}/{}] {}: {}", i + 1, plan.len(), label(scene, *method, *t, *repeat), run.summary());
+        let summary = run.summary();
+        runs.push(run);
+        // Written after every run, so an interrupted bench keeps what it measured.
+        let rows: Vec<&ResultsRow> = runs.iter().map(|r| &r.row).collect();
+        write_table(&dir.join("results.csv"), &rows)?;
+        let steps: Vec<&SeriesRow> = runs.iter().flat_map(|r| &r.series).collect();
+        write_table(&dir.join("series.csv"), &steps)?;
+        if let Some(p) = page {
+            let charts = crate::charts::write_charts(dir)?;
+            let pngs = charts
+                .iter()
+                .filter(|c| c.extension().is_some_and(|e| e == "png"))
+                .filter_map(|c| c.file_name().map(|n| n.to_string_lossy().into_owned()))
+                .collect();
+            p.done(i, summary, pngs);
+        }
+    }
+    Ok(runs)
 }
 
 fn pct(x: Option<f64>) -> String {
@@ -618,6 +668,8 @@ mod tests {
             repeats: 1,
             seed: 1,
             out: None,
+            serve: None,
+            secret_file: None,
         };
         let report = report(&runs, &args, &[1, 2]);
         assert!(report.contains("\nTwo-level against sync and async:\n\n- cornell, 2 threads:"), "{report}");

@@ -1,7 +1,10 @@
 //! `coordinator charts DIR`: charts of a bench folder's `results.csv` and `series.csv`, written to `DIR/charts/`
 //! as SVG and PNG. The main curves use the error over pixels that do not see a light directly (the `_unlit`
-//! columns), where δ is meaningful. Every repeat of a series is drawn as its own line in its key's colour, so
-//! the spread between runs stays visible; only the speedup and memory lines are means over repeats.
+//! columns), where δ is meaningful. Every method has one colour in every chart and every thread count (or, in
+//! the charts over cores, every scene) one marker shape; δ is drawn solid and the true error dashed. Every
+//! repeat of a series is its own line, so the spread between runs stays visible; only the speedup and memory
+//! lines are means over repeats. A scene with more (method, threads) keys than can be told apart gets one chart
+//! per thread count.
 
 use crate::bench_tables::{read_table, ResultsRow, SeriesRow};
 use crate::cli::ChartsArgs;
@@ -25,7 +28,13 @@ const FONT: &str = "sans-serif";
 static FONT_DATA: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
 const UNLIT: &str = "pixels that do not see a light directly";
 
-/// Line colours (matplotlib's "tab10" without its grey, which the guide lines use); they repeat after nine keys.
+/// Most (method, threads) keys in one error chart: past this, a scene's error charts are split by thread count.
+const MAX_KEYS_PER_CHART: usize = 12;
+/// Most markers along one line: enough to tell its shape, few enough not to hide the line.
+const MARKERS_PER_LINE: usize = 9;
+
+/// Line colours (matplotlib's "tab10" without its grey, which the guide lines use): one per method, in the order
+/// of `Method::ALL`, so a method has the same colour in every chart.
 const PALETTE: [RGBColor; 9] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
@@ -57,16 +66,21 @@ pub fn write_charts(dir: &Path) -> Result<Vec<PathBuf>> {
     let out = dir.join("charts");
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
 
+    let markers = ThreadMarkers::of(series.iter().map(|r| r.threads));
     let mut plots = Vec::new();
     for scene in first_appearances(series.iter().map(|r| r.scene.as_str())) {
         let rows: Vec<&SeriesRow> = series.iter().filter(|r| r.scene == scene).collect();
         let part = file_name_part(scene);
-        plots.push((format!("error-vs-time-{part}"), error_vs_time(scene, &rows)));
-        plots.push((format!("error-vs-rays-{part}"), error_vs_rays(scene, &rows)));
-        plots.push((format!("calibration-{part}"), calibration(scene, &rows)));
+        for (suffix, title, rows) in chart_groups(&rows) {
+            let title = format!("{scene}{title}");
+            plots.push((format!("error-vs-time-{part}{suffix}"), error_vs_time(&title, &rows, &markers)));
+            plots.push((format!("error-vs-rays-{part}{suffix}"), error_vs_rays(&title, &rows, &markers)));
+            plots.push((format!("calibration-{part}{suffix}"), calibration(&title, &rows, &markers)));
+        }
     }
-    plots.push(("speedup-vs-cores".to_string(), speedup_vs_cores(&results)));
-    plots.push(("memory-vs-cores".to_string(), memory_vs_cores(&results)));
+    let scenes = first_appearances(results.iter().map(|r| r.scene.as_str()));
+    plots.push(("speedup-vs-cores".to_string(), speedup_vs_cores(&results, &scenes)));
+    plots.push(("memory-vs-cores".to_string(), memory_vs_cores(&results, &scenes)));
 
     let mut written = Vec::new();
     for (name, plot) in &plots {
@@ -102,12 +116,43 @@ fn file_name_part(name: &str) -> String {
     name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect()
 }
 
-fn colour(i: usize) -> RGBColor {
+/// The method's colour, the same in every chart.
+fn method_colour(method: Method) -> RGBColor {
+    let i = Method::ALL.iter().position(|&m| m == method).unwrap_or(0);
     PALETTE[i % PALETTE.len()]
 }
 
-fn threads_label(method: Method, threads: usize) -> String {
-    format!("{method}, {threads} thread{}", if threads == 1 { "" } else { "s" })
+/// Marker shapes, one per thread count (or scene), in this order.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Marker {
+    Circle,
+    Square,
+    Triangle,
+    Cross,
+    Ring,
+}
+
+const MARKERS: [Marker; 5] = [Marker::Circle, Marker::Square, Marker::Triangle, Marker::Cross, Marker::Ring];
+
+/// The marker of the `i`-th thread count or scene (shapes repeat past five, which the split charts avoid).
+fn marker(i: usize) -> Marker {
+    MARKERS[i % MARKERS.len()]
+}
+
+/// The marker of every thread count of the bench, from the fewest threads up, so that a thread count has the
+/// same marker in every chart.
+struct ThreadMarkers(Vec<usize>);
+
+impl ThreadMarkers {
+    fn of(threads: impl Iterator<Item = usize>) -> Self {
+        let mut t = first_appearances(threads);
+        t.sort_unstable();
+        ThreadMarkers(t)
+    }
+
+    fn get(&self, threads: usize) -> Marker {
+        marker(self.0.iter().position(|&t| t == threads).unwrap_or(0))
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -122,13 +167,27 @@ enum Stroke {
 struct Line {
     colour: RGBColor,
     stroke: Stroke,
+    /// Drawn at a few of the points, or at every point for `Stroke::Points`.
+    marker: Option<Marker>,
     points: Vec<(f64, f64)>,
 }
 
+/// A legend row: a line sample (None: no line), a marker, or both.
 struct LegendEntry {
     text: String,
     colour: RGBColor,
-    stroke: Stroke,
+    stroke: Option<Stroke>,
+    marker: Option<Marker>,
+}
+
+impl LegendEntry {
+    fn line(text: impl Into<String>, colour: RGBColor, stroke: Stroke) -> Self {
+        LegendEntry { text: text.into(), colour, stroke: Some(stroke), marker: None }
+    }
+
+    fn marker(text: impl Into<String>, marker: Marker) -> Self {
+        LegendEntry { text: text.into(), colour: BLACK, stroke: None, marker: Some(marker) }
+    }
 }
 
 struct Axis {
@@ -179,41 +238,71 @@ struct Plot {
 /// A curve drawn from series rows: its stroke and the point of a row, if the row has one.
 type Curve = (Stroke, fn(&SeriesRow) -> Option<(f64, f64)>);
 
-/// One line per (method, threads) and repeat of a scene's series for each curve, coloured by (method, threads),
-/// with one legend entry per (method, threads) that has any point.
-fn series_lines(rows: &[&SeriesRow], curves: &[Curve]) -> (Vec<Line>, Vec<LegendEntry>) {
+/// One line per (method, threads) and repeat of a scene's series for each curve, in the method's colour with the
+/// thread count's marker; the legend has one row per method and one per thread count that have any point.
+fn series_lines(rows: &[&SeriesRow], curves: &[Curve], markers: &ThreadMarkers) -> (Vec<Line>, Vec<LegendEntry>) {
     let mut lines = Vec::new();
-    let mut legend = Vec::new();
     let keys = first_appearances(rows.iter().map(|r| (r.method, r.threads)));
-    for (i, &(method, threads)) in keys.iter().enumerate() {
+    let (mut methods, mut threads_drawn) = (Vec::new(), Vec::new());
+    for &(method, threads) in &keys {
         let of_key: Vec<&SeriesRow> =
             rows.iter().copied().filter(|r| r.method == method && r.threads == threads).collect();
-        let mut any = false;
         for repeat in first_appearances(of_key.iter().map(|r| r.repeat)) {
             for &(stroke, point) in curves {
                 let mut points: Vec<(f64, f64)> =
                     of_key.iter().filter(|r| r.repeat == repeat).filter_map(|r| point(r)).collect();
                 points.sort_by(|a, b| a.0.total_cmp(&b.0));
-                any |= !points.is_empty();
-                lines.push(Line { colour: colour(i), stroke, points });
+                if points.is_empty() {
+                    continue;
+                }
+                methods.push(method);
+                threads_drawn.push(threads);
+                lines.push(Line { colour: method_colour(method), stroke, marker: Some(markers.get(threads)), points });
             }
         }
-        if any {
-            legend.push(LegendEntry { text: threads_label(method, threads), colour: colour(i), stroke: Stroke::Solid });
-        }
     }
+    let mut legend: Vec<LegendEntry> = first_appearances(methods.into_iter())
+        .into_iter()
+        .map(|m| LegendEntry::line(m.name(), method_colour(m), Stroke::Solid))
+        .collect();
+    let mut counts = first_appearances(threads_drawn.into_iter());
+    counts.sort_unstable();
+    legend.extend(
+        counts
+            .into_iter()
+            .map(|t| LegendEntry::marker(format!("{t} thread{}", if t == 1 { "" } else { "s" }), markers.get(t))),
+    );
     (lines, legend)
 }
 
-fn error_vs_time(scene: &str, rows: &[&SeriesRow]) -> Plot {
+/// The (method, threads) keys of rows, split into groups that one chart can tell apart: all of them, or one
+/// group per thread count when there are too many. Each group comes with a file name suffix and a title part.
+fn chart_groups<'a>(rows: &[&'a SeriesRow]) -> Vec<(String, String, Vec<&'a SeriesRow>)> {
+    let keys = first_appearances(rows.iter().map(|r| (r.method, r.threads)));
+    if keys.len() <= MAX_KEYS_PER_CHART {
+        return vec![(String::new(), String::new(), rows.to_vec())];
+    }
+    let mut counts = first_appearances(rows.iter().map(|r| r.threads));
+    counts.sort_unstable();
+    counts
+        .into_iter()
+        .map(|t| {
+            let of: Vec<&SeriesRow> = rows.iter().copied().filter(|r| r.threads == t).collect();
+            (format!("-{t}t"), format!(", {t} thread{}", if t == 1 { "" } else { "s" }), of)
+        })
+        .collect()
+}
+
+fn error_vs_time(title: &str, rows: &[&SeriesRow], markers: &ThreadMarkers) -> Plot {
     let (lines, mut legend) = series_lines(
         rows,
         &[(Stroke::Solid, |r| Some((r.time_s, r.delta_unlit))), (Stroke::Dashed, |r| Some((r.time_s, r.true_unlit?)))],
+        markers,
     );
-    legend.push(LegendEntry { text: "solid: δ (estimated)".into(), colour: BLACK, stroke: Stroke::Solid });
-    legend.push(LegendEntry { text: "dashed: true error".into(), colour: BLACK, stroke: Stroke::Dashed });
+    legend.push(LegendEntry::line("δ (estimated)", BLACK, Stroke::Solid));
+    legend.push(LegendEntry::line("true error", BLACK, Stroke::Dashed));
     Plot {
-        title: format!("{scene}: relative error against time, {UNLIT}"),
+        title: format!("{title}: relative error against time, {UNLIT}"),
         x: Axis::log("wall time (s)"),
         y: Axis::log("relative error"),
         lines,
@@ -223,10 +312,10 @@ fn error_vs_time(scene: &str, rows: &[&SeriesRow]) -> Plot {
     }
 }
 
-fn error_vs_rays(scene: &str, rows: &[&SeriesRow]) -> Plot {
-    let (lines, legend) = series_lines(rows, &[(Stroke::Solid, |r| Some((r.rays as f64, r.delta_unlit)))]);
+fn error_vs_rays(title: &str, rows: &[&SeriesRow], markers: &ThreadMarkers) -> Plot {
+    let (lines, legend) = series_lines(rows, &[(Stroke::Solid, |r| Some((r.rays as f64, r.delta_unlit)))], markers);
     Plot {
-        title: format!("{scene}: δ against rays traced, {UNLIT}"),
+        title: format!("{title}: δ against rays traced, {UNLIT}"),
         x: Axis::log("rays traced"),
         y: Axis::log("relative error δ"),
         lines,
@@ -236,13 +325,13 @@ fn error_vs_rays(scene: &str, rows: &[&SeriesRow]) -> Plot {
     }
 }
 
-fn calibration(scene: &str, rows: &[&SeriesRow]) -> Plot {
+fn calibration(title: &str, rows: &[&SeriesRow], markers: &ThreadMarkers) -> Plot {
     let (lines, mut legend) =
-        series_lines(rows, &[(Stroke::Solid, |r| Some((r.time_s, r.true_unlit? / r.delta_unlit)))]);
-    legend.push(LegendEntry { text: "δ exact".into(), colour: GUIDE, stroke: Stroke::Solid });
-    legend.push(LegendEntry { text: "off by a factor of 2".into(), colour: GUIDE, stroke: Stroke::Dashed });
+        series_lines(rows, &[(Stroke::Solid, |r| Some((r.time_s, r.true_unlit? / r.delta_unlit)))], markers);
+    legend.push(LegendEntry::line("δ exact", GUIDE, Stroke::Solid));
+    legend.push(LegendEntry::line("off by a factor of 2", GUIDE, Stroke::Dashed));
     Plot {
-        title: format!("{scene}: true error / δ against time, {UNLIT}"),
+        title: format!("{title}: true error / δ against time, {UNLIT}"),
         x: Axis::log("wall time (s)"),
         y: Axis::linear("true error / δ", false),
         lines,
@@ -300,24 +389,42 @@ fn by_threads(results: &[ResultsRow], value: fn(&ResultsRow) -> Option<f64>) -> 
         .collect()
 }
 
+/// The marker of a scene in the charts over cores, by its place in `scenes`.
+fn scene_marker(scenes: &[&str], scene: &str) -> Marker {
+    marker(scenes.iter().position(|&s| s == scene).unwrap_or(0))
+}
+
+/// Legend rows of the charts over cores: one per method drawn (its colour), one per scene drawn (its marker).
+fn method_and_scene_legend(keys: &[ByThreads], scenes: &[&str]) -> Vec<LegendEntry> {
+    let mut legend: Vec<LegendEntry> = first_appearances(keys.iter().map(|k| k.method))
+        .into_iter()
+        .map(|m| LegendEntry::line(m.name(), method_colour(m), Stroke::Solid))
+        .collect();
+    let drawn = first_appearances(keys.iter().map(|k| k.scene));
+    legend.extend(
+        scenes
+            .iter()
+            .filter(|s| drawn.contains(s))
+            .map(|s| LegendEntry::marker(s.to_string(), scene_marker(scenes, s))),
+    );
+    legend
+}
+
 /// Speedup at t threads = mean rays per second at t / the same at the smallest thread count t₀ of the same scene
 /// and method, × t₀: against one thread when there are one-thread runs, and comparable across methods otherwise.
-fn speedup_vs_cores(results: &[ResultsRow]) -> Plot {
+fn speedup_vs_cores(results: &[ResultsRow], scenes: &[&str]) -> Plot {
     let mut lines = Vec::new();
-    let mut legend = Vec::new();
-    for (i, key) in by_threads(results, ray_rate).into_iter().enumerate() {
-        let Some(&(base_threads, base_rate)) = key.means.first() else { continue };
+    let keys: Vec<ByThreads> = by_threads(results, ray_rate).into_iter().filter(|k| !k.means.is_empty()).collect();
+    for key in &keys {
+        let (base_threads, base_rate) = key.means[0];
         let points: Vec<(f64, f64)> =
             key.means.iter().map(|&(t, rate)| (t as f64, rate / base_rate * base_threads as f64)).collect();
-        lines.push(Line { colour: colour(i), stroke: Stroke::Solid, points: points.clone() });
-        lines.push(Line { colour: colour(i), stroke: Stroke::Points, points });
-        legend.push(LegendEntry {
-            text: format!("{}, {}", key.scene, key.method),
-            colour: colour(i),
-            stroke: Stroke::Solid,
-        });
+        let (colour, shape) = (method_colour(key.method), scene_marker(scenes, key.scene));
+        lines.push(Line { colour, stroke: Stroke::Solid, marker: None, points: points.clone() });
+        lines.push(Line { colour, stroke: Stroke::Points, marker: Some(shape), points });
     }
-    legend.push(LegendEntry { text: "ideal: speedup = cores".into(), colour: GUIDE, stroke: Stroke::Dashed });
+    let mut legend = method_and_scene_legend(&keys, scenes);
+    legend.push(LegendEntry::line("ideal: speedup = cores", GUIDE, Stroke::Dashed));
     Plot {
         title: "Tracing speedup against cores (rays per second, mean over repeats)".into(),
         x: Axis::linear("cores (threads)", true),
@@ -330,25 +437,19 @@ fn speedup_vs_cores(results: &[ResultsRow]) -> Plot {
 }
 
 /// `peak_memory_bytes` is read as the peak of one process (like run.json's VmHWM), not a sum over processes.
-fn memory_vs_cores(results: &[ResultsRow]) -> Plot {
+fn memory_vs_cores(results: &[ResultsRow], scenes: &[&str]) -> Plot {
     let mut lines = Vec::new();
-    let mut legend = Vec::new();
     let megabytes = |r: &ResultsRow| r.peak_memory_bytes.map(|b| b as f64 / 1e6);
-    for (i, key) in by_threads(results, megabytes).into_iter().enumerate() {
-        if key.runs.is_empty() {
-            continue;
-        }
+    let keys: Vec<ByThreads> = by_threads(results, megabytes).into_iter().filter(|k| !k.runs.is_empty()).collect();
+    for key in &keys {
         let points = key.means.iter().map(|&(t, mb)| (t as f64, mb)).collect();
-        lines.push(Line { colour: colour(i), stroke: Stroke::Solid, points });
-        lines.push(Line { colour: colour(i), stroke: Stroke::Points, points: key.runs });
-        legend.push(LegendEntry {
-            text: format!("{}, {}", key.scene, key.method),
-            colour: colour(i),
-            stroke: Stroke::Solid,
-        });
+        let (colour, shape) = (method_colour(key.method), scene_marker(scenes, key.scene));
+        lines.push(Line { colour, stroke: Stroke::Solid, marker: None, points });
+        lines.push(Line { colour, stroke: Stroke::Points, marker: Some(shape), points: key.runs.clone() });
     }
-    legend.push(LegendEntry { text: "line: mean over repeats".into(), colour: BLACK, stroke: Stroke::Solid });
-    legend.push(LegendEntry { text: "dots: single runs".into(), colour: BLACK, stroke: Stroke::Points });
+    let mut legend = method_and_scene_legend(&keys, scenes);
+    legend.push(LegendEntry::line("line: mean over repeats", BLACK, Stroke::Solid));
+    legend.push(LegendEntry::marker("markers: single runs", Marker::Circle));
     Plot {
         title: "Peak memory per process against cores".into(),
         x: Axis::linear("cores (threads)", true),
@@ -554,6 +655,12 @@ fn draw<DB: DrawingBackend>(plot: &Plot, root: &DrawingArea<DB, Shift>) -> Resul
     }
     for (line, points) in &lines {
         draw_line(&mut chart, points, line.colour, line.stroke, 2)?;
+        let every = if line.stroke == Stroke::Points { 1 } else { points.len().div_ceil(MARKERS_PER_LINE).max(1) };
+        if let Some(m) = line.marker {
+            // From the last point back, so that every line's end, where the runs are compared, has a marker.
+            let at: Vec<(f64, f64)> = points.iter().rev().step_by(every).copied().collect();
+            draw_markers(&mut chart, &at, line.colour, m)?;
+        }
     }
     if !has_data {
         let style = TextStyle::from((FONT, 18).into_font()).pos(Pos::new(HPos::Center, VPos::Center));
@@ -576,7 +683,29 @@ fn draw_line<DB: DrawingBackend>(
     match stroke {
         Stroke::Solid => chart.draw_series(LineSeries::new(points, style)).map(|_| ()),
         Stroke::Dashed => chart.draw_series(DashedLineSeries::new(points, 8, 5, style)).map(|_| ()),
-        Stroke::Points => chart.draw_series(points.map(|p| Circle::new(p, 4, style.filled()))).map(|_| ()),
+        // The markers are drawn by `draw_markers`.
+        Stroke::Points => Ok(()),
+    }
+    .map_err(drawing)
+}
+
+fn draw_markers<DB: DrawingBackend>(
+    chart: &mut ChartContext<DB, Cartesian2d<Scale, Scale>>,
+    points: &[(f64, f64)],
+    colour: RGBColor,
+    marker: Marker,
+) -> Result<()> {
+    let fill = ShapeStyle::from(&colour).filled();
+    let line = ShapeStyle::from(&colour).stroke_width(2);
+    let points = points.iter().copied();
+    match marker {
+        Marker::Circle => chart.draw_series(points.map(|p| Circle::new(p, 4, fill))).map(|_| ()),
+        Marker::Square => chart
+            .draw_series(points.map(|p| EmptyElement::at(p) + Rectangle::new([(-4, -4), (4, 4)], fill)))
+            .map(|_| ()),
+        Marker::Triangle => chart.draw_series(points.map(|p| TriangleMarker::new(p, 6, fill))).map(|_| ()),
+        Marker::Cross => chart.draw_series(points.map(|p| Cross::new(p, 5, line))).map(|_| ()),
+        Marker::Ring => chart.draw_series(points.map(|p| Circle::new(p, 5, line))).map(|_| ()),
     }
     .map_err(drawing)
 }
@@ -592,9 +721,19 @@ fn draw_legend<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, entries: &[Leg
         let y = top + i as i32 * row + row / 2;
         let style = ShapeStyle::from(&entry.colour).stroke_width(2);
         match entry.stroke {
-            Stroke::Solid => area.draw(&PathElement::new(vec![(6, y), (40, y)], style)),
-            Stroke::Dashed => area.draw(&DashedPathElement::new(vec![(6, y), (40, y)], 8, 5, style)),
-            Stroke::Points => area.draw(&Circle::new((23, y), 4, style.filled())),
+            Some(Stroke::Solid) => area.draw(&PathElement::new(vec![(6, y), (40, y)], style)),
+            Some(Stroke::Dashed) => area.draw(&DashedPathElement::new(vec![(6, y), (40, y)], 8, 5, style)),
+            Some(Stroke::Points) | None => Ok(()),
+        }
+        .map_err(drawing)?;
+        let fill = style.filled();
+        match entry.marker {
+            Some(Marker::Circle) => area.draw(&Circle::new((23, y), 4, fill)),
+            Some(Marker::Square) => area.draw(&Rectangle::new([(19, y - 4), (27, y + 4)], fill)),
+            Some(Marker::Triangle) => area.draw(&TriangleMarker::new((23, y), 6, fill)),
+            Some(Marker::Cross) => area.draw(&Cross::new((23, y), 5, style)),
+            Some(Marker::Ring) => area.draw(&Circle::new((23, y), 5, style)),
+            None => Ok(()),
         }
         .map_err(drawing)?;
         area.draw(&Text::new(entry.text.clone(), (48, y), font.clone())).map_err(drawing)?;
@@ -611,7 +750,8 @@ fn save(plot: &Plot, dir: &Path, name: &str) -> Result<[PathBuf; 2]> {
         draw(plot, &root)?;
         root.present().map_err(drawing)?;
     }
-    std::fs::write(&svg_path, svg).with_context(|| format!("cannot write {}", svg_path.display()))?;
+    write_atomically(&svg_path, |path| Ok(std::fs::write(path, &svg)?))
+        .with_context(|| format!("cannot write {}", svg_path.display()))?;
 
     let png_path = dir.join(format!("{name}.png"));
     let (width, height) = CHART_SIZE;
@@ -621,8 +761,20 @@ fn save(plot: &Plot, dir: &Path, name: &str) -> Result<[PathBuf; 2]> {
         draw(plot, &root)?;
         root.present().map_err(drawing)?;
     }
-    write_png(&png_path, &rgb).with_context(|| format!("cannot write {}", png_path.display()))?;
+    write_atomically(&png_path, |path| write_png(path, &rgb))
+        .with_context(|| format!("cannot write {}", png_path.display()))?;
     Ok([svg_path, png_path])
+}
+
+/// Writes `path` through `write` into a temporary file beside it, then renames it into place: the bench's live
+/// page serves the charts while they are redrawn, and must never send half a file.
+fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = PathBuf::from(tmp);
+    write(&tmp)?;
+    std::fs::rename(&tmp, path)?;
+    Ok(())
 }
 
 /// plotters' own PNG encoder would pull in the `image` crate; the workspace already has `png`.
@@ -760,8 +912,72 @@ mod tests {
             assert!(text > 100, "{path:?} has no legend text: {text} dark pixels");
         }
         let calibration = std::fs::read_to_string(dir.join("charts/calibration-caustic.svg")).unwrap();
-        assert!(!calibration.contains("async, 1 thread"), "caustic's async runs have no true error to calibrate");
+        // plotters writes each text on a line of its own.
+        assert!(!calibration.contains("\nasync\n"), "caustic's async runs have no true error to calibrate");
+        assert!(calibration.contains("\nsync\n") && calibration.contains("\n2 threads\n"), "the legend names the keys");
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    fn series_row(method: Method, threads: usize, repeat: u32) -> SeriesRow {
+        SeriesRow {
+            scene: "caustic".into(),
+            method,
+            threads,
+            repeat,
+            time_s: 1.0,
+            rays: 1000,
+            delta_unlit: 0.1,
+            delta_all: 0.1,
+            true_unlit: Some(0.12),
+            true_all: Some(0.12),
+        }
+    }
+
+    #[test]
+    fn a_method_keeps_its_colour_a_thread_count_its_marker_and_true_error_is_dashed() {
+        let rows = [
+            series_row(Method::Path, 1, 0),
+            series_row(Method::Combination, 2, 0),
+            series_row(Method::Pbpm, 1, 0),
+            series_row(Method::ThreeLevel, 1, 0),
+            series_row(Method::ThreeLevel, 2, 0),
+        ];
+        let refs: Vec<&SeriesRow> = rows.iter().collect();
+        let markers = ThreadMarkers::of(rows.iter().map(|r| r.threads));
+        let plot = error_vs_time("caustic", &refs, &markers);
+        assert_eq!(plot.lines.len(), 10, "δ and true error for each key");
+        let colours: Vec<RGBColor> = Method::ALL.iter().map(|&m| method_colour(m)).collect();
+        assert!(colours.iter().enumerate().all(|(i, c)| !colours[..i].contains(c)), "every method its own colour");
+        for (row, pair) in rows.iter().zip(plot.lines.chunks(2)) {
+            assert!(pair
+                .iter()
+                .all(|l| l.colour == method_colour(row.method) && l.marker == Some(markers.get(row.threads))));
+            assert_eq!((pair[0].stroke, pair[1].stroke), (Stroke::Solid, Stroke::Dashed));
+        }
+        assert_ne!(markers.get(1), markers.get(2));
+        let texts: Vec<&str> = plot.legend.iter().map(|e| e.text.as_str()).collect();
+        assert_eq!(
+            texts,
+            ["path", "combination", "pbpm", "three-level", "1 thread", "2 threads", "δ (estimated)", "true error"]
+        );
+    }
+
+    #[test]
+    fn a_scene_with_more_keys_than_can_be_told_apart_gets_a_chart_per_thread_count() {
+        // The bench's default on two cores: pbpm and path at one thread, the five parallel methods at one and two.
+        let few: Vec<SeriesRow> = Method::ALL
+            .iter()
+            .flat_map(|&m| if m.layout().runs_on(2) { vec![1, 2] } else { vec![1] }.into_iter().map(move |t| (m, t)))
+            .map(|(m, t)| series_row(m, t, 0))
+            .collect();
+        let refs: Vec<&SeriesRow> = few.iter().collect();
+        assert_eq!((refs.len(), chart_groups(&refs).len()), (12, 1));
+        let many: Vec<SeriesRow> = [1, 2, 4].iter().flat_map(|&t| Method::ALL.map(|m| series_row(m, t, 0))).collect();
+        let refs: Vec<&SeriesRow> = many.iter().collect();
+        let groups = chart_groups(&refs);
+        let suffixes: Vec<&str> = groups.iter().map(|g| g.0.as_str()).collect();
+        assert_eq!(suffixes, ["-1t", "-2t", "-4t"]);
+        assert!(groups.iter().all(|g| g.2.len() == Method::ALL.len()));
     }
 
     fn error_with(test: &str, file: &str, edit: impl Fn(&str) -> String) -> String {

@@ -94,6 +94,13 @@ pub struct BenchArgs {
     /// Output folder for results.csv and report.md (default: a new folder under out/).
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// Serve a page of the runs done and to do and of the charts, redrawn after every run, on ADDR (default
+    /// 127.0.0.1 and a free port). Any address but loopback needs a secret (--secret-file or $PHOTONFARM_SECRET).
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:0")]
+    pub serve: Option<std::net::SocketAddr>,
+    /// File with the secret the page asks for on a non-loopback --serve address (otherwise $PHOTONFARM_SECRET).
+    #[arg(long, value_name = "FILE")]
+    pub secret_file: Option<PathBuf>,
 }
 
 /// `--method`'s parser: the library's methods by name, each with its summary in the help.
@@ -208,11 +215,44 @@ pub struct RenderArgs {
     /// No progress bar (for logs and scripts).
     #[arg(long)]
     pub quiet: bool,
+    /// Serve a live page of the run (image, error chart, workers, stop button) on ADDR (default 127.0.0.1 and
+    /// a free port; the URL is printed). Any address but loopback needs the job's secret (--secret-file or
+    /// $PHOTONFARM_SECRET).
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:0")]
+    pub serve: Option<std::net::SocketAddr>,
+    /// Seconds the live page stays up after the run has written its outputs, so an open page shows the end.
+    #[arg(long, default_value_t = 2.0, value_name = "SECONDS")]
+    pub serve_linger: f64,
+    /// Stream every layer to a running tev viewer after each merge: `tev` (at 127.0.0.1:14158) or
+    /// `tev=HOST:PORT`. A tev that is not there is a warning, never a failed render.
+    #[arg(long, value_name = "tev[=HOST:PORT]", value_parser = parse_display)]
+    pub display: Option<Display>,
     /// Memory the process may use, e.g. 2G or 500M: checked before the in-process parallel methods allocate
     /// (memory in use after loading the scene plus the engine's buffers). `async`, whose buffers grow with its
     /// threads, runs with fewer threads to fit; the other methods refuse to start. The record flags either.
     #[arg(long, value_name = "SIZE", value_parser = parse_size)]
     pub memory_limit: Option<u64>,
+}
+
+/// Where `--display` sends the layers.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Display {
+    /// tev's address, HOST:PORT.
+    Tev(String),
+}
+
+/// Parses `--display`: `tev` or `tev=HOST:PORT`.
+pub fn parse_display(text: &str) -> Result<Display, String> {
+    match text.split_once('=') {
+        None if text == "tev" => Ok(Display::Tev(crate::live::tev::DEFAULT_ADDRESS.to_string())),
+        Some(("tev", address))
+            if address.rsplit_once(':').is_some_and(|(h, p)| !h.is_empty() && p.parse::<u16>().is_ok()) =>
+        {
+            Ok(Display::Tev(address.to_string()))
+        }
+        Some(("tev", address)) => Err(format!("'{address}' is not HOST:PORT (e.g. tev=127.0.0.1:14158)")),
+        _ => Err(format!("'{text}' is not a display: the one there is is tev, as `tev` or `tev=HOST:PORT`")),
+    }
 }
 
 /// Parses a size in bytes with an optional K, M, G or T suffix (powers of 1024; "B", "iB" accepted), e.g. 2G.
@@ -258,6 +298,18 @@ mod tests {
         assert_eq!(args.methods.len(), Method::ALL.len());
         let e = Cli::try_parse_from(["coordinator", "render", "s.toml", "--method", "fast"]).unwrap_err();
         assert!(e.to_string().contains("two-level"), "{e}");
+    }
+
+    #[test]
+    fn display_takes_tev_with_or_without_an_address_and_refuses_anything_else() {
+        assert_eq!(parse_display("tev"), Ok(Display::Tev("127.0.0.1:14158".into())));
+        assert_eq!(parse_display("tev=viewer:9000"), Ok(Display::Tev("viewer:9000".into())));
+        for bad in ["", "tev=", "tev=host", "tev=:80", "tev=host:port", "pbrt", "window=1"] {
+            assert!(parse_display(bad).is_err(), "{bad}");
+        }
+        let cli = Cli::try_parse_from(["coordinator", "render", "s.toml", "--serve"]).unwrap();
+        let Command::Render(args) = cli.command else { panic!("not a render") };
+        assert_eq!(args.serve, Some("127.0.0.1:0".parse().unwrap()));
     }
 
     #[test]

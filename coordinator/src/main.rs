@@ -6,6 +6,7 @@ mod bench_tables;
 mod charts;
 mod cli;
 mod cluster;
+mod live;
 mod output_folder;
 mod reference_command;
 mod render_command;

@@ -2,11 +2,15 @@
 //! (the scene's, the overrides, or a checkpoint's), start the method's engine (in this process or as worker
 //! processes), run it until the stop rule while refreshing the outputs, and write the image and the record.
 
-use crate::cli::{ErrorOverArg, RenderArgs};
+use crate::cli::{Display, ErrorOverArg, RenderArgs};
 use crate::cluster::launch::{self, LaunchOptions};
+use crate::live::feed::LiveFeed;
+use crate::live::session::{LiveOptions, LiveSession};
 use crate::output_folder::{self, Reference};
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
+use photonfarm::accumulation::Accumulator;
+use photonfarm::protocol::Secret;
 use photonfarm::render::checkpoint::Checkpoint;
 use photonfarm::render::method::{Images, Processes};
 use photonfarm::render::record::{flags_of, HistoryEntry, RunRecord, WorkerRecord, WorkerState};
@@ -42,6 +46,10 @@ pub fn run(args: RenderArgs) -> Result<()> {
 
     let mut notes = Vec::new();
     let (mut engine, layout) = start_engine(&args, &scene, settings, &dir, checkpoint.as_ref(), &mut notes)?;
+    let mut live = LiveSession::start(live_options(&args, &scene, &layout, &dir, engine.as_ref(), &interrupted)?)?;
+    if let Some(url) = live.as_ref().and_then(|l| l.url.as_ref()) {
+        println!("live page: {url}  (results in {})", dir.display());
+    }
     let outputs = Outputs {
         args: &args,
         scene: &scene,
@@ -54,8 +62,12 @@ pub fn run(args: RenderArgs) -> Result<()> {
         start: Instant::now(),
     };
     let mut history = checkpoint.map(|c| c.history).unwrap_or_default();
-    let run = run_until_stop(engine.as_mut(), &stop, &interrupted, &outputs, &bar, &mut history);
+    let mut feed = live.as_mut().map(|l| &mut l.feed);
+    let run = run_until_stop(engine.as_mut(), &stop, &interrupted, &outputs, &bar, &mut history, feed.as_deref_mut());
     bar.set_message("stopping: collecting the last completed phases");
+    if let Some(f) = feed.as_deref_mut() {
+        f.stopping(engine.as_ref(), &history, outputs.elapsed_s());
+    }
     finish(engine.as_mut(), &outputs, &mut history);
     bar.finish_and_clear();
     let reason = run.context("writing the periodic results failed; the run was stopped")?;
@@ -65,8 +77,65 @@ pub fn run(args: RenderArgs) -> Result<()> {
         bail!("no worker rendered anything ({})", why.join("; "));
     }
     let record = outputs.save(engine.as_ref(), &history, reason.name())?;
+    if let Some(f) = feed {
+        f.finished(engine.as_ref(), &record);
+    }
     print_summary(&record, reason, &dir);
+    if live.as_ref().is_some_and(|l| l.url.is_some()) {
+        std::thread::sleep(Duration::from_secs_f64(args.serve_linger));
+    }
     Ok(())
+}
+
+/// What the live view shows the run on (`--serve`, `--display`), with the run's settings for the page.
+fn live_options(
+    args: &RenderArgs,
+    scene: &Scene,
+    layout: &str,
+    dir: &Path,
+    engine: &dyn Progressive,
+    interrupted: &Arc<AtomicBool>,
+) -> Result<LiveOptions> {
+    if !(args.serve_linger.is_finite() && args.serve_linger >= 0.0) {
+        bail!("--serve-linger must be a number of seconds, 0 or more");
+    }
+    let serve = match args.serve {
+        Some(addr) => {
+            let secret = match &args.secret_file {
+                Some(f) => Some(Secret::from_file(f)?),
+                None => Secret::from_env()?,
+            };
+            Some((addr, secret))
+        }
+        None => None,
+    };
+    let settings = serde_json::json!({
+        "scene": args.scene.display().to_string(),
+        "width": scene.camera.width,
+        "height": scene.camera.height,
+        "method": args.method.name(),
+        "layout": layout,
+        "seed": args.seed,
+        "output_folder": dir.display().to_string(),
+        "reference": args.reference.as_ref().map(|p| p.display().to_string()),
+        "stop": {
+            "time_s": args.time,
+            "phases": args.phases,
+            "target_error": args.target_error,
+            "error_over": format!("{:?}", args.error_over).to_lowercase(),
+        },
+        "save_interval_s": args.save_interval,
+        "settings": engine.settings(),
+    });
+    let sums = engine.sums();
+    Ok(LiveOptions {
+        serve,
+        tev: args.display.as_ref().map(|Display::Tev(address)| address.clone()),
+        blank: Accumulator::with_aux(sums.width, sums.height, sums.aux.layout().clone()),
+        settings,
+        dir: dir.to_path_buf(),
+        interrupted: interrupted.clone(),
+    })
 }
 
 /// Refuses options that the method does not take.
@@ -338,6 +407,7 @@ fn run_until_stop(
     outputs: &Outputs,
     bar: &ProgressBar,
     history: &mut Vec<HistoryEntry>,
+    mut feed: Option<&mut LiveFeed>,
 ) -> Result<StopReason> {
     let save_interval = Duration::from_secs_f64(outputs.args.save_interval.max(0.5));
     let mut last_save = Instant::now();
@@ -349,6 +419,9 @@ fn run_until_stop(
             (entry.true_all, entry.true_unlit) = (Some(t.rmse_all), Some(t.rmse_unlit));
         }
         bar.set_message(progress(entry, stop.error_over, engine.workers().as_deref()));
+        if let Some(f) = feed.as_deref_mut() {
+            f.after_merge(engine, history, outputs.elapsed_s());
+        }
         if last_save.elapsed() >= save_interval && save_error.is_none() {
             last_save = Instant::now();
             if let Err(e) = outputs.save(engine, history, "running") {

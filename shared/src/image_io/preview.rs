@@ -69,17 +69,7 @@ pub fn write_preview_png(path: &Path, image: &LayerImage, exposure: f32) -> Resu
     let width = u32::try_from(image.width).map_err(|_| too_large())?;
     let height = u32::try_from(image.height).map_err(|_| too_large())?;
 
-    let bytes: Vec<u8> = image
-        .rgb
-        .iter()
-        .flat_map(|pixel| {
-            if pixel.iter().all(|value| value.is_finite()) {
-                pixel.map(|value| encode_srgb_byte(value * exposure))
-            } else {
-                NON_FINITE_COLOUR
-            }
-        })
-        .collect();
+    let bytes = tonemap_rgb8(image, exposure);
 
     write_atomically(path, |file| {
         let convert = |error: png::EncodingError| match error {
@@ -94,6 +84,23 @@ pub fn write_preview_png(path: &Path, image: &LayerImage, exposure: f32) -> Resu
         writer.write_image_data(&bytes).map_err(convert)?;
         writer.finish().map_err(convert)
     })
+}
+
+/// The preview's 8-bit sRGB bytes of a layer, three per pixel from the top row: linear RGB × exposure through
+/// the sRGB transfer function, clamped; NaN or infinite pixels magenta. The file previews and the live page
+/// share it, so both show a layer alike.
+pub fn tonemap_rgb8(image: &LayerImage, exposure: f32) -> Vec<u8> {
+    image
+        .rgb
+        .iter()
+        .flat_map(|pixel| {
+            if pixel.iter().all(|value| value.is_finite()) {
+                pixel.map(|value| encode_srgb_byte(value * exposure))
+            } else {
+                NON_FINITE_COLOUR
+            }
+        })
+        .collect()
 }
 
 /// Rec.709 luminance, the brightness measure matching the sRGB primaries of the preview.

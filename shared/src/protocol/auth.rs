@@ -82,6 +82,16 @@ impl Secret {
         self.insecure
     }
 
+    /// True when `candidate` (surrounding white space trimmed) is this secret, compared in constant time over
+    /// the candidate's bytes; never true for the empty secret of `--insecure`.
+    pub fn matches(&self, candidate: &[u8]) -> bool {
+        let candidate = candidate.trim_ascii();
+        if self.insecure || candidate.len() != self.key.len() {
+            return false;
+        }
+        candidate.iter().zip(&self.key).fold(0u8, |acc, (a, b)| acc | (a ^ b)) == 0
+    }
+
     /// The secret's text, to hand to a child process through its environment.
     pub fn expose_for_child(&self) -> &[u8] {
         &self.key
@@ -144,5 +154,21 @@ pub async fn handshake(conn: &mut Connection, role: Role, name: &str, secret: &S
         Message::Refused { reason } if reason == "authentication failed" => Err(ProtocolError::Authentication),
         Message::Refused { reason } => Err(ProtocolError::Refused(reason)),
         other => Err(ProtocolError::Unexpected { expected: "Proof", got: other.kind().into() }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_secret_matches_itself_only_and_the_insecure_secret_matches_nothing() {
+        let s = Secret::from_bytes(b"0123456789abcdef", "test").unwrap();
+        assert!(s.matches(b"0123456789abcdef"));
+        assert!(s.matches(b" 0123456789abcdef\n"));
+        assert!(!s.matches(b"0123456789abcdeF"));
+        assert!(!s.matches(b"0123456789abcde"));
+        assert!(!s.matches(b""));
+        assert!(!Secret::insecure().matches(b""));
     }
 }
