@@ -71,7 +71,12 @@ pub async fn serve_job(
         Message::Refused { reason } => return Err(ProtocolError::Refused(reason).into()),
         other => return Err(ProtocolError::Unexpected { expected: "Job", got: other.kind().into() }.into()),
     };
-    fetch_files(&mut conn, &job, cache).await?;
+    if fetch_files(&mut conn, &job, cache).await? == Fetched::Stopped {
+        // The run ended while this worker was still being set up: nothing rendered, nothing lost.
+        conn.write(&Message::Finished).await?;
+        drain_until_closed(&mut conn).await;
+        return Ok(JobOutcome { coordinator: peer.name, snapshots_sent: 0, snapshots_acked: 0 });
+    }
     let meshes: BTreeMap<String, Vec<u8>> =
         job.files.iter().map(|f| (f.path.clone(), cache[&f.sha256].clone())).collect();
     let job = Arc::new(*job);
@@ -193,14 +198,30 @@ pub async fn serve_job(
     result.map(|()| JobOutcome { coordinator: peer.name, snapshots_sent: sent, snapshots_acked: acked })
 }
 
-/// Asks for the job's files that are not in `cache` and checks every one against its hash.
-async fn fetch_files(conn: &mut Connection, job: &Job, cache: &mut FileCache) -> Result<(), ProtocolError> {
+/// Whether the job's files all arrived, or the coordinator stopped the run first.
+#[derive(Debug, PartialEq, Eq)]
+enum Fetched {
+    All,
+    Stopped,
+}
+
+/// Reads what the coordinator still sends after this worker said `Finished` (files it had asked for, a last
+/// heartbeat) until the coordinator closes the link, so that closing first does not reset a link the
+/// coordinator is still writing to; gives up after a few seconds.
+async fn drain_until_closed(conn: &mut Connection) {
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while let Ok(Ok(_)) = tokio::time::timeout(deadline.saturating_duration_since(Instant::now()), conn.read()).await {}
+}
+
+/// Asks for the job's files that are not in `cache` and checks every one against its hash. A stop request
+/// that arrives first ends the job normally.
+async fn fetch_files(conn: &mut Connection, job: &Job, cache: &mut FileCache) -> Result<Fetched, ProtocolError> {
     let mut missing: Vec<String> =
         job.files.iter().map(|f| f.sha256.clone()).filter(|h| !cache.contains_key(h)).collect();
     missing.sort();
     missing.dedup();
     if missing.is_empty() {
-        return Ok(());
+        return Ok(Fetched::All);
     }
     conn.write(&Message::NeedFiles { hashes: missing.clone() }).await?;
     while !missing.is_empty() {
@@ -216,9 +237,11 @@ async fn fetch_files(conn: &mut Connection, job: &Job, cache: &mut FileCache) ->
                 missing.swap_remove(pos);
                 cache.insert(sha256, bytes);
             }
+            Message::Stop => return Ok(Fetched::Stopped),
+            Message::Heartbeat => {}
             Message::Refused { reason } => return Err(ProtocolError::Refused(reason)),
             other => return Err(ProtocolError::Unexpected { expected: "File", got: other.kind().into() }),
         }
     }
-    Ok(())
+    Ok(Fetched::All)
 }

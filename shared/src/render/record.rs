@@ -95,6 +95,10 @@ pub struct WorkerRecord {
     /// Phase values with a NaN or an infinity the worker dropped (any is a bug, and flagged in the record).
     #[serde(default)]
     pub non_finite_dropped: u64,
+    /// Lost links of workers from this worker's host so far in the job (0 for the workers the coordinator
+    /// starts itself): at `--max-worker-failures` the host is refused for the rest of the job.
+    #[serde(default)]
+    pub failures: u32,
 }
 
 /// Where a worker of a distributed run is in its life: "connecting", "running", "finished" or "lost: why" in
