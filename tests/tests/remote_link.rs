@@ -128,7 +128,10 @@ fn a_remote_worker_behind_a_slow_distant_link_adapts_its_snapshot_interval_and_k
         slow / fast
     );
     assert!(send > 0.05 && interval > 1.0 && send <= 0.05 * interval + 1e-3, "interval {interval} s, send {send} s");
-    assert!(slow >= 0.95 * fast, "{slow:.0} rays/s over the slow link, {fast:.0} direct");
+    // The link costs only the set-up's round trips and the last snapshot's transfer, well under 5% of a 12 s
+    // run, but two runs in a row on this shared 2-core machine differ by more than that (docs/distribution.md
+    // gives measured ratios from 0.80 to 1.45), so the bound here only catches a worker that the link stalls.
+    assert!(slow >= 0.7 * fast, "{slow:.0} rays/s over the slow link, {fast:.0} direct");
     // The image is right: its true error agrees with its own error estimate.
     let (truth, delta) = (r["true_error"]["rmse_unlit"].as_f64().unwrap(), r["error"]["delta_unlit"].as_f64().unwrap());
     assert!(truth < 1.5 * delta, "true error {truth} against δ {delta}");
