@@ -245,3 +245,82 @@ async fn fetch_files(conn: &mut Connection, job: &Job, cache: &mut FileCache) ->
     }
     Ok(Fetched::All)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use photonfarm::protocol::auth::handshake;
+    use photonfarm::protocol::{EngineSpec, FileRef};
+    use photonfarm::render::method::ParallelMethod;
+    use photonfarm::render::{Method, RenderSettings};
+    use photonfarm::scene::Scene;
+    use std::path::Path;
+    use tokio::net::{TcpListener, TcpStream};
+
+    /// Cornell's job, whose meshes a new worker must ask for.
+    fn cornell_job() -> (Job, BTreeMap<String, Vec<u8>>) {
+        let scenes = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+        let path = scenes.join("cornell.toml");
+        let scene = Scene::load(&path).unwrap();
+        let files: Vec<FileRef> =
+            scene.mesh_files.iter().map(|(p, h)| FileRef { path: p.clone(), sha256: h.clone() }).collect();
+        let store = scene.mesh_files.iter().map(|(p, h)| (h.clone(), std::fs::read(scenes.join(p)).unwrap())).collect();
+        let job = Job {
+            scene_name: "cornell.toml".into(),
+            scene_text: std::fs::read_to_string(&path).unwrap(),
+            files,
+            scene_hash: scene.hash.clone(),
+            settings: RenderSettings::for_scene(&scene, Method::ThreeLevel, 1),
+            stream: 0,
+            engine: EngineSpec {
+                method: ParallelMethod::TwoLevel,
+                group_size: 1,
+                tile_size: None,
+                phases_per_deal: Some(6),
+                cores: None,
+                numa_node: None,
+                synthetic_topology: false,
+                processes_per_pixel: 1,
+                process_rank: 0,
+                resumed_phases: 0,
+            },
+            snapshot_interval_ms: 1000,
+        };
+        (job, store)
+    }
+
+    #[test]
+    fn a_stop_that_arrives_while_the_files_are_being_sent_ends_the_job_normally() {
+        let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+        runtime.block_on(async {
+            let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
+            let addr = listener.local_addr().unwrap();
+            let (job, store) = cornell_job();
+            // A coordinator whose run ends right after it sent the job: its Stop is on the wire before the
+            // files the worker is about to ask for.
+            let coordinator = tokio::spawn(async move {
+                let (s, _) = listener.accept().await.unwrap();
+                let mut c = Connection::new(s).unwrap();
+                handshake(&mut c, Role::Coordinator, "c", &Secret::insecure()).await.unwrap();
+                c.write(&Message::Job(Box::new(job))).await.unwrap();
+                c.write(&Message::Stop).await.unwrap();
+                loop {
+                    match c.read().await.unwrap() {
+                        Message::NeedFiles { hashes } => {
+                            for h in hashes {
+                                let bytes = store[&h].clone();
+                                c.write(&Message::File { sha256: h, bytes }).await.unwrap();
+                            }
+                        }
+                        other => return other.kind(),
+                    }
+                }
+            });
+            let conn = Connection::new(TcpStream::connect(addr).await.unwrap()).unwrap();
+            let opts = LinkOptions::new("w".into(), Secret::insecure());
+            let outcome = serve_job(conn, &opts, &mut FileCache::new()).await.expect("a normal end");
+            assert_eq!((outcome.snapshots_sent, outcome.snapshots_acked), (0, 0));
+            assert_eq!(coordinator.await.unwrap(), "Finished");
+        });
+    }
+}

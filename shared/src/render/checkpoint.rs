@@ -58,7 +58,7 @@ const MAX_STATE_BYTES: u64 = 64 << 20;
 
 /// bincode's limit on what one checkpoint may claim to hold, so that a forged length cannot make the decoder
 /// allocate more than this; the file's size is checked against the scene's own bound first.
-const DECODE_LIMIT: usize = 4 << 30;
+const DECODE_LIMIT: usize = u32::MAX as usize;
 
 fn decode_config() -> impl bincode::config::Config {
     bincode::config::standard().with_limit::<DECODE_LIMIT>()
