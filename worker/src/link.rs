@@ -95,7 +95,8 @@ pub async fn serve_job(
     };
 
     let stop = Arc::new(AtomicBool::new(false));
-    // Snapshot interval: the job's, lengthened so that sending a snapshot takes at most 5% of it.
+    // Snapshot interval: the job's, lengthened so that sending a snapshot (until it is acknowledged) takes at
+    // most 5% of it.
     let floor_ms = job.snapshot_interval_ms.max(1);
     let interval_ms = Arc::new(AtomicU64::new(floor_ms));
     let mut previous_send_ms = 0u64;
@@ -124,6 +125,8 @@ pub async fn serve_job(
     let (mut incoming, reader_task) = reader.forward();
     let (mut sent, mut acked, mut last_seq) = (0u64, 0u64, 0u64);
     let mut finished = false;
+    // The snapshot sent last and when its sending began, until it is acknowledged.
+    let mut in_flight: Option<(u64, Instant)> = None;
     let mut last_sent = Instant::now();
     let mut last_heard = Instant::now();
     let mut tick = tokio::time::interval(Duration::from_millis(200));
@@ -139,12 +142,10 @@ pub async fn serve_job(
                         sent += 1;
                         last_seq = s.seq;
                         s.previous_send_ms = previous_send_ms;
-                        let t = Instant::now();
+                        // A send is timed until its acknowledgement: the write alone returns as soon as the
+                        // kernel's socket buffer holds the frame, which on a slow link can be megabytes early.
+                        in_flight = Some((s.seq, Instant::now()));
                         writer.write(&Message::Snapshot(s)).await?;
-                        // The write returns once the kernel holds the tail of the frame: on a slow link that is
-                        // close to the transfer time.
-                        previous_send_ms = t.elapsed().as_millis() as u64;
-                        interval_ms.store(floor_ms.max(20 * previous_send_ms), Ordering::Relaxed);
                         last_sent = Instant::now();
                         continue;
                     }
@@ -164,7 +165,14 @@ pub async fn serve_job(
             message = incoming.recv() => {
                 last_heard = Instant::now();
                 match message.map(|(m, _)| m) {
-                    Some(Ok(Message::Ack { seq })) => acked = acked.max(seq),
+                    Some(Ok(Message::Ack { seq })) => {
+                        acked = acked.max(seq);
+                        if let Some((_, t)) = in_flight.filter(|(s, _)| seq >= *s) {
+                            previous_send_ms = t.elapsed().as_millis() as u64;
+                            interval_ms.store(floor_ms.max(20 * previous_send_ms), Ordering::Relaxed);
+                            in_flight = None;
+                        }
+                    }
                     Some(Ok(Message::Stop)) => stop.store(true, Ordering::Release),
                     Some(Ok(Message::Heartbeat)) => {}
                     Some(Ok(other)) => {

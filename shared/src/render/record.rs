@@ -81,8 +81,8 @@ pub struct WorkerRecord {
     pub totals: RayTotals,
     /// Pixel-phases merged (Σ over pixels of the phases it added).
     pub pixel_phases: u64,
-    /// The worker's snapshot interval at its last snapshot, and how long it took to send the one before (s):
-    /// the interval grows on slow links so that sending stays under 5% of it.
+    /// The worker's snapshot interval at its last snapshot, and how long it took to send the one before, until
+    /// its acknowledgement (s): the interval grows on slow links so that sending stays under 5% of it.
     pub snapshot_interval_s: f64,
     pub last_send_s: f64,
     /// Seconds from the start of the render to the worker's start of rendering (process start, link, job,
