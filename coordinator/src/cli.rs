@@ -23,6 +23,20 @@ pub enum Command {
     Reference(ReferenceArgs),
     /// Draw charts (SVG and PNG) of a bench folder's results.csv and series.csv into DIR/charts/.
     Charts(ChartsArgs),
+    /// Keys for encrypted links to remote workers.
+    #[command(subcommand)]
+    Keys(KeysCommand),
+}
+
+#[derive(Subcommand, Debug)]
+pub enum KeysCommand {
+    /// Make a job CA, a certificate and key for the coordinator and for the workers, and a shared secret in
+    /// DIR (`--tls-dir DIR` on both sides). Copy ca.pem, worker.pem, worker.key and secret to the workers'
+    /// machines.
+    Init {
+        /// A new or empty folder.
+        dir: PathBuf,
+    },
 }
 
 #[derive(clap::Args, Debug)]
@@ -158,9 +172,15 @@ pub struct RenderArgs {
     /// File with the shared secret for remote workers (otherwise $PHOTONFARM_SECRET).
     #[arg(long, value_name = "FILE")]
     pub secret_file: Option<PathBuf>,
-    /// Allow remote links without a secret (anyone who can reach the port can join or be driven).
+    /// Allow links to other machines without TLS and without a secret: anyone who can reach the port can
+    /// join or be driven, and scenes and images cross the network in the clear.
     #[arg(long)]
     pub insecure: bool,
+    /// Key folder made by `coordinator keys init DIR`: links to remote workers run over mutually
+    /// authenticated TLS with its certificates (required off loopback unless --insecure), and its secret
+    /// serves when no other is given.
+    #[arg(long, value_name = "DIR")]
+    pub tls_dir: Option<PathBuf>,
     /// Continue the run whose output folder is DIR from its checkpoint (combination and three-level): its
     /// sums, phases, rays and time carry on, and results go to DIR unless --out is given.
     #[arg(long, value_name = "DIR")]
@@ -168,6 +188,10 @@ pub struct RenderArgs {
     /// A worker that sends nothing (not even a heartbeat) for this many seconds is presumed hung and dropped.
     #[arg(long, default_value_t = 15.0, value_name = "SECONDS")]
     pub worker_timeout: f64,
+    /// After this many lost links from one host (crashes, hangs, refused snapshots), that host's workers are
+    /// refused for the rest of the job.
+    #[arg(long, default_value_t = 3, value_name = "N")]
+    pub max_worker_failures: u32,
     /// Seconds between a local worker's snapshots.
     #[arg(long, default_value_t = 1.0, value_name = "SECONDS")]
     pub snapshot_interval: f64,

@@ -20,6 +20,7 @@ fn main() -> std::process::ExitCode {
         cli::Command::Bench(args) => bench_command::run(args),
         cli::Command::Reference(args) => reference_command::run(args),
         cli::Command::Charts(args) => charts::run(args),
+        cli::Command::Keys(cli::KeysCommand::Init { dir }) => keys_init(&dir),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
@@ -28,4 +29,19 @@ fn main() -> std::process::ExitCode {
             std::process::ExitCode::FAILURE
         }
     }
+}
+
+/// `coordinator keys init DIR`: the job CA's certificates and keys, and what to copy where.
+fn keys_init(dir: &std::path::Path) -> anyhow::Result<()> {
+    let files = photonfarm::protocol::tls::init_keys(dir)?;
+    for f in &files {
+        println!("wrote {}", f.display());
+    }
+    println!(
+        "the coordinator takes --tls-dir {0}; copy ca.pem, worker.pem, worker.key and secret to a folder on each \
+         worker machine and give `worker join|serve` --tls-dir with it. coordinator.key stays here; the CA's own \
+         key was not kept, so a new job CA needs a new folder",
+        dir.display()
+    );
+    Ok(())
 }

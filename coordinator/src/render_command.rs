@@ -37,7 +37,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
         None => None,
     };
     let checkpoint = load_checkpoint(&args, &scene)?;
-    if let Some(c) = &checkpoint {
+    if let (Some(c), Some(from)) = (&checkpoint, &args.resume) {
+        check_resume_has_work(c, &stop, from)?;
         settings = c.settings;
     }
     let dir = output_dir(&args)?;
@@ -213,11 +214,50 @@ fn load_checkpoint(args: &RenderArgs, scene: &Scene) -> Result<Option<Checkpoint
         bail!("a resumed run keeps the settings of its checkpoint: drop --max-depth, --backward-diffuse-depth, --radius-scale, --light-paths-per-pixel and --spectral-output");
     }
     let path = from.join(CHECKPOINT);
-    let c = Checkpoint::load(&path)?;
-    if c.scene_hash != scene.hash {
-        bail!("{} was made from another scene, or the scene or its meshes changed since", path.display());
-    }
+    let c = Checkpoint::load(&path, scene)?;
     Ok(Some(c))
+}
+
+/// Refuses to resume a run whose checkpoint already meets the stop rule: starting workers only to stop them at
+/// once would add nothing and say nothing about why.
+fn check_resume_has_work(c: &Checkpoint, stop: &StopRule, from: &Path) -> Result<()> {
+    let place = from.display();
+    if let Some(t) = stop.time {
+        if c.elapsed_s >= t.as_secs_f64() {
+            bail!(
+                "the checkpoint in {place} already has {:.1} s of rendering, which meets --time {}: nothing to \
+                render. Ask for more time than that (e.g. --time {:.0}) or another stop rule",
+                c.elapsed_s,
+                t.as_secs_f64(),
+                (c.elapsed_s + t.as_secs_f64()).ceil()
+            );
+        }
+    }
+    let sums = c.sums().map_err(|e| anyhow::anyhow!("the checkpoint's sums: {e}"))?;
+    let e = sums.error();
+    if let Some(n) = stop.phases {
+        if e.min_phases as u64 >= n {
+            bail!(
+                "the checkpoint in {place} already has at least {} phases in every pixel, which meets --phases {n}: \
+                nothing to render. Ask for more phases than that",
+                e.min_phases
+            );
+        }
+    }
+    if let Some(target) = stop.target_error {
+        let (d, over) = match stop.error_over {
+            ErrorOver::Unlit => (e.delta_unlit, "unlit pixels"),
+            ErrorOver::All => (e.delta_all, "all pixels"),
+        };
+        if d <= target {
+            bail!(
+                "the checkpoint in {place} already has δ {:.2}% ({over}), which meets --target-error {target}: \
+                nothing to render. Ask for a smaller target",
+                100.0 * d
+            );
+        }
+    }
+    Ok(())
 }
 
 /// The output folder (`--out`, the resumed run's, or a new one under out/), created.
@@ -312,7 +352,9 @@ fn launch_options(args: &RenderArgs) -> LaunchOptions {
         remote_only: args.remote_only,
         secret_file: args.secret_file.clone(),
         insecure: args.insecure,
+        tls_dir: args.tls_dir.clone(),
         worker_timeout_s: args.worker_timeout,
+        max_worker_failures: args.max_worker_failures,
         snapshot_interval_s: args.snapshot_interval,
         group_size: args.group_size,
         tile_size: args.tile_size,

@@ -86,6 +86,46 @@ fn missing_mesh_file_is_named() {
     expect_error(&t, line_of(&t, "missing.obj"), &["objects[0].mesh", "missing.obj", "cannot read"]);
 }
 
+/// Loads GOOD with its floor replaced by the OBJ mesh `obj`; returns the error's message.
+fn obj_error(name: &str, obj: &str) -> String {
+    let dir = std::env::temp_dir().join(format!("photonfarm-bad-obj-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("mesh.obj"), obj).unwrap();
+    let t = GOOD.replace(
+        "quad = { corner = [-1.0, -1.0, 0.0], edge1 = [2.0, 0.0, 0.0], edge2 = [0.0, 2.0, 0.0] }",
+        "mesh = \"mesh.obj\"",
+    );
+    let err = Scene::from_toml(&t, Path::new("bad.toml"), &dir).err().expect("the broken OBJ was accepted");
+    std::fs::remove_dir_all(&dir).ok();
+    assert_eq!(err.line, line_of(&t, "mesh.obj"), "{err}");
+    assert!(err.to_string().contains("objects[0].mesh"), "{err}");
+    err.to_string()
+}
+
+#[test]
+fn obj_indices_out_of_range_are_refused_with_a_clear_error() {
+    let square = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n";
+    let e = obj_error("vertex", &format!("{square}f 1 2 5\n"));
+    assert!(e.contains("face vertex index out of bounds"), "{e}");
+    let e = obj_error("relative", &format!("{square}f -1 -2 -9\n"));
+    assert!(e.contains("out of bounds"), "{e}");
+    let e = obj_error("normal", &format!("{square}vn 0 0 1\nf 1//1 2//1 3//2\n"));
+    assert!(e.contains("face normal index out of bounds"), "{e}");
+    let e = obj_error("texcoord", &format!("{square}vt 0 0\nf 1/1 2/1 3/3\n"));
+    assert!(e.contains("face texcoord index out of bounds"), "{e}");
+    let e = obj_error("zero", &format!("{square}f 0 1 2\n"));
+    assert!(e.contains("cannot parse OBJ"), "{e}");
+}
+
+#[test]
+fn obj_normals_or_texture_coordinates_on_only_some_faces_are_refused_with_a_clear_error() {
+    let square = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvn 0 0 1\nvt 0 0\nvt 1 0\nvt 1 1\n";
+    let e = obj_error("some-normals", &format!("{square}f 1//1 2//1 3//1\nf 1 3 4\n"));
+    assert!(e.contains("vertex normals") && e.contains("some face corners"), "{e}");
+    let e = obj_error("some-uvs", &format!("{square}f 1/1 2/2 3/3\nf 1 3 4\n"));
+    assert!(e.contains("texture coordinates") && e.contains("some face corners"), "{e}");
+}
+
 #[test]
 fn degenerate_triangle_in_an_obj_is_located() {
     let dir = std::env::temp_dir().join(format!("photonfarm-bad-scene-{}", std::process::id()));

@@ -71,3 +71,142 @@ pub fn render_output(scene: &Path, out: &Path, args: &[&str]) -> Output {
         .output()
         .expect("cannot start the coordinator")
 }
+
+/// A user-space network link for tests: a TCP proxy whose two directions are each a delay line behind a rate
+/// limit, like a router's queue drained at the link's rate followed by the wire's propagation delay, so that a
+/// slow, distant link can be emulated where the kernel has no netem. It can also keep a copy of every byte
+/// that crosses it, to check what an eavesdropper would see.
+pub mod link {
+    use std::net::SocketAddr;
+    use std::sync::{Arc, Mutex};
+    use std::time::Duration;
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    use tokio::net::{TcpListener, TcpSocket, TcpStream};
+    use tokio::sync::mpsc;
+    use tokio::time::Instant;
+
+    /// What the emulated link does to the bytes crossing it, in each direction.
+    #[derive(Clone, Copy, Debug)]
+    pub struct Shape {
+        /// Propagation delay, one way.
+        pub delay: Duration,
+        /// Link rate in bits per second (None: as fast as the machine goes).
+        pub rate_bits_per_s: Option<f64>,
+    }
+
+    impl Shape {
+        /// No delay, no rate limit: a recording tap only.
+        pub const NONE: Shape = Shape { delay: Duration::ZERO, rate_bits_per_s: None };
+    }
+
+    /// A running proxy; it stops when dropped.
+    pub struct Proxy {
+        /// Where the proxy listens.
+        pub addr: SocketAddr,
+        captured: Arc<Mutex<Vec<u8>>>,
+        runtime: Option<tokio::runtime::Runtime>,
+    }
+
+    /// Bytes read from one side before they are queued: also the granularity of the delay line.
+    const CHUNK: usize = 16 << 10;
+    /// Chunks in flight per direction: room for the delay line of a fast, distant link (100 Mbit/s × 20 ms is
+    /// 250 kB). The reader itself waits for the link's rate, so a sender feels the rate through TCP's flow
+    /// control instead of handing everything to the proxy.
+    const QUEUE: usize = 64;
+
+    impl Proxy {
+        /// Listens on `listen` and relays every connection to `target` through a link of `shape`; with
+        /// `record`, keeps both directions' bytes (see `captured`).
+        pub fn start(listen: SocketAddr, target: SocketAddr, shape: Shape, record: bool) -> Self {
+            let runtime = tokio::runtime::Builder::new_multi_thread()
+                .worker_threads(1)
+                .enable_all()
+                .build()
+                .expect("a runtime for the link proxy");
+            let captured = Arc::new(Mutex::new(Vec::new()));
+            let listener = runtime.block_on(async {
+                let socket = if listen.is_ipv4() { TcpSocket::new_v4() } else { TcpSocket::new_v6() }
+                    .expect("a socket for the proxy");
+                socket.set_reuseaddr(true).expect("SO_REUSEADDR");
+                // Small kernel buffers on the proxy's side, so that the queue below is what holds bytes.
+                socket.set_recv_buffer_size(64 << 10).expect("SO_RCVBUF");
+                socket.bind(listen).unwrap_or_else(|e| panic!("the proxy cannot listen on {listen}: {e}"));
+                socket.listen(16).expect("listen")
+            });
+            let addr = listener.local_addr().expect("the proxy's address");
+            let tap = record.then(|| captured.clone());
+            runtime.spawn(accept_loop(listener, target, shape, tap));
+            Proxy { addr, captured, runtime: Some(runtime) }
+        }
+
+        /// Every byte relayed so far, both directions, each chunk as it crossed.
+        pub fn captured(&self) -> Vec<u8> {
+            self.captured.lock().unwrap().clone()
+        }
+    }
+
+    impl Drop for Proxy {
+        fn drop(&mut self) {
+            if let Some(r) = self.runtime.take() {
+                r.shutdown_background();
+            }
+        }
+    }
+
+    async fn accept_loop(listener: TcpListener, target: SocketAddr, shape: Shape, tap: Option<Arc<Mutex<Vec<u8>>>>) {
+        while let Ok((inbound, _)) = listener.accept().await {
+            let tap = tap.clone();
+            tokio::spawn(async move {
+                let Ok(outbound) = TcpStream::connect(target).await else { return };
+                let _ = (inbound.set_nodelay(true), outbound.set_nodelay(true));
+                let (ri, wi) = inbound.into_split();
+                let (ro, wo) = outbound.into_split();
+                tokio::spawn(direction(ri, wo, shape, tap.clone()));
+                tokio::spawn(direction(ro, wi, shape, tap));
+            });
+        }
+    }
+
+    /// Relays one direction: chunks leave the queue at the link's rate and arrive `delay` later, in order.
+    async fn direction(
+        mut from: tokio::net::tcp::OwnedReadHalf,
+        mut to: tokio::net::tcp::OwnedWriteHalf,
+        shape: Shape,
+        tap: Option<Arc<Mutex<Vec<u8>>>>,
+    ) {
+        let (tx, mut rx) = mpsc::channel::<(Vec<u8>, Instant)>(QUEUE);
+        let writer = tokio::spawn(async move {
+            while let Some((chunk, due)) = rx.recv().await {
+                tokio::time::sleep_until(due).await;
+                if to.write_all(&chunk).await.is_err() {
+                    return;
+                }
+            }
+            let _ = to.shutdown().await;
+        });
+        // When the link finishes sending what is queued: the next chunk starts then or on arrival.
+        let mut link_free = Instant::now();
+        let mut buf = vec![0u8; CHUNK];
+        loop {
+            let n = match from.read(&mut buf).await {
+                Ok(0) | Err(_) => break,
+                Ok(n) => n,
+            };
+            if let Some(tap) = &tap {
+                tap.lock().unwrap().extend_from_slice(&buf[..n]);
+            }
+            let now = Instant::now();
+            let start = link_free.max(now);
+            let serialise =
+                shape.rate_bits_per_s.map_or(Duration::ZERO, |r| Duration::from_secs_f64(n as f64 * 8.0 / r));
+            link_free = start + serialise;
+            // Hold the reader until the link has sent the chunk: the rate limit is what the sender feels.
+            if tx.send((buf[..n].to_vec(), link_free + shape.delay)).await.is_err() {
+                break;
+            }
+            tokio::time::sleep_until(link_free).await;
+        }
+        drop(tx);
+        let _ = writer.await;
+    }
+}

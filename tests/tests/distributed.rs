@@ -215,7 +215,8 @@ fn a_coordinator_killed_mid_run_resumes_without_losing_or_recounting_a_checkpoin
     std::thread::sleep(Duration::from_millis(700));
     child.kill().unwrap();
     child.wait().unwrap();
-    let checkpoint = photonfarm::render::checkpoint::Checkpoint::load(&out.join("checkpoint.bin")).unwrap();
+    let loaded = photonfarm::scene::Scene::load(&scene).unwrap();
+    let checkpoint = photonfarm::render::checkpoint::Checkpoint::load(&out.join("checkpoint.bin"), &loaded).unwrap();
     let before: u64 = checkpoint.sums().unwrap().pixels.iter().map(|p| p.phases as u64).sum();
     assert!(before > 0, "the checkpoint holds no phase");
     assert!(before < 1200 * 1600, "the first session finished before it was killed");
@@ -411,4 +412,68 @@ fn a_textured_scene_renders_the_same_through_three_level_workers_that_received_i
         assert!(w["pixel_phases"].as_u64().unwrap() > 0, "{w}");
     }
     assert_same_image(&single, &three, "textured scene, three-level against one process");
+}
+
+/// The record of a running render, once it has one with a worker named `name` in a state `state` names.
+fn wait_for_worker_state(out: &Path, name: &str, state: &str) -> serde_json::Value {
+    let start = Instant::now();
+    loop {
+        let r: Option<serde_json::Value> =
+            std::fs::read_to_string(out.join("run.json")).ok().and_then(|t| serde_json::from_str(&t).ok());
+        let found = r.as_ref().and_then(|r| {
+            r["workers"]
+                .as_array()?
+                .iter()
+                .find(|w| w["name"] == name && w["state"].as_str().is_some_and(|s| s.starts_with(state)))
+        });
+        if let Some(w) = found {
+            return w.clone();
+        }
+        assert!(start.elapsed() < Duration::from_secs(30), "worker {name} never reached '{state}' in the record");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+#[test]
+fn a_host_whose_workers_keep_failing_is_refused_for_the_rest_of_the_job_and_the_record_counts_its_failures() {
+    let dir = scratch_dir("blocklist");
+    let scene = cornell_at(&dir, 32);
+    let out = dir.join("out");
+    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let addr = format!("127.0.0.1:{port}");
+    // The local worker renders the job throughout; workers that join from 127.0.0.1 are killed mid-run.
+    let mut c = coordinator(&scene, &out, &["--method", "three-level", "--topology", "pack:1 numa:1 core:1 pu:1"]);
+    c.args(["--time", "60", "--listen", &addr, "--max-worker-failures", "2", "--save-interval", "0.3"]);
+    let child = c.stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
+    for round in 0..2 {
+        let name = format!("flaky{round}");
+        let mut w = Command::new(binary("worker"))
+            .args(["join", &addr, "--name", &name])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        wait_for_worker_state(&out, &name, "running");
+        w.kill().unwrap();
+        w.wait().unwrap();
+        let lost = wait_for_worker_state(&out, &name, "lost");
+        assert_eq!(lost["failures"], round + 1, "{lost}");
+    }
+    let refused = Command::new(binary("worker")).args(["join", &addr, "--name", "flaky2"]).output().unwrap();
+    let why = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success(), "{why}");
+    assert!(why.contains("failed 2 times in this job") && why.contains("--max-worker-failures 2"), "{why}");
+    // Ctrl-C: the run ends at once and writes what it has.
+    assert!(Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap().success());
+    let o = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stderr.contains("refused for the rest of it"), "{stderr}");
+    let r = record(&out);
+    let workers = r["workers"].as_array().unwrap();
+    let flaky: Vec<_> = workers.iter().filter(|w| w["name"].as_str().unwrap().starts_with("flaky")).collect();
+    assert_eq!(flaky.len(), 2, "the refused worker never became one of the job's: {workers:?}");
+    assert!(flaky.iter().all(|w| w["failures"] == 2 && w["state"].as_str().unwrap().starts_with("lost")), "{flaky:?}");
+    let local = workers.iter().find(|w| w["name"] == "node0").unwrap();
+    assert_eq!((&local["state"], &local["failures"]), (&"finished".into(), &0.into()), "{local}");
 }

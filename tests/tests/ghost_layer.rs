@@ -26,8 +26,9 @@ fn lens_at(dir: &Path) -> PathBuf {
 }
 
 /// The ghost layer's sums of a run's checkpoint, with the pixel-phases they hold.
-fn checkpointed_ghost(run: &Path) -> (Vec<f64>, u64) {
-    let sums = Checkpoint::load(&run.join("checkpoint.bin")).unwrap().sums().unwrap();
+fn checkpointed_ghost(run: &Path, scene: &Path) -> (Vec<f64>, u64) {
+    let scene = photonfarm::scene::Scene::load(scene).unwrap();
+    let sums = Checkpoint::load(&run.join("checkpoint.bin"), &scene).unwrap().sums().unwrap();
     assert_eq!(sums.aux.layout().offset("ghost"), Some(0), "the checkpoint has no ghost layer");
     (sums.aux.values().to_vec(), sums.pixels.iter().map(|p| p.phases as u64).sum())
 }
@@ -61,13 +62,13 @@ fn a_three_level_render_of_the_lens_writes_a_non_zero_ghost_layer_and_a_resumed_
     // Continue the run from its checkpoint for 16 more phases than it reached (the workers render on until the
     // coordinator's stop arrives, so it may have many more than 16): sums only grow, so every ghost sum of the
     // checkpoint is still there, with the light of the phases added since.
-    let (before, phases_before) = checkpointed_ghost(&run);
+    let (before, phases_before) = checkpointed_ghost(&run, &scene);
     let record: serde_json::Value = serde_json::from_slice(&std::fs::read(run.join("run.json")).unwrap()).unwrap();
     let target = (record["error"]["min_phases"].as_u64().unwrap() + 16).to_string();
     let mut resume = three.to_vec();
     resume.extend(["--phases", &target, "--resume", run.to_str().unwrap()]);
     render(&scene, &run, &resume);
-    let (after, phases_after) = checkpointed_ghost(&run);
+    let (after, phases_after) = checkpointed_ghost(&run, &scene);
     assert!(phases_after > phases_before, "the resumed run added no phase");
     // Per pixel in luminance: the lens disperses, so one channel of a spectral sample may be negative, but
     // its luminance (ȳ weighted) never is, and a pixel's luminance sum only grows.

@@ -71,7 +71,12 @@ pub async fn serve_job(
         Message::Refused { reason } => return Err(ProtocolError::Refused(reason).into()),
         other => return Err(ProtocolError::Unexpected { expected: "Job", got: other.kind().into() }.into()),
     };
-    fetch_files(&mut conn, &job, cache).await?;
+    if fetch_files(&mut conn, &job, cache).await? == Fetched::Stopped {
+        // The run ended while this worker was still being set up: nothing rendered, nothing lost.
+        conn.write(&Message::Finished).await?;
+        drain_until_closed(&mut conn).await;
+        return Ok(JobOutcome { coordinator: peer.name, snapshots_sent: 0, snapshots_acked: 0 });
+    }
     let meshes: BTreeMap<String, Vec<u8>> =
         job.files.iter().map(|f| (f.path.clone(), cache[&f.sha256].clone())).collect();
     let job = Arc::new(*job);
@@ -90,7 +95,8 @@ pub async fn serve_job(
     };
 
     let stop = Arc::new(AtomicBool::new(false));
-    // Snapshot interval: the job's, lengthened so that sending a snapshot takes at most 5% of it.
+    // Snapshot interval: the job's, lengthened so that sending a snapshot (until it is acknowledged) takes at
+    // most 5% of it.
     let floor_ms = job.snapshot_interval_ms.max(1);
     let interval_ms = Arc::new(AtomicU64::new(floor_ms));
     let mut previous_send_ms = 0u64;
@@ -119,6 +125,8 @@ pub async fn serve_job(
     let (mut incoming, reader_task) = reader.forward();
     let (mut sent, mut acked, mut last_seq) = (0u64, 0u64, 0u64);
     let mut finished = false;
+    // The snapshot sent last and when its sending began, until it is acknowledged.
+    let mut in_flight: Option<(u64, Instant)> = None;
     let mut last_sent = Instant::now();
     let mut last_heard = Instant::now();
     let mut tick = tokio::time::interval(Duration::from_millis(200));
@@ -134,12 +142,10 @@ pub async fn serve_job(
                         sent += 1;
                         last_seq = s.seq;
                         s.previous_send_ms = previous_send_ms;
-                        let t = Instant::now();
+                        // A send is timed until its acknowledgement: the write alone returns as soon as the
+                        // kernel's socket buffer holds the frame, which on a slow link can be megabytes early.
+                        in_flight = Some((s.seq, Instant::now()));
                         writer.write(&Message::Snapshot(s)).await?;
-                        // The write returns once the kernel holds the tail of the frame: on a slow link that is
-                        // close to the transfer time.
-                        previous_send_ms = t.elapsed().as_millis() as u64;
-                        interval_ms.store(floor_ms.max(20 * previous_send_ms), Ordering::Relaxed);
                         last_sent = Instant::now();
                         continue;
                     }
@@ -159,7 +165,14 @@ pub async fn serve_job(
             message = incoming.recv() => {
                 last_heard = Instant::now();
                 match message.map(|(m, _)| m) {
-                    Some(Ok(Message::Ack { seq })) => acked = acked.max(seq),
+                    Some(Ok(Message::Ack { seq })) => {
+                        acked = acked.max(seq);
+                        if let Some((_, t)) = in_flight.filter(|(s, _)| seq >= *s) {
+                            previous_send_ms = t.elapsed().as_millis() as u64;
+                            interval_ms.store(floor_ms.max(20 * previous_send_ms), Ordering::Relaxed);
+                            in_flight = None;
+                        }
+                    }
                     Some(Ok(Message::Stop)) => stop.store(true, Ordering::Release),
                     Some(Ok(Message::Heartbeat)) => {}
                     Some(Ok(other)) => {
@@ -193,14 +206,30 @@ pub async fn serve_job(
     result.map(|()| JobOutcome { coordinator: peer.name, snapshots_sent: sent, snapshots_acked: acked })
 }
 
-/// Asks for the job's files that are not in `cache` and checks every one against its hash.
-async fn fetch_files(conn: &mut Connection, job: &Job, cache: &mut FileCache) -> Result<(), ProtocolError> {
+/// Whether the job's files all arrived, or the coordinator stopped the run first.
+#[derive(Debug, PartialEq, Eq)]
+enum Fetched {
+    All,
+    Stopped,
+}
+
+/// Reads what the coordinator still sends after this worker said `Finished` (files it had asked for, a last
+/// heartbeat) until the coordinator closes the link, so that closing first does not reset a link the
+/// coordinator is still writing to; gives up after a few seconds.
+async fn drain_until_closed(conn: &mut Connection) {
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while let Ok(Ok(_)) = tokio::time::timeout(deadline.saturating_duration_since(Instant::now()), conn.read()).await {}
+}
+
+/// Asks for the job's files that are not in `cache` and checks every one against its hash. A stop request
+/// that arrives first ends the job normally.
+async fn fetch_files(conn: &mut Connection, job: &Job, cache: &mut FileCache) -> Result<Fetched, ProtocolError> {
     let mut missing: Vec<String> =
         job.files.iter().map(|f| f.sha256.clone()).filter(|h| !cache.contains_key(h)).collect();
     missing.sort();
     missing.dedup();
     if missing.is_empty() {
-        return Ok(());
+        return Ok(Fetched::All);
     }
     conn.write(&Message::NeedFiles { hashes: missing.clone() }).await?;
     while !missing.is_empty() {
@@ -216,9 +245,90 @@ async fn fetch_files(conn: &mut Connection, job: &Job, cache: &mut FileCache) ->
                 missing.swap_remove(pos);
                 cache.insert(sha256, bytes);
             }
+            Message::Stop => return Ok(Fetched::Stopped),
+            Message::Heartbeat => {}
             Message::Refused { reason } => return Err(ProtocolError::Refused(reason)),
             other => return Err(ProtocolError::Unexpected { expected: "File", got: other.kind().into() }),
         }
     }
-    Ok(())
+    Ok(Fetched::All)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use photonfarm::protocol::auth::handshake;
+    use photonfarm::protocol::{EngineSpec, FileRef};
+    use photonfarm::render::method::ParallelMethod;
+    use photonfarm::render::{Method, RenderSettings};
+    use photonfarm::scene::Scene;
+    use std::path::Path;
+    use tokio::net::{TcpListener, TcpStream};
+
+    /// Cornell's job, whose meshes a new worker must ask for.
+    fn cornell_job() -> (Job, BTreeMap<String, Vec<u8>>) {
+        let scenes = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+        let path = scenes.join("cornell.toml");
+        let scene = Scene::load(&path).unwrap();
+        let files: Vec<FileRef> =
+            scene.mesh_files.iter().map(|(p, h)| FileRef { path: p.clone(), sha256: h.clone() }).collect();
+        let store = scene.mesh_files.iter().map(|(p, h)| (h.clone(), std::fs::read(scenes.join(p)).unwrap())).collect();
+        let job = Job {
+            scene_name: "cornell.toml".into(),
+            scene_text: std::fs::read_to_string(&path).unwrap(),
+            files,
+            scene_hash: scene.hash.clone(),
+            settings: RenderSettings::for_scene(&scene, Method::ThreeLevel, 1),
+            stream: 0,
+            engine: EngineSpec {
+                method: ParallelMethod::TwoLevel,
+                group_size: 1,
+                tile_size: None,
+                phases_per_deal: Some(6),
+                cores: None,
+                numa_node: None,
+                synthetic_topology: false,
+                processes_per_pixel: 1,
+                process_rank: 0,
+                resumed_phases: 0,
+            },
+            snapshot_interval_ms: 1000,
+        };
+        (job, store)
+    }
+
+    #[test]
+    fn a_stop_that_arrives_while_the_files_are_being_sent_ends_the_job_normally() {
+        let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+        runtime.block_on(async {
+            let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
+            let addr = listener.local_addr().unwrap();
+            let (job, store) = cornell_job();
+            // A coordinator whose run ends right after it sent the job: its Stop is on the wire before the
+            // files the worker is about to ask for.
+            let coordinator = tokio::spawn(async move {
+                let (s, _) = listener.accept().await.unwrap();
+                let mut c = Connection::new(s).unwrap();
+                handshake(&mut c, Role::Coordinator, "c", &Secret::insecure()).await.unwrap();
+                c.write(&Message::Job(Box::new(job))).await.unwrap();
+                c.write(&Message::Stop).await.unwrap();
+                loop {
+                    match c.read().await.unwrap() {
+                        Message::NeedFiles { hashes } => {
+                            for h in hashes {
+                                let bytes = store[&h].clone();
+                                c.write(&Message::File { sha256: h, bytes }).await.unwrap();
+                            }
+                        }
+                        other => return other.kind(),
+                    }
+                }
+            });
+            let conn = Connection::new(TcpStream::connect(addr).await.unwrap()).unwrap();
+            let opts = LinkOptions::new("w".into(), Secret::insecure());
+            let outcome = serve_job(conn, &opts, &mut FileCache::new()).await.expect("a normal end");
+            assert_eq!((outcome.snapshots_sent, outcome.snapshots_acked), (0, 0));
+            assert_eq!(coordinator.await.unwrap(), "Finished");
+        });
+    }
 }

@@ -4,7 +4,8 @@
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use photonfarm::protocol::auth::Secret;
-use photonfarm::protocol::Connection;
+use photonfarm::protocol::tls::{self, Tls, Transport};
+use photonfarm::protocol::Role;
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -22,10 +23,14 @@ struct SecretArgs {
     /// File holding the shared secret (at least 16 bytes); otherwise $PHOTONFARM_SECRET.
     #[arg(long)]
     secret_file: Option<PathBuf>,
-    /// Accept links without a secret on non-loopback addresses (anyone who can reach the port can then use
-    /// this machine).
+    /// Allow links to other machines without TLS and without a secret (anyone who can reach the port can
+    /// then use this machine, and scenes and images cross the network in the clear).
     #[arg(long)]
     insecure: bool,
+    /// Folder with the job CA's ca.pem, worker.pem, worker.key (and secret) from `coordinator keys init`:
+    /// the link runs over mutually authenticated TLS (required off loopback unless --insecure).
+    #[arg(long, value_name = "DIR")]
+    tls_dir: Option<PathBuf>,
     /// The name this worker gives the coordinator (default: the host name).
     #[arg(long)]
     name: Option<String>,
@@ -68,10 +73,33 @@ fn secret(args: &SecretArgs, loopback: bool) -> Result<Secret> {
     if let Some(s) = Secret::from_env()? {
         return Ok(s);
     }
+    if let Some(dir) = &args.tls_dir {
+        let path = dir.join(tls::SECRET_FILE);
+        if path.exists() {
+            return Ok(Secret::from_file(&path)?);
+        }
+    }
     if args.insecure || loopback {
         return Ok(Secret::insecure());
     }
-    bail!("a link that is not loopback needs a shared secret: --secret-file FILE or $PHOTONFARM_SECRET (or --insecure)")
+    bail!(
+        "a link that is not loopback needs a shared secret: --secret-file FILE, $PHOTONFARM_SECRET or the secret \
+         of --tls-dir DIR (or --insecure)"
+    )
+}
+
+/// TLS with the `--tls-dir` keys; plaintext only on loopback or with an explicit `--insecure`.
+fn transport(args: &SecretArgs, loopback: bool) -> Result<Transport> {
+    if let Some(dir) = &args.tls_dir {
+        return Ok(Transport::Tls(Tls::load(dir, Role::Worker)?));
+    }
+    if args.insecure || loopback {
+        return Ok(Transport::Plain);
+    }
+    bail!(
+        "a link that is not loopback is encrypted: give --tls-dir DIR with the job's ca.pem, worker.pem and \
+         worker.key (from `coordinator keys init`), or --insecure to send scenes and images in the clear"
+    )
 }
 
 fn main() -> std::process::ExitCode {
@@ -102,6 +130,7 @@ async fn run(cli: Cli) -> Result<()> {
             let loopback = !addrs.is_empty() && addrs.iter().all(|a| a.ip().is_loopback());
             let mut opts =
                 LinkOptions::new(s.name.clone().unwrap_or_else(worker::machine::hostname), secret(&s, loopback)?);
+            let transport = transport(&s, loopback)?;
             opts.slowdown = s.slowdown;
             // The coordinator may still be starting: retry for a while.
             let deadline = Instant::now() + Duration::from_secs(15);
@@ -112,7 +141,7 @@ async fn run(cli: Cli) -> Result<()> {
                     Err(e) => return Err(e).with_context(|| format!("cannot reach the coordinator at {addr}")),
                 }
             };
-            let conn = Connection::new(stream)?;
+            let conn = transport.connect(stream).await.with_context(|| format!("cannot set up the link to {addr}"))?;
             let outcome = serve_job(conn, &opts, &mut FileCache::new()).await?;
             eprintln!(
                 "worker {}: job for {} done, {} snapshots sent, {} acknowledged",
@@ -126,6 +155,7 @@ async fn run(cli: Cli) -> Result<()> {
                 secret(&s, listen.ip().is_loopback())?,
             );
             opts.slowdown = s.slowdown;
+            let transport = transport(&s, listen.ip().is_loopback())?;
             let listener =
                 tokio::net::TcpListener::bind(listen).await.with_context(|| format!("cannot listen on {listen}"))?;
             eprintln!("worker {}: listening on {}", opts.name, listener.local_addr()?);
@@ -136,7 +166,13 @@ async fn run(cli: Cli) -> Result<()> {
                     eprintln!("worker {}: refused {peer}: no secret is set and the link is not loopback", opts.name);
                     continue;
                 }
-                let conn = Connection::new(stream)?;
+                let conn = match transport.accept(stream).await {
+                    Ok(c) => c,
+                    Err(e) => {
+                        eprintln!("worker {}: refused {peer}: {e}", opts.name);
+                        continue;
+                    }
+                };
                 match serve_job(conn, &opts, &mut cache).await {
                     Ok(o) => eprintln!(
                         "worker {}: job from {peer} ({}) done, {} snapshots sent, {} acknowledged",

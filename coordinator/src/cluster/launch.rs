@@ -1,12 +1,13 @@
 //! Starting a distributed render: the NUMA nodes, one local worker process per node, the remote workers, and
 //! the job each of them gets.
 
-use super::network::{FileStore, NetworkPlan, Planned, Timing};
+use super::network::{Blocklist, FileStore, NetworkPlan, Planned, Timing};
 use super::numa_nodes::{self, NumaNode, NumaNodes};
 use super::{Cluster, Member};
 use anyhow::{bail, Context, Result};
 use photonfarm::protocol::auth::SECRET_ENV;
-use photonfarm::protocol::{EngineSpec, FileRef, Job, Secret};
+use photonfarm::protocol::tls::{self, Tls, Transport};
+use photonfarm::protocol::{EngineSpec, FileRef, Job, Role, Secret};
 use photonfarm::render::method::Grouping;
 use photonfarm::render::{Method, RenderSettings};
 use photonfarm::scene::Scene;
@@ -32,10 +33,14 @@ pub struct LaunchOptions {
     pub remote_only: bool,
     /// The shared secret for remote workers (otherwise the environment's).
     pub secret_file: Option<PathBuf>,
-    /// Allow remote links without a secret.
+    /// Allow remote links without a secret and without TLS.
     pub insecure: bool,
+    /// The key folder of `coordinator keys init`: remote links run over TLS with its certificates.
+    pub tls_dir: Option<PathBuf>,
     /// Seconds of silence after which a worker is presumed hung.
     pub worker_timeout_s: f64,
+    /// Lost links after which a host's workers are refused for the rest of the job.
+    pub max_worker_failures: u32,
     /// Seconds between a worker's snapshots (remote workers lengthen it on slow links).
     pub snapshot_interval_s: f64,
     /// Most threads per group where workers run two-level.
@@ -75,6 +80,7 @@ pub fn launch(
     let timing = check(options)?;
     let nodes = numa_nodes::detect(options.topology.as_deref(), &worker::machine::all_cores())?;
     let remote_secret = remote_secret(options)?;
+    let remote_transport = remote_transport(options)?;
     let template = JobTemplate::new(options, scene, settings, &nodes, resume.as_ref())?;
     let (members, jobs) = plan_workers(options, &nodes, &template);
     if members.is_empty() && options.listen.is_none() {
@@ -97,7 +103,9 @@ pub fn launch(
         local: local.map(|l| (l, local_secret)),
         public: public.map(|l| (l, remote_secret.clone())),
         remote_secret,
+        remote_transport,
         timing,
+        blocklist: Arc::new(Blocklist::new(options.max_worker_failures)),
     };
     let initial = resume.map(|r| (r.sums, r.totals));
     let aux = photonfarm::accumulation::AuxLayout::for_scene(scene, settings.spectral_bands);
@@ -116,10 +124,23 @@ fn check(options: &LaunchOptions) -> Result<Timing> {
     if !(options.snapshot_interval_s.is_finite() && options.snapshot_interval_s > 0.0) {
         bail!("--snapshot-interval must be a positive number of seconds");
     }
+    if options.max_worker_failures == 0 {
+        bail!("--max-worker-failures must be at least 1");
+    }
     if !(options.worker_timeout_s.is_finite() && options.worker_timeout_s >= 2.0) {
         bail!("--worker-timeout must be at least 2 seconds (workers send a heartbeat every second)");
     }
     Ok(Timing { heartbeat: Duration::from_secs(1), peer_timeout: Duration::from_secs_f64(options.worker_timeout_s) })
+}
+
+/// True when every link to remote workers stays on this machine (`--worker` and `--listen` addresses on
+/// loopback): such links need neither a secret nor TLS.
+fn loopback_only(options: &LaunchOptions) -> bool {
+    let is_loopback = |w: &String| {
+        use std::net::ToSocketAddrs;
+        w.to_socket_addrs().map(|mut a| a.all(|a| a.ip().is_loopback())).unwrap_or(false)
+    };
+    options.remote_workers.iter().all(is_loopback) && options.listen.is_none_or(|l| l.ip().is_loopback())
 }
 
 fn remote_secret(options: &LaunchOptions) -> Result<Secret> {
@@ -129,18 +150,32 @@ fn remote_secret(options: &LaunchOptions) -> Result<Secret> {
     if let Some(s) = Secret::from_env()? {
         return Ok(s);
     }
-    let is_loopback = |w: &String| {
-        use std::net::ToSocketAddrs;
-        w.to_socket_addrs().map(|mut a| a.all(|a| a.ip().is_loopback())).unwrap_or(false)
-    };
-    let loopback_only =
-        options.remote_workers.iter().all(is_loopback) && options.listen.is_none_or(|l| l.ip().is_loopback());
-    if options.insecure || loopback_only {
+    if let Some(dir) = &options.tls_dir {
+        let path = dir.join(tls::SECRET_FILE);
+        if path.exists() {
+            return Ok(Secret::from_file(&path)?);
+        }
+    }
+    if options.insecure || loopback_only(options) {
         return Ok(Secret::insecure());
     }
     bail!(
-        "remote workers need a shared secret: --secret-file FILE or ${SECRET_ENV} (or --insecure to allow anyone \
-         who can reach the port)"
+        "remote workers need a shared secret: --secret-file FILE, ${SECRET_ENV} or the secret of --tls-dir DIR \
+         (or --insecure to allow anyone who can reach the port)"
+    )
+}
+
+/// TLS with the `--tls-dir` keys; plaintext only on loopback or with an explicit `--insecure`.
+fn remote_transport(options: &LaunchOptions) -> Result<Transport> {
+    if let Some(dir) = &options.tls_dir {
+        return Ok(Transport::Tls(Tls::load(dir, Role::Coordinator)?));
+    }
+    if options.insecure || loopback_only(options) {
+        return Ok(Transport::Plain);
+    }
+    bail!(
+        "links to workers on other machines are encrypted: give --tls-dir DIR with the keys of `coordinator keys \
+         init DIR` (and the workers their copy), or --insecure to send scenes and images in the clear"
     )
 }
 

@@ -7,15 +7,17 @@ pub mod network;
 pub mod numa_nodes;
 
 use anyhow::{Context, Result};
-use network::{Control, Event, NetworkPlan, Planned};
+use network::{Blocklist, Control, Event, NetworkPlan, Planned};
 use photonfarm::accumulation::delta::apply_delta;
 use photonfarm::accumulation::{Accumulator, AuxLayout};
 use photonfarm::render::record::{WorkerRecord, WorkerState};
 use photonfarm::render::session::Progressive;
 use photonfarm::render::{RayTotals, RenderSettings};
+use std::net::IpAddr;
 use std::process::Child;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::sync::mpsc::UnboundedSender;
 
@@ -24,6 +26,8 @@ use tokio::sync::mpsc::UnboundedSender;
 pub struct WorkerView {
     pub record: WorkerRecord,
     last_seq: u64,
+    /// The host its link comes from, for the blocklist (None for the workers this coordinator starts).
+    ip: Option<IpAddr>,
 }
 
 /// A running distributed render.
@@ -37,6 +41,7 @@ pub struct Cluster {
     control: Option<UnboundedSender<Control>>,
     network: Option<std::thread::JoinHandle<()>>,
     children: Vec<Child>,
+    blocklist: Arc<Blocklist>,
     /// New workers may still join (`--listen`).
     accepts_joins: bool,
     /// `collect` ran: the workers were stopped and may exit on their own.
@@ -78,6 +83,7 @@ impl Cluster {
             None => (Accumulator::with_aux(width, height, aux), RayTotals::default()),
         };
         let accepts_joins = plan.public.is_some();
+        let blocklist = plan.blocklist.clone();
         let (events_tx, events) = std::sync::mpsc::channel();
         let (control_tx, control_rx) = tokio::sync::mpsc::unbounded_channel();
         let runtime = tokio::runtime::Builder::new_current_thread()
@@ -103,6 +109,7 @@ impl Cluster {
                     ..WorkerRecord::default()
                 },
                 last_seq: 0,
+                ip: None,
             })
             .collect();
         Ok(Cluster {
@@ -114,6 +121,7 @@ impl Cluster {
             control: Some(control_tx),
             network: Some(network),
             children,
+            blocklist,
             accepts_joins,
             collected: false,
             started: Instant::now(),
@@ -135,6 +143,25 @@ impl Cluster {
             eprintln!("coordinator: worker {} lost ({why}); the run goes on with the others", r.name);
         }
         r.state = state;
+        if matches!(r.state, WorkerState::Lost(_)) {
+            self.count_failure(w);
+        }
+    }
+
+    /// Counts a lost link against its host's address, shows the count on every worker from that host, and
+    /// says so when the host is refused from now on.
+    fn count_failure(&mut self, w: usize) {
+        let Some(ip) = self.workers[w].ip else { return };
+        let n = self.blocklist.fail(ip);
+        for v in self.workers.iter_mut().filter(|v| v.ip == Some(ip)) {
+            v.record.failures = n;
+        }
+        if n == self.blocklist.max() {
+            eprintln!(
+                "coordinator: workers from {ip} failed {n} times in this job: it is refused for the rest of it \
+                (--max-worker-failures)"
+            );
+        }
     }
 
     /// Handles one event; true when a snapshot was merged.
@@ -142,14 +169,22 @@ impl Cluster {
         match event {
             Event::Joined { worker, name, address } => {
                 while self.workers.len() <= worker {
-                    self.workers.push(WorkerView { record: WorkerRecord::default(), last_seq: 0 });
+                    self.workers.push(WorkerView { record: WorkerRecord::default(), last_seq: 0, ip: None });
                 }
-                self.workers[worker].record.name = name;
-                self.workers[worker].record.address = address;
+                let ip = address.parse::<std::net::SocketAddr>().ok().map(|a| a.ip());
+                let v = &mut self.workers[worker];
+                v.record.name = name;
+                v.record.address = address;
+                v.ip = ip;
+                v.record.failures = ip.map_or(0, |ip| self.blocklist.failures(ip));
             }
             Event::Connected { worker, address } => {
-                if self.workers[worker].record.address == "local" {
-                    self.workers[worker].record.address = address;
+                let v = &mut self.workers[worker];
+                if v.record.address == "local" {
+                    v.record.address = address;
+                } else if let Ok(a) = address.parse::<std::net::SocketAddr>() {
+                    // A `--worker` daemon this coordinator dialled.
+                    v.ip = Some(a.ip());
                 }
             }
             Event::Started { worker, info } => {
@@ -189,7 +224,11 @@ impl Cluster {
                         self.send(Control::Ack { worker, seq: snapshot.seq });
                         return true;
                     }
-                    Err(e) => self.set_state(worker, WorkerState::Lost(format!("refused its snapshot: {e}"))),
+                    Err(e) => {
+                        let reason = format!("refused its snapshot: {e}");
+                        self.send(Control::Drop { worker, reason: reason.clone() });
+                        self.set_state(worker, WorkerState::Lost(reason));
+                    }
                 }
             }
             Event::Finished { worker } => self.set_state(worker, WorkerState::Finished),

@@ -3,9 +3,10 @@
 //! main thread's acknowledgements and stop requests back. One tokio task per worker link.
 
 use photonfarm::protocol::auth::{handshake, Peer};
+use photonfarm::protocol::tls::Transport;
 use photonfarm::protocol::{Connection, Job, Message, ProtocolError, Role, Secret, Snapshot, WorkerInfo};
 use std::collections::BTreeMap;
-use std::net::SocketAddr;
+use std::net::{IpAddr, SocketAddr};
 use std::path::PathBuf;
 use std::sync::mpsc as std_mpsc;
 use std::sync::Arc;
@@ -53,8 +54,61 @@ pub enum Event {
 /// What the main thread asks of the network thread.
 #[derive(Debug)]
 pub enum Control {
-    Ack { worker: usize, seq: u64 },
+    Ack {
+        worker: usize,
+        seq: u64,
+    },
     StopAll,
+    /// End the worker's link, telling it why (its snapshot was refused).
+    Drop {
+        worker: usize,
+        reason: String,
+    },
+}
+
+/// Failures of worker links per host address in this job, as render-farm managers keep them: a host whose
+/// workers failed `max` times is refused for the rest of the job, so that a worker that keeps crashing and
+/// rejoining stops costing the run a set-up each time.
+#[derive(Debug)]
+pub struct Blocklist {
+    max: u32,
+    failures: std::sync::Mutex<BTreeMap<IpAddr, u32>>,
+}
+
+impl Blocklist {
+    /// A blocklist that refuses an address after `max` failures (at least 1).
+    pub fn new(max: u32) -> Self {
+        Blocklist { max: max.max(1), failures: Default::default() }
+    }
+
+    /// Counts one failure of `ip`; returns its failures so far.
+    pub fn fail(&self, ip: IpAddr) -> u32 {
+        let mut f = self.failures.lock().unwrap_or_else(|p| p.into_inner());
+        let n = f.entry(ip).or_insert(0);
+        *n += 1;
+        *n
+    }
+
+    /// Failures of `ip` so far.
+    pub fn failures(&self, ip: IpAddr) -> u32 {
+        self.failures.lock().unwrap_or_else(|p| p.into_inner()).get(&ip).copied().unwrap_or(0)
+    }
+
+    /// Failures after which an address is refused.
+    pub fn max(&self) -> u32 {
+        self.max
+    }
+
+    /// Why `ip` is refused, if it is.
+    pub fn refusal(&self, ip: IpAddr) -> Option<String> {
+        let n = self.failures(ip);
+        (n >= self.max).then(|| {
+            format!(
+                "workers from {ip} failed {n} times in this job (--max-worker-failures {}): refused for the rest of it",
+                self.max
+            )
+        })
+    }
 }
 
 /// Files the job references, by hash, read from disk when a worker asks.
@@ -92,7 +146,11 @@ pub struct NetworkPlan {
     pub public: Option<(std::net::TcpListener, Secret)>,
     /// Secret for `--worker` dials.
     pub remote_secret: Secret,
+    /// Plaintext or TLS for `--listen` and `--worker` links (the local workers' links are plaintext loopback).
+    pub remote_transport: Transport,
     pub timing: Timing,
+    /// Addresses refused after repeated failures (shared with the main thread, which counts them).
+    pub blocklist: Arc<Blocklist>,
 }
 
 type Links = BTreeMap<usize, mpsc::UnboundedSender<Control>>;
@@ -123,7 +181,7 @@ pub async fn run(
         if let Planned::Remote { address } = p {
             let (plan, events, link_tx, address) = (plan.clone(), events.clone(), link_tx.clone(), address.clone());
             tokio::spawn(async move {
-                match dial(&address, &plan.remote_secret).await {
+                match dial(&address, &plan.remote_transport, &plan.remote_secret).await {
                     Ok((conn, _peer)) => {
                         let job = plan.jobs[i].clone();
                         drive(i, conn, job, plan, events, link_tx).await
@@ -142,7 +200,9 @@ pub async fn run(
                 let Ok((stream, addr)) = listener.accept().await else { continue };
                 let (plan, events, link_tx, secret) = (plan2.clone(), events.clone(), link_tx.clone(), secret.clone());
                 tokio::spawn(async move {
-                    let Some((conn, peer)) = accept(stream, addr, &secret, &events).await else { return };
+                    let Some((conn, peer)) = accept(stream, addr, &Transport::Plain, &secret, &events).await else {
+                        return;
+                    };
                     let index =
                         plan.planned.iter().position(|p| matches!(p, Planned::Local { name } if *name == peer.name));
                     match index {
@@ -167,11 +227,25 @@ pub async fn run(
             let mut next = plan2.planned.len();
             loop {
                 let Ok((stream, addr)) = listener.accept().await else { continue };
-                if secret.is_insecure() && !addr.ip().is_loopback() {
+                if !addr.ip().is_loopback() && (secret.is_insecure() || !plan2.remote_transport.is_tls()) {
                     // `--insecure` was given explicitly for this listener; say so once per link.
-                    eprintln!("coordinator: accepting {addr} without authentication (--insecure)");
+                    let what = match (secret.is_insecure(), plan2.remote_transport.is_tls()) {
+                        (true, false) => "without authentication or encryption",
+                        (true, true) => "without authentication",
+                        _ => "without encryption",
+                    };
+                    eprintln!("coordinator: accepting {addr} {what} (--insecure)");
                 }
-                let Some((conn, peer)) = accept(stream, addr, &secret, &events).await else { continue };
+                let Some((mut conn, peer)) = accept(stream, addr, &plan2.remote_transport, &secret, &events).await
+                else {
+                    continue;
+                };
+                // Checked once the peer has authenticated, so only a worker of the job learns why.
+                if let Some(reason) = plan2.blocklist.refusal(addr.ip()) {
+                    let _ = conn.write(&Message::Refused { reason: reason.clone() }).await;
+                    let _ = events.send(Event::Refused { address: addr.to_string(), reason });
+                    continue;
+                }
                 let worker = next;
                 next += 1;
                 let _ = events.send(Event::Joined { worker, name: peer.name.clone(), address: addr.to_string() });
@@ -197,6 +271,11 @@ pub async fn run(
                         let _ = l.send(Control::StopAll);
                     }
                 }
+                Some(Control::Drop { worker, reason }) => {
+                    if let Some(l) = links.get(&worker) {
+                        let _ = l.send(Control::Drop { worker, reason });
+                    }
+                }
                 None => return,
             },
             Some((worker, tx)) = link_rx.recv() => {
@@ -209,11 +288,11 @@ pub async fn run(
     }
 }
 
-async fn dial(address: &str, secret: &Secret) -> Result<(Connection, Peer), ProtocolError> {
+async fn dial(address: &str, transport: &Transport, secret: &Secret) -> Result<(Connection, Peer), ProtocolError> {
     let stream = tokio::time::timeout(Duration::from_secs(10), TcpStream::connect(address))
         .await
         .map_err(|_| ProtocolError::Timeout(Duration::from_secs(10), "the connection"))??;
-    let mut conn = Connection::new(stream)?;
+    let mut conn = transport.connect(stream).await?;
     let peer = handshake(&mut conn, Role::Coordinator, "coordinator", secret).await?;
     Ok((conn, peer))
 }
@@ -221,11 +300,12 @@ async fn dial(address: &str, secret: &Secret) -> Result<(Connection, Peer), Prot
 async fn accept(
     stream: TcpStream,
     addr: SocketAddr,
+    transport: &Transport,
     secret: &Secret,
     events: &std_mpsc::Sender<Event>,
 ) -> Option<(Connection, Peer)> {
     let result = async {
-        let mut conn = Connection::new(stream)?;
+        let mut conn = transport.accept(stream).await?;
         let peer = handshake(&mut conn, Role::Coordinator, "coordinator", secret).await?;
         Ok::<_, ProtocolError>((conn, peer))
     }
@@ -303,6 +383,10 @@ async fn drive(
                     let message = match c {
                         Some(Control::Ack { seq, .. }) => Message::Ack { seq },
                         Some(Control::StopAll) => Message::Stop,
+                        Some(Control::Drop { reason, .. }) => {
+                            let _ = writer.write(&Message::Refused { reason: reason.clone() }).await;
+                            break Err(reason);
+                        }
                         None => break Err("the coordinator is shutting down".into()),
                     };
                     writer.write(&message).await.map_err(|e| e.to_string())?;

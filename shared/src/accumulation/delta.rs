@@ -151,6 +151,14 @@ pub fn encode_delta(current: &Accumulator, base: &Accumulator, compression: Comp
     zstd::bulk::compress(&raw, compression.level()).expect("zstd compression of an in-memory buffer cannot fail")
 }
 
+/// The most bytes a compressed delta of `pixels` pixels with the auxiliary layers `layout` can take
+/// (zstd's bound for incompressible input).
+pub fn max_delta_bytes(pixels: u64, layout: &AuxLayout) -> u64 {
+    let raw = 8 + layout_bytes(layout).len() as u64 + (BYTES_PER_PIXEL as u64 + 8 * layout.channels() as u64) * pixels;
+    // zstd's documented bound: the input, plus 1/256 of it, plus a small constant for its frame.
+    raw + raw / 256 + (128 << 10)
+}
+
 /// What a delta added.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct DeltaSummary {
@@ -212,6 +220,7 @@ pub fn apply_delta(bytes: &[u8], sums: &mut Accumulator) -> Result<DeltaSummary,
     let counts: Vec<Vec<u32>> = (0..U32_PLANES)
         .map(|k| unshuffle::<4>(&counts[4 * n * k..4 * n * (k + 1)], n).into_iter().map(u32::from_le_bytes).collect())
         .collect();
+    check_sums_stay_valid(sums, &counts, &values, &aux_values)?;
     let aux = sums.aux.values_mut();
     for (k, plane) in aux_values.iter().enumerate() {
         for (i, v) in plane.iter().enumerate() {
@@ -221,14 +230,47 @@ pub fn apply_delta(bytes: &[u8], sums: &mut Accumulator) -> Result<DeltaSummary,
     let mut pixel_phases = 0u64;
     for (i, p) in sums.pixels.iter_mut().enumerate() {
         pixel_phases += counts[0][i] as u64;
+        // `check_sums_stay_valid` found no overflow; wrapping adds keep a release build from checking again.
         for (k, plane) in counts.iter().enumerate() {
-            *u32_plane_mut(p, k) += plane[i];
+            let c = u32_plane_mut(p, k);
+            *c = c.wrapping_add(plane[i]);
         }
         for (k, plane) in values.iter().enumerate() {
             *f64_plane_mut(p, k) += plane[i];
         }
     }
     Ok(DeltaSummary { pixel_phases, raw_bytes: expected })
+}
+
+/// Refuses a delta whose addition would overflow a pixel's phase or camera-ray count or make a sum infinite: a
+/// buggy or hostile peer must not wrap the counts (a panic in debug builds, silent corruption in release) nor
+/// leave part of its delta merged.
+fn check_sums_stay_valid(
+    sums: &Accumulator,
+    counts: &[Vec<u32>],
+    values: &[Vec<f64>],
+    aux_values: &[Vec<f64>],
+) -> Result<(), DeltaError> {
+    for (i, p) in sums.pixels.iter().enumerate() {
+        if let Some(k) = (0..U32_PLANES).find(|&k| u32_plane(p, k).checked_add(counts[k][i]).is_none()) {
+            return Err(DeltaError(format!(
+                "pixel {i} would overflow its count {k} ({} + {})",
+                u32_plane(p, k),
+                counts[k][i]
+            )));
+        }
+        if let Some((k, _)) = values.iter().enumerate().find(|(k, plane)| !(f64_plane(p, *k) + plane[i]).is_finite()) {
+            return Err(DeltaError(format!("pixel {i} would overflow its sum {k}")));
+        }
+    }
+    let channels = aux_values.len();
+    let aux = sums.aux.values();
+    for (k, plane) in aux_values.iter().enumerate() {
+        if let Some((i, _)) = plane.iter().enumerate().find(|(i, v)| !(aux[i * channels + k] + **v).is_finite()) {
+            return Err(DeltaError(format!("pixel {i} would overflow its auxiliary sum {k}")));
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -336,6 +378,33 @@ mod tests {
         let mut target = zero.clone();
         assert!(apply_delta(&encode_delta(&bad, &zero, Compression::Fast), &mut target).is_err());
         assert_eq!(target, zero);
+    }
+
+    #[test]
+    fn a_delta_that_would_overflow_a_pixels_counts_is_refused_whole() {
+        let none = AuxLayout::default();
+        let mut target = sums(10, 2, 0.2, &none);
+        target.pixels[7].phases = u32::MAX - 1;
+        let before = target.clone();
+        // Two more phases on every pixel: pixel 7 would wrap, the pixels before it would not.
+        let delta = encode_delta(&sums(10, 2, 0.4, &none), &Accumulator::new(10, 1), Compression::Fast);
+        let e = apply_delta(&delta, &mut target).unwrap_err().to_string();
+        assert!(e.contains("pixel 7") && e.contains("overflow"), "{e}");
+        assert_eq!(target, before, "nothing of a refused delta is merged");
+        let mut target = sums(10, 2, 0.2, &none);
+        target.pixels[2].camera_rays = u32::MAX;
+        let before = target.clone();
+        assert!(apply_delta(&delta, &mut target).is_err());
+        assert_eq!(target, before);
+        // A finite sum that a finite delta would push past f64::MAX.
+        let mut huge = sums(10, 2, 0.4, &none);
+        huge.pixels[4].sum[0][0] = 0.75 * f64::MAX;
+        let delta = encode_delta(&huge, &Accumulator::new(10, 1), Compression::Fast);
+        let mut target = sums(10, 2, 0.2, &none);
+        target.pixels[4].sum[0][0] = 0.75 * f64::MAX;
+        let before = target.clone();
+        assert!(apply_delta(&delta, &mut target).unwrap_err().to_string().contains("pixel 4"));
+        assert_eq!(target, before);
     }
 
     #[test]

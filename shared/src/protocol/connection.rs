@@ -1,22 +1,26 @@
-//! A `Connection` owns the framing of one TCP link (as in tokio's mini-redis): whole messages in and out,
-//! with a frame limit and timeouts. It splits into a reader and a writer for links that read and write at
-//! once.
+//! A `Connection` owns the framing of one link (as in tokio's mini-redis): whole messages in and out, with a
+//! frame limit and timeouts, over plain TCP or TLS (`protocol::tls`). It splits into a reader and a writer for
+//! links that read and write at once.
 
 use super::error::ProtocolError;
 use super::frame::{read_frame, write_frame, DEFAULT_MAX_FRAME};
 use super::message::{decode, encode, Message};
 use std::net::SocketAddr;
 use std::time::Duration;
-use tokio::io::{AsyncWriteExt, BufReader, BufWriter};
-use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
+use tokio::io::{AsyncRead, AsyncWrite, AsyncWriteExt, BufReader, BufWriter};
 use tokio::net::TcpStream;
+
+/// The reading half of a link's stream, whatever carries it.
+type ReadHalf = Box<dyn AsyncRead + Send + Unpin>;
+/// The writing half of a link's stream.
+type WriteHalf = Box<dyn AsyncWrite + Send + Unpin>;
 
 /// Messages read by `MessageReader::forward`, each with the bytes of its frame.
 pub type Incoming = tokio::sync::mpsc::UnboundedReceiver<(Result<Message, ProtocolError>, u64)>;
 
 /// Reads whole messages.
 pub struct MessageReader {
-    inner: BufReader<OwnedReadHalf>,
+    inner: BufReader<ReadHalf>,
     max_frame: u32,
     /// Bytes read so far, frames included.
     pub bytes: u64,
@@ -24,7 +28,7 @@ pub struct MessageReader {
 
 /// Writes whole messages.
 pub struct MessageWriter {
-    inner: BufWriter<OwnedWriteHalf>,
+    inner: BufWriter<WriteHalf>,
     max_frame: u32,
     /// Bytes written so far, frames included.
     pub bytes: u64,
@@ -38,16 +42,26 @@ pub struct Connection {
 }
 
 impl Connection {
-    /// Wraps a connected socket.
+    /// Wraps a connected socket (a plain link).
     pub fn new(stream: TcpStream) -> std::io::Result<Self> {
         let peer = stream.peer_addr()?;
         stream.set_nodelay(true)?;
         let (r, w) = stream.into_split();
-        Ok(Connection {
+        Ok(Self::from_halves(Box::new(r), Box::new(w), peer))
+    }
+
+    /// Wraps any stream to `peer`, e.g. a TLS session over a socket.
+    pub fn from_stream<S: AsyncRead + AsyncWrite + Send + 'static>(stream: S, peer: SocketAddr) -> Self {
+        let (r, w) = tokio::io::split(stream);
+        Self::from_halves(Box::new(r), Box::new(w), peer)
+    }
+
+    fn from_halves(r: ReadHalf, w: WriteHalf, peer: SocketAddr) -> Self {
+        Connection {
             reader: MessageReader { inner: BufReader::new(r), max_frame: DEFAULT_MAX_FRAME, bytes: 0 },
             writer: MessageWriter { inner: BufWriter::new(w), max_frame: DEFAULT_MAX_FRAME, bytes: 0 },
             peer,
-        })
+        }
     }
 
     /// Sends one message and flushes it.

@@ -21,6 +21,8 @@ pub enum ProtocolError {
     Unexpected { expected: &'static str, got: String },
     #[error("the peer closed the connection")]
     Closed,
+    #[error("TLS: {0}")]
+    Tls(String),
     #[error("timed out after {0:?} waiting for {1}")]
     Timeout(std::time::Duration, &'static str),
 }

@@ -89,7 +89,8 @@ pub struct Snapshot {
     pub totals: RayTotals,
     /// Per-pixel sums added since the previous snapshot (see `accumulation::delta`).
     pub delta: Vec<u8>,
-    /// The snapshot interval the worker uses now, and how long sending its previous snapshot took (ms).
+    /// The snapshot interval the worker uses now, and how long sending its previous snapshot took, from the
+    /// start of the write to the acknowledgement (ms).
     pub interval_ms: u64,
     pub previous_send_ms: u64,
     /// The worker process's peak resident memory so far (bytes; 0 where the OS does not say).

@@ -1,12 +1,14 @@
 //! The coordinator–worker protocol (DESIGN §3): length-prefixed frames, one message enum encoded with bincode,
 //! a handshake that checks the protocol version and proves a shared secret both ways, and snapshots that carry
-//! only completed phases, as exact deltas of the sums (`accumulation::delta`).
+//! only completed phases, as exact deltas of the sums (`accumulation::delta`); links that leave the machine run
+//! inside mutually authenticated TLS (`tls`).
 
 pub mod auth;
 pub mod connection;
 pub mod error;
 pub mod frame;
 pub mod message;
+pub mod tls;
 
 pub use auth::Secret;
 pub use connection::{Connection, MessageReader, MessageWriter};

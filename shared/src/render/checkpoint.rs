@@ -5,9 +5,11 @@ use super::method::Method;
 use super::record::HistoryEntry;
 use super::settings::RenderSettings;
 use super::totals::RayTotals;
-use crate::accumulation::delta::{apply_delta, encode_delta, Compression};
+use crate::accumulation::delta::{apply_delta, encode_delta, max_delta_bytes, Compression};
 use crate::accumulation::{Accumulator, AuxLayout};
+use crate::scene::Scene;
 use serde::{Deserialize, Serialize};
+use std::io::Read;
 use std::path::Path;
 
 /// 2: the sums' auxiliary layers (the ghost layer) are kept. 3: the settings hold the spectral-output bands.
@@ -44,6 +46,22 @@ pub enum CheckpointError {
     Write { path: String, source: std::io::Error },
     #[error("{path} is not a photonfarm checkpoint of this version: {reason}")]
     Format { path: String, reason: String },
+    #[error("{path} is {size} bytes, more than a checkpoint of this scene can be ({max} bytes): it is corrupt or not a checkpoint")]
+    TooLarge { path: String, size: u64, max: u64 },
+    #[error("{path} does not belong to this scene: {reason}")]
+    OtherScene { path: String, reason: String },
+}
+
+/// Bytes a checkpoint may hold beside its sums (settings, counters and the δ history, which grows by one small
+/// entry per merge): generous for runs of days.
+const MAX_STATE_BYTES: u64 = 64 << 20;
+
+/// bincode's limit on what one checkpoint may claim to hold, so that a forged length cannot make the decoder
+/// allocate more than this; the file's size is checked against the scene's own bound first.
+const DECODE_LIMIT: usize = u32::MAX as usize;
+
+fn decode_config() -> impl bincode::config::Config {
+    bincode::config::standard().with_limit::<DECODE_LIMIT>()
 }
 
 impl Checkpoint {
@@ -93,20 +111,75 @@ impl Checkpoint {
         std::fs::rename(&tmp, path).map_err(err)
     }
 
-    /// Reads and checks a checkpoint.
-    pub fn load(path: &Path) -> Result<Self, CheckpointError> {
+    /// The largest checkpoint file `scene` can have: its sums with every auxiliary layer a run of it may keep,
+    /// incompressible, and the rest of the run's state.
+    pub fn max_file_bytes(scene: &Scene) -> u64 {
+        let widest = AuxLayout::for_scene(scene, crate::spectrum::MAX_BANDS);
+        let pixels = scene.camera.width as u64 * scene.camera.height as u64;
+        max_delta_bytes(pixels, &widest) + MAX_STATE_BYTES
+    }
+
+    /// Reads a checkpoint of `scene` and checks it: its size against what the scene can have before reading it,
+    /// then its format, the scene's hash, the image size and the auxiliary layers before its sums are decoded,
+    /// so a corrupt or foreign file costs no more memory than the scene's own image.
+    pub fn load(path: &Path, scene: &Scene) -> Result<Self, CheckpointError> {
         let p = path.display().to_string();
-        let bytes = std::fs::read(path).map_err(|source| CheckpointError::Read { path: p.clone(), source })?;
-        let (c, _): (Checkpoint, usize) = bincode::serde::decode_from_slice(&bytes, bincode::config::standard())
-            .map_err(|e| CheckpointError::Format { path: p.clone(), reason: e.to_string() })?;
-        if c.format != FORMAT {
-            return Err(CheckpointError::Format {
-                path: p,
-                reason: format!("format {} (expected {FORMAT})", c.format),
-            });
+        let read_err = |source| CheckpointError::Read { path: p.clone(), source };
+        let file = std::fs::File::open(path).map_err(read_err)?;
+        let size = file.metadata().map_err(read_err)?.len();
+        let max = Self::max_file_bytes(scene);
+        if size > max {
+            return Err(CheckpointError::TooLarge { path: p, size, max });
         }
-        c.sums().map_err(|reason| CheckpointError::Format { path: p, reason })?;
+        let mut bytes = Vec::with_capacity(size as usize);
+        // `take` keeps a file that grows while it is read within the bound.
+        file.take(max + 1).read_to_end(&mut bytes).map_err(read_err)?;
+        Self::from_bytes(&bytes, scene, &p)
+    }
+
+    /// Checks and decodes the bytes of a checkpoint of `scene` (`path` names it in errors), in the order
+    /// `load` gives.
+    pub fn from_bytes(bytes: &[u8], scene: &Scene, path: &str) -> Result<Self, CheckpointError> {
+        let max = Self::max_file_bytes(scene);
+        if bytes.len() as u64 > max {
+            return Err(CheckpointError::TooLarge { path: path.into(), size: bytes.len() as u64, max });
+        }
+        let c = Self::decode(bytes).map_err(|reason| CheckpointError::Format { path: path.into(), reason })?;
+        c.check_scene(scene).map_err(|reason| CheckpointError::OtherScene { path: path.into(), reason })?;
+        c.sums().map_err(|reason| CheckpointError::Format { path: path.into(), reason })?;
         Ok(c)
+    }
+
+    /// Decodes the bytes of a checkpoint file and checks its format number; the sums stay encoded.
+    pub fn decode(bytes: &[u8]) -> Result<Self, String> {
+        let (c, used): (Checkpoint, usize) =
+            bincode::serde::decode_from_slice(bytes, decode_config()).map_err(|e| e.to_string())?;
+        if used != bytes.len() {
+            return Err(format!("{} bytes after the checkpoint", bytes.len() - used));
+        }
+        if c.format != FORMAT {
+            return Err(format!("format {} (expected {FORMAT})", c.format));
+        }
+        Ok(c)
+    }
+
+    /// Checks that the checkpoint continues a render of `scene`: the same scene and meshes (their hash), the
+    /// same image size, and the auxiliary layers the scene gives with the checkpoint's settings.
+    pub fn check_scene(&self, scene: &Scene) -> Result<(), String> {
+        if self.scene_hash != scene.hash {
+            return Err("it was made from another scene, or the scene or its meshes changed since".into());
+        }
+        let (w, h) = (scene.camera.width, scene.camera.height);
+        if (self.width, self.height) != (w, h) {
+            return Err(format!("it holds a {}×{} image, the scene renders {w}×{h}", self.width, self.height));
+        }
+        if self.settings.spectral_bands > crate::spectrum::MAX_BANDS {
+            return Err(format!("it claims {} spectral bands", self.settings.spectral_bands));
+        }
+        if self.aux != AuxLayout::for_scene(scene, self.settings.spectral_bands) {
+            return Err("its auxiliary layers are not the ones this version gives the scene".into());
+        }
+        Ok(())
     }
 }
 
@@ -150,10 +223,77 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("checkpoint.bin");
         c.save(&path).unwrap();
-        let back = Checkpoint::load(&path).unwrap();
+        let back = Checkpoint::decode(&std::fs::read(&path).unwrap()).unwrap();
         assert_eq!(back, c);
         assert_eq!(back.sums().unwrap(), a, "the sums and their ghost layer");
+        assert!(Checkpoint::decode(b"garbage").is_err());
+    }
+
+    /// A scene of `width` × `height` pixels with nothing in it but a light, and its checkpoint with no phase.
+    fn empty_scene_and_checkpoint(width: u32, height: u32) -> (Scene, Checkpoint) {
+        let text = format!(
+            r#"
+[camera]
+type = "pinhole"
+position = [0.0, 0.0, 5.0]
+look_at = [0.0, 0.0, 0.0]
+up = [0.0, 1.0, 0.0]
+fov_y_deg = 40.0
+width = {width}
+height = {height}
+
+[materials.white]
+type = "diffuse"
+albedo = [0.5, 0.5, 0.5]
+
+[[objects]]
+material = "white"
+emission = [1.0, 1.0, 1.0]
+quad = {{ corner = [-1.0, -1.0, 0.0], edge1 = [2.0, 0.0, 0.0], edge2 = [0.0, 2.0, 0.0] }}
+"#
+        );
+        let scene = Scene::from_toml(&text, Path::new("test.toml"), Path::new(".")).unwrap();
+        let settings = RenderSettings::for_scene(&scene, Method::ThreeLevel, 1);
+        let sums = Accumulator::with_aux(width, height, AuxLayout::for_scene(&scene, 0));
+        let c = Checkpoint::new(&sums, &scene.hash, Method::ThreeLevel, settings, 1, 1.0, RayTotals::default(), &[]);
+        (scene, c)
+    }
+
+    #[test]
+    fn a_checkpoint_of_another_scene_or_size_is_refused_before_its_sums_are_decoded() {
+        let dir = std::env::temp_dir().join(format!("pf-checkpoint-scene-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("checkpoint.bin");
+        let (scene, c) = empty_scene_and_checkpoint(8, 4);
+        c.save(&path).unwrap();
+        assert_eq!(Checkpoint::load(&path, &scene).unwrap(), c);
+        let (other, _) = empty_scene_and_checkpoint(8, 5);
+        let e = Checkpoint::load(&path, &other).unwrap_err();
+        assert!(matches!(e, CheckpointError::OtherScene { .. }), "{e}");
+        // The image size as read is checked against the scene before anything of that size is allocated.
+        let mut huge = c.clone();
+        (huge.width, huge.height) = (1 << 30, 1 << 30);
+        huge.save(&path).unwrap();
+        let e = Checkpoint::load(&path, &scene).unwrap_err().to_string();
+        assert!(e.contains("1073741824×1073741824 image"), "{e}");
+        let mut foreign = c.clone();
+        foreign.scene_hash = "0".repeat(64);
+        foreign.save(&path).unwrap();
+        assert!(matches!(Checkpoint::load(&path, &scene), Err(CheckpointError::OtherScene { .. })));
         std::fs::write(&path, b"garbage").unwrap();
-        assert!(matches!(Checkpoint::load(&path), Err(CheckpointError::Format { .. })));
+        assert!(matches!(Checkpoint::load(&path, &scene), Err(CheckpointError::Format { .. })));
+    }
+
+    #[test]
+    fn a_file_larger_than_any_checkpoint_of_the_scene_is_refused_unread() {
+        let dir = std::env::temp_dir().join(format!("pf-checkpoint-large-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("checkpoint.bin");
+        let (scene, _) = empty_scene_and_checkpoint(2, 2);
+        let max = Checkpoint::max_file_bytes(&scene);
+        // A sparse file: its size, not its content, is what is refused.
+        std::fs::File::create(&path).unwrap().set_len(max + 1).unwrap();
+        let e = Checkpoint::load(&path, &scene).unwrap_err();
+        assert!(matches!(e, CheckpointError::TooLarge { size, .. } if size == max + 1), "{e}");
     }
 }

@@ -81,8 +81,8 @@ pub struct WorkerRecord {
     pub totals: RayTotals,
     /// Pixel-phases merged (Σ over pixels of the phases it added).
     pub pixel_phases: u64,
-    /// The worker's snapshot interval at its last snapshot, and how long it took to send the one before (s):
-    /// the interval grows on slow links so that sending stays under 5% of it.
+    /// The worker's snapshot interval at its last snapshot, and how long it took to send the one before, until
+    /// its acknowledgement (s): the interval grows on slow links so that sending stays under 5% of it.
     pub snapshot_interval_s: f64,
     pub last_send_s: f64,
     /// Seconds from the start of the render to the worker's start of rendering (process start, link, job,
@@ -95,6 +95,10 @@ pub struct WorkerRecord {
     /// Phase values with a NaN or an infinity the worker dropped (any is a bug, and flagged in the record).
     #[serde(default)]
     pub non_finite_dropped: u64,
+    /// Lost links of workers from this worker's host so far in the job (0 for the workers the coordinator
+    /// starts itself): at `--max-worker-failures` the host is refused for the rest of the job.
+    #[serde(default)]
+    pub failures: u32,
 }
 
 /// Where a worker of a distributed run is in its life: "connecting", "running", "finished" or "lost: why" in

@@ -81,8 +81,27 @@ impl<'a> Loader<'a> {
             let nrm = &model.mesh.normals;
             let tex = &model.mesh.texcoords;
             let vertices = pos.len() / 3;
-            // With single_index every vertex has a texture coordinate, or none has.
-            let model_uvs = tex.len() >= 2 * vertices && vertices > 0;
+            // With single_index tobj gives a vertex a normal or texture coordinate only where its face corner
+            // names one: when some corners do and others do not, the lists no longer line up with the vertices.
+            let partial = |what: &str, tag: &str| {
+                self.error(
+                    Some(m.span()),
+                    field,
+                    format!(
+                        "{}: '{}' gives {what} ({tag}) for some face corners but not for others; give them on every \
+                        face of the object or on none",
+                        path.display(),
+                        model.name
+                    ),
+                )
+            };
+            if !nrm.is_empty() && nrm.len() != 3 * vertices {
+                return Err(partial("vertex normals", "f v/vt/vn"));
+            }
+            if !tex.is_empty() && tex.len() != 2 * vertices {
+                return Err(partial("texture coordinates", "f v/vt"));
+            }
+            let model_uvs = !tex.is_empty() && vertices > 0;
             let vertex = |i: u32| Vec3::new(pos[3 * i as usize], pos[3 * i as usize + 1], pos[3 * i as usize + 2]);
             let normal = |i: u32| Vec3::new(nrm[3 * i as usize], nrm[3 * i as usize + 1], nrm[3 * i as usize + 2]);
             for (k, tri) in model.mesh.indices.chunks_exact(3).enumerate() {
