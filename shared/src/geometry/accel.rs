@@ -1,5 +1,5 @@
-//! The scene's acceleration structure: an obvhs compressed-wide BVH over all triangles, plus the analytic
-//! surfaces, which are few and tested directly.
+//! The scene's acceleration structure: a BVH over all triangles, built by obvhs (a compressed-wide BVH, the
+//! default) or, with the `embree` feature, by Embree; the analytic surfaces are few and tested directly.
 
 use super::{analytic::Analytic, hit::SurfaceHit, mesh::MeshTriangle, ray::Ray};
 use glam::{Vec3, Vec3A};
@@ -11,6 +11,134 @@ use obvhs::{
 };
 use std::time::Duration;
 
+/// obvhs's build presets, from the fastest build to the most thorough (a better BVH should trace faster).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ObvhsPreset {
+    /// `BvhBuildParams::fastest_build`: one triangle per leaf, no reinsertion.
+    Fastest,
+    /// `very_fast_build`.
+    VeryFast,
+    /// `fast_build`.
+    Fast,
+    /// `medium_build`: "around the same build time as Embree", in obvhs's words.
+    Medium,
+    /// `slow_build`, which also splits large triangles.
+    Slow,
+    /// `very_slow_build`.
+    VerySlow,
+}
+
+impl ObvhsPreset {
+    /// Every preset, fastest build first.
+    pub const ALL: [ObvhsPreset; 6] = [
+        ObvhsPreset::Fastest,
+        ObvhsPreset::VeryFast,
+        ObvhsPreset::Fast,
+        ObvhsPreset::Medium,
+        ObvhsPreset::Slow,
+        ObvhsPreset::VerySlow,
+    ];
+
+    /// The preset photonfarm builds with. On the shipped scenes and the 1 M-triangle bench the thorough presets
+    /// traced no faster (docs/measurements.md, "BVH build presets").
+    pub const DEFAULT: ObvhsPreset = ObvhsPreset::Fastest;
+
+    fn params(self) -> BvhBuildParams {
+        match self {
+            ObvhsPreset::Fastest => BvhBuildParams::fastest_build(),
+            ObvhsPreset::VeryFast => BvhBuildParams::very_fast_build(),
+            ObvhsPreset::Fast => BvhBuildParams::fast_build(),
+            ObvhsPreset::Medium => BvhBuildParams::medium_build(),
+            ObvhsPreset::Slow => BvhBuildParams::slow_build(),
+            ObvhsPreset::VerySlow => BvhBuildParams::very_slow_build(),
+        }
+    }
+}
+
+/// The library that builds the BVH over a scene's triangles and traces rays through it. Both return the same
+/// hits (up to rounding in the last bits of `t` and rays that graze a shared edge).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Backend {
+    /// obvhs's compressed-wide BVH, pure Rust, built with the given preset.
+    Obvhs(ObvhsPreset),
+    /// Intel Embree 3 through the system's `libembree3` (the `embree` feature).
+    #[cfg(feature = "embree")]
+    Embree,
+}
+
+/// The environment variable that overrides the default backend, for measurements: a name from
+/// `Backend::name`.
+pub const BACKEND_VARIABLE: &str = "PHOTONFARM_BVH";
+
+impl Backend {
+    /// Every backend this build has, each obvhs preset included.
+    pub fn all() -> Vec<Backend> {
+        let obvhs = ObvhsPreset::ALL.iter().map(|&p| Backend::Obvhs(p));
+        #[cfg(feature = "embree")]
+        return obvhs.chain([Backend::Embree]).collect();
+        #[cfg(not(feature = "embree"))]
+        obvhs.collect()
+    }
+
+    /// The backend's name: `embree`, or `obvhs-` and the preset (`obvhs-fastest`, `obvhs-very-fast`, ...).
+    pub fn name(self) -> &'static str {
+        match self {
+            Backend::Obvhs(ObvhsPreset::Fastest) => "obvhs-fastest",
+            Backend::Obvhs(ObvhsPreset::VeryFast) => "obvhs-very-fast",
+            Backend::Obvhs(ObvhsPreset::Fast) => "obvhs-fast",
+            Backend::Obvhs(ObvhsPreset::Medium) => "obvhs-medium",
+            Backend::Obvhs(ObvhsPreset::Slow) => "obvhs-slow",
+            Backend::Obvhs(ObvhsPreset::VerySlow) => "obvhs-very-slow",
+            #[cfg(feature = "embree")]
+            Backend::Embree => "embree",
+        }
+    }
+
+    /// The backend of that name (`obvhs` alone is obvhs with its default preset).
+    pub fn from_name(name: &str) -> Result<Backend, AccelError> {
+        if name == "obvhs" {
+            return Ok(Backend::Obvhs(ObvhsPreset::DEFAULT));
+        }
+        Backend::all().into_iter().find(|b| b.name() == name).ok_or_else(|| AccelError::UnknownBackend {
+            name: name.to_string(),
+            known: Backend::all().iter().map(|b| b.name()).collect::<Vec<_>>().join(", "),
+            hint: if cfg!(feature = "embree") { "" } else { " (embree needs the `embree` feature)" },
+        })
+    }
+
+    /// The default backend, or the one `PHOTONFARM_BVH` names.
+    pub fn from_env() -> Result<Backend, AccelError> {
+        match std::env::var(BACKEND_VARIABLE) {
+            Err(std::env::VarError::NotPresent) => Ok(Backend::default()),
+            Ok(name) => Backend::from_name(name.trim()),
+            Err(std::env::VarError::NotUnicode(_)) => {
+                Err(AccelError::UnknownBackend { name: "(not UTF-8)".into(), known: String::new(), hint: "" })
+            }
+        }
+    }
+}
+
+impl Default for Backend {
+    /// Embree when the build has it: it traces faster (docs/measurements.md, "Ray tracing").
+    fn default() -> Self {
+        #[cfg(feature = "embree")]
+        return Backend::Embree;
+        #[cfg(not(feature = "embree"))]
+        return Backend::Obvhs(ObvhsPreset::DEFAULT);
+    }
+}
+
+/// A backend could not build the scene's BVH, or none of the name asked for exists.
+#[derive(Debug, thiserror::Error)]
+pub enum AccelError {
+    /// `PHOTONFARM_BVH` (or a caller) named no backend of this build.
+    #[error("no ray-tracing backend is called `{name}` ({BACKEND_VARIABLE}): one of obvhs, {known}{hint}")]
+    UnknownBackend { name: String, known: String, hint: &'static str },
+    /// The backend failed to build the BVH.
+    #[error("the {backend} ray-tracing backend could not build the scene: {message}")]
+    Build { backend: &'static str, message: String },
+}
+
 /// Shading data of one triangle, stored in BVH order next to its vertices.
 #[derive(Clone, Copy, Debug)]
 struct TriangleData {
@@ -20,14 +148,27 @@ struct TriangleData {
     normals: Option<[Vec3; 3]>,
 }
 
-/// All surfaces of a scene, ready for intersection queries.
-pub struct SceneGeometry {
-    bvh: Option<CwBvh>,
-    /// Triangles in BVH leaf order, so traversal reads them without indirection.
+/// obvhs's BVH with the triangles in its leaf order, so that traversal reads them without indirection.
+struct ObvhsTriangles {
+    bvh: CwBvh,
     triangles: Vec<Triangle>,
     data: Vec<TriangleData>,
-    /// Triangles in the order they were added, for light sampling.
-    by_index: Vec<MeshTriangle>,
+}
+
+/// The BVH over the triangles, by backend; `None` when the scene has no triangles.
+enum TriangleAccel {
+    None,
+    Obvhs(ObvhsTriangles),
+    #[cfg(feature = "embree")]
+    Embree(super::embree::EmbreeTriangles),
+}
+
+/// All surfaces of a scene, ready for intersection queries.
+pub struct SceneGeometry {
+    backend: Backend,
+    accel: TriangleAccel,
+    /// Triangles and their objects in the order they were added, for light sampling and shading.
+    by_index: Vec<(u32, MeshTriangle)>,
     analytic: Vec<(u32, Analytic)>,
     t_min: f32,
 }
@@ -36,12 +177,18 @@ pub struct SceneGeometry {
 const RELATIVE_T_MIN: f32 = 1e-7;
 
 impl SceneGeometry {
-    /// Builds the BVH. `triangles` pairs each triangle with the object it belongs to.
-    pub fn build(triangles: Vec<(u32, MeshTriangle)>, analytic: Vec<(u32, Analytic)>) -> Self {
-        let tris: Vec<Triangle> = triangles
-            .iter()
-            .map(|(_, t)| Triangle { v0: Vec3A::from(t.v[0]), v1: Vec3A::from(t.v[1]), v2: Vec3A::from(t.v[2]) })
-            .collect();
+    /// Builds the BVH with the default backend, or the one `PHOTONFARM_BVH` names. `triangles` pairs each
+    /// triangle with the object it belongs to.
+    pub fn build(triangles: Vec<(u32, MeshTriangle)>, analytic: Vec<(u32, Analytic)>) -> Result<Self, AccelError> {
+        Self::build_with(Backend::from_env()?, triangles, analytic)
+    }
+
+    /// Builds the BVH with the given backend.
+    pub fn build_with(
+        backend: Backend,
+        triangles: Vec<(u32, MeshTriangle)>,
+        analytic: Vec<(u32, Analytic)>,
+    ) -> Result<Self, AccelError> {
         let mut extent = 0.0f32;
         for (_, t) in &triangles {
             for v in t.v {
@@ -56,26 +203,26 @@ impl SceneGeometry {
             };
             extent = extent.max(c.abs().max_element() + r);
         }
-        let (bvh, triangles_bvh, data) = if tris.is_empty() {
-            (None, Vec::new(), Vec::new())
+        let accel = if triangles.is_empty() {
+            TriangleAccel::None
         } else {
-            let bvh = build_cwbvh_from_tris(&tris, BvhBuildParams::fastest_build(), &mut Duration::default());
-            let order: Vec<usize> = bvh.primitive_indices.iter().map(|&i| i as usize).collect();
-            let triangles_bvh = order.iter().map(|&i| tris[i]).collect();
-            let data = order
-                .iter()
-                .map(|&i| TriangleData { object: triangles[i].0, index: i as u32, normals: triangles[i].1.n })
-                .collect();
-            (Some(bvh), triangles_bvh, data)
+            match backend {
+                Backend::Obvhs(preset) => TriangleAccel::Obvhs(build_obvhs(&triangles, preset)),
+                #[cfg(feature = "embree")]
+                Backend::Embree => TriangleAccel::Embree(super::embree::EmbreeTriangles::build(&triangles)?),
+            }
         };
-        SceneGeometry {
-            bvh,
-            triangles: triangles_bvh,
-            data,
-            by_index: triangles.into_iter().map(|(_, t)| t).collect(),
-            analytic,
-            t_min: RELATIVE_T_MIN * (1.0 + extent),
-        }
+        Ok(SceneGeometry { backend, accel, by_index: triangles, analytic, t_min: RELATIVE_T_MIN * (1.0 + extent) })
+    }
+
+    /// The same surfaces with their BVH built by another backend, to compare backends.
+    pub fn rebuilt_with(&self, backend: Backend) -> Result<SceneGeometry, AccelError> {
+        Self::build_with(backend, self.by_index.clone(), self.analytic.clone())
+    }
+
+    /// The backend that traces this geometry's triangles.
+    pub fn backend(&self) -> Backend {
+        self.backend
     }
 
     /// Number of triangles.
@@ -85,52 +232,52 @@ impl SceneGeometry {
 
     /// A triangle by the index it was added with.
     pub fn triangle(&self, index: u32) -> &MeshTriangle {
-        &self.by_index[index as usize]
+        &self.by_index[index as usize].1
     }
 
     /// The closest surface along the ray, if any.
     pub fn intersect(&self, ray: &Ray) -> Option<SurfaceHit> {
         let mut best_t = ray.t_max;
-        let mut best: Option<(usize, bool, Vec3)> = None; // (id, is_triangle, analytic normal)
-        if let Some(bvh) = &self.bvh {
-            let bray = BvhRay::new(Vec3A::from(ray.origin), Vec3A::from(ray.direction), self.t_min, ray.t_max);
-            let mut hit = RayHit::none();
-            if bvh.ray_traverse(bray, &mut hit, |r, id| self.triangles[id].intersect(r)) && hit.t < best_t {
-                best_t = hit.t;
-                best = Some((hit.primitive_id as usize, true, Vec3::ZERO));
+        let mut best: Option<SurfaceHit> = None;
+        match &self.accel {
+            TriangleAccel::None => {}
+            TriangleAccel::Obvhs(o) => {
+                let bray = BvhRay::new(Vec3A::from(ray.origin), Vec3A::from(ray.direction), self.t_min, ray.t_max);
+                let mut hit = RayHit::none();
+                if o.bvh.ray_traverse(bray, &mut hit, |r, id| o.triangles[id].intersect(r)) && hit.t < best_t {
+                    let id = hit.primitive_id as usize;
+                    let (tri, data) = (&o.triangles[id], &o.data[id]);
+                    best_t = hit.t;
+                    let uv = || barycentrics(tri, ray);
+                    best = Some(triangle_hit(
+                        ray,
+                        hit.t,
+                        [tri.v0, tri.v1, tri.v2],
+                        data.normals,
+                        uv,
+                        data.object,
+                        data.index,
+                    ));
+                }
+            }
+            #[cfg(feature = "embree")]
+            TriangleAccel::Embree(e) => {
+                if let Some(h) = e.intersect(ray, self.t_min) {
+                    let (object, tri) = &self.by_index[h.index as usize];
+                    let v = tri.v.map(Vec3A::from);
+                    best_t = h.t;
+                    best = Some(triangle_hit(ray, h.t, v, tri.n, || (h.u, h.v), *object, h.index));
+                }
             }
         }
-        for (i, (_, a)) in self.analytic.iter().enumerate() {
+        for (object, a) in &self.analytic {
             let r = Ray { t_max: best_t, ..*ray };
             if let Some((t, n)) = a.intersect(&r, self.t_min) {
                 best_t = t;
-                best = Some((i, false, n));
+                best = Some(SurfaceHit { t, p: ray.at(t), ng: n, ns: n, object: *object, triangle: u32::MAX });
             }
         }
-        let (id, is_triangle, n) = best?;
-        let p = ray.at(best_t);
-        if is_triangle {
-            let tri = &self.triangles[id];
-            let data = &self.data[id];
-            let ng = Vec3::from((tri.v1 - tri.v0).cross(tri.v2 - tri.v0)).normalize();
-            let ns = match data.normals {
-                Some(vn) => {
-                    let (u, v) = barycentrics(tri, ray);
-                    let n = (vn[0] * (1.0 - u - v) + vn[1] * u + vn[2] * v).normalize_or_zero();
-                    if n == Vec3::ZERO || !n.is_finite() {
-                        ng
-                    } else if n.dot(ng) < 0.0 {
-                        -n
-                    } else {
-                        n
-                    }
-                }
-                None => ng,
-            };
-            Some(SurfaceHit { t: best_t, p, ng, ns, object: data.object, triangle: data.index })
-        } else {
-            Some(SurfaceHit { t: best_t, p, ng: n, ns: n, object: self.analytic[id].0, triangle: u32::MAX })
-        }
+        best
     }
 
     /// True when nothing blocks the open segment from `from` to `to`; `from` must already be offset.
@@ -142,15 +289,66 @@ impl SceneGeometry {
         }
         let dir = d / dist;
         let t_max = dist * (1.0 - 1e-4);
-        if let Some(bvh) = &self.bvh {
-            let bray = BvhRay::new(Vec3A::from(from), Vec3A::from(dir), self.t_min, t_max);
-            if !bvh.ray_traverse_miss(bray, |r, id| self.triangles[id].intersect(r)) {
-                return false;
+        let blocked = match &self.accel {
+            TriangleAccel::None => false,
+            TriangleAccel::Obvhs(o) => {
+                let bray = BvhRay::new(Vec3A::from(from), Vec3A::from(dir), self.t_min, t_max);
+                !o.bvh.ray_traverse_miss(bray, |r, id| o.triangles[id].intersect(r))
             }
+            #[cfg(feature = "embree")]
+            TriangleAccel::Embree(e) => e.occluded(from, dir, self.t_min, t_max),
+        };
+        if blocked {
+            return false;
         }
         let r = Ray { origin: from, direction: dir, t_max };
         !self.analytic.iter().any(|(_, a)| a.intersect(&r, self.t_min).is_some())
     }
+}
+
+fn build_obvhs(triangles: &[(u32, MeshTriangle)], preset: ObvhsPreset) -> ObvhsTriangles {
+    let tris: Vec<Triangle> = triangles
+        .iter()
+        .map(|(_, t)| Triangle { v0: Vec3A::from(t.v[0]), v1: Vec3A::from(t.v[1]), v2: Vec3A::from(t.v[2]) })
+        .collect();
+    let bvh = build_cwbvh_from_tris(&tris, preset.params(), &mut Duration::default());
+    let order: Vec<usize> = bvh.primitive_indices.iter().map(|&i| i as usize).collect();
+    let triangles_bvh = order.iter().map(|&i| tris[i]).collect();
+    let data = order
+        .iter()
+        .map(|&i| TriangleData { object: triangles[i].0, index: i as u32, normals: triangles[i].1.n })
+        .collect();
+    ObvhsTriangles { bvh, triangles: triangles_bvh, data }
+}
+
+/// The hit on triangle `v` at distance `t`; `uv` gives the hit's barycentrics (computed only when the
+/// triangle has vertex normals to interpolate).
+#[inline]
+fn triangle_hit(
+    ray: &Ray,
+    t: f32,
+    v: [Vec3A; 3],
+    normals: Option<[Vec3; 3]>,
+    uv: impl FnOnce() -> (f32, f32),
+    object: u32,
+    index: u32,
+) -> SurfaceHit {
+    let ng = Vec3::from((v[1] - v[0]).cross(v[2] - v[0])).normalize();
+    let ns = match normals {
+        Some(vn) => {
+            let (u, v) = uv();
+            let n = (vn[0] * (1.0 - u - v) + vn[1] * u + vn[2] * v).normalize_or_zero();
+            if n == Vec3::ZERO || !n.is_finite() {
+                ng
+            } else if n.dot(ng) < 0.0 {
+                -n
+            } else {
+                n
+            }
+        }
+        None => ng,
+    };
+    SurfaceHit { t, p: ray.at(t), ng, ns, object, triangle: index }
 }
 
 /// Barycentrics (u, v) of the hit with p = (1−u−v) v0 + u v1 + v v2 (Embree's convention; obvhs 0.4's own
@@ -171,7 +369,7 @@ mod tests {
     use super::*;
     use crate::geometry::{analytic::Sphere, mesh::Mesh};
 
-    fn two_quads() -> SceneGeometry {
+    fn two_quads(backend: Backend) -> SceneGeometry {
         let mut tris = Vec::new();
         for t in Mesh::quad(Vec3::new(-1.0, -1.0, 1.0), Vec3::X * 2.0, Vec3::Y * 2.0).triangles {
             tris.push((0, t));
@@ -179,24 +377,46 @@ mod tests {
         for t in Mesh::quad(Vec3::new(-1.0, -1.0, 2.0), Vec3::X * 2.0, Vec3::Y * 2.0).triangles {
             tris.push((1, t));
         }
-        SceneGeometry::build(tris, vec![])
+        SceneGeometry::build_with(backend, tris, vec![]).unwrap()
     }
 
     #[test]
     fn closest_hit_is_the_nearer_quad_with_its_winding_normal() {
-        let g = two_quads();
-        let h = g.intersect(&Ray::new(Vec3::new(0.2, 0.3, 0.0), Vec3::Z)).unwrap();
-        assert_eq!(h.object, 0);
-        assert!((h.t - 1.0).abs() < 1e-5);
-        assert!((h.ng - Vec3::Z).length() < 1e-5);
+        for &b in &Backend::all() {
+            let g = two_quads(b);
+            let h = g.intersect(&Ray::new(Vec3::new(0.2, 0.3, 0.0), Vec3::Z)).unwrap();
+            assert_eq!(h.object, 0, "{b:?}");
+            assert!((h.t - 1.0).abs() < 1e-5, "{b:?}");
+            assert!((h.ng - Vec3::Z).length() < 1e-5, "{b:?}");
+            // The triangle index is the one it was added with, whatever order the BVH keeps.
+            let tri = g.triangle(h.triangle);
+            assert!(tri.v.iter().all(|v| (v.z - 1.0).abs() < 1e-6), "{b:?}");
+            // A ray that starts past the nearer quad sees the farther one; one bounded before it sees nothing.
+            let h = g.intersect(&Ray::new(Vec3::new(0.2, 0.3, 1.5), Vec3::Z)).unwrap();
+            assert_eq!(h.object, 1, "{b:?}");
+            let short = Ray { t_max: 0.9, ..Ray::new(Vec3::new(0.2, 0.3, 0.0), Vec3::Z) };
+            assert!(g.intersect(&short).is_none(), "{b:?}");
+        }
     }
 
     #[test]
     fn occlusion_sees_the_blocker_between_the_points() {
-        let g = two_quads();
-        // Off the quads' shared diagonal: obvhs's Möller test is not watertight exactly on an edge.
-        assert!(!g.unoccluded(Vec3::new(0.1, -0.2, 0.0), Vec3::new(0.1, -0.2, 1.5)));
-        assert!(g.unoccluded(Vec3::new(0.1, -0.2, 1.2), Vec3::new(0.1, -0.2, 1.8)));
+        for &b in &Backend::all() {
+            let g = two_quads(b);
+            // Off the quads' shared diagonal: obvhs's Möller test is not watertight exactly on an edge.
+            assert!(!g.unoccluded(Vec3::new(0.1, -0.2, 0.0), Vec3::new(0.1, -0.2, 1.5)), "{b:?}");
+            assert!(g.unoccluded(Vec3::new(0.1, -0.2, 1.2), Vec3::new(0.1, -0.2, 1.8)), "{b:?}");
+        }
+    }
+
+    #[test]
+    fn backends_are_found_by_name_and_unknown_names_are_refused() {
+        for &b in &Backend::all() {
+            assert_eq!(Backend::from_name(b.name()).unwrap(), b);
+        }
+        assert_eq!(Backend::from_name("obvhs").unwrap(), Backend::Obvhs(ObvhsPreset::DEFAULT));
+        let e = Backend::from_name("optix").unwrap_err().to_string();
+        assert!(e.contains("`optix`") && e.contains("obvhs-medium"), "{e}");
     }
 
     #[test]
@@ -209,26 +429,30 @@ mod tests {
             v: [Vec3::new(0.0, 0.0, 1.0), Vec3::new(1.0, 0.0, 1.0), Vec3::new(0.0, 1.0, 1.0)],
             n: Some([n0, n1, n2]),
         };
-        let g = SceneGeometry::build(vec![(0, t)], vec![]);
-        let h = g.intersect(&Ray::new(Vec3::new(0.9, 0.05, 0.0), Vec3::Z)).unwrap();
         let expect = (n0 * 0.05 + n1 * 0.9 + n2 * 0.05).normalize();
-        assert!((h.ns - expect).length() < 1e-4, "{:?} vs {:?}", h.ns, expect);
+        for &b in &Backend::all() {
+            let g = SceneGeometry::build_with(b, vec![(0, t)], vec![]).unwrap();
+            let h = g.intersect(&Ray::new(Vec3::new(0.9, 0.05, 0.0), Vec3::Z)).unwrap();
+            assert!((h.ns - expect).length() < 1e-4, "{b:?}: {:?} vs {:?}", h.ns, expect);
+        }
     }
 
     #[test]
     fn analytic_sphere_in_front_of_a_quad_wins() {
-        let tris = Mesh::quad(Vec3::new(-1.0, -1.0, 2.0), Vec3::X * 2.0, Vec3::Y * 2.0)
+        let tris: Vec<_> = Mesh::quad(Vec3::new(-1.0, -1.0, 2.0), Vec3::X * 2.0, Vec3::Y * 2.0)
             .triangles
             .into_iter()
             .map(|t| (0, t))
             .collect();
-        let g = SceneGeometry::build(
-            tris,
-            vec![(1, Analytic::Sphere(Sphere { center: Vec3::new(0.0, 0.0, 1.0), radius: 0.25 }))],
-        );
-        let h = g.intersect(&Ray::new(Vec3::ZERO, Vec3::Z)).unwrap();
-        assert_eq!(h.object, 1);
-        assert!((h.t - 0.75).abs() < 1e-5);
-        assert_eq!(h.triangle, u32::MAX);
+        let sphere = Analytic::Sphere(Sphere { center: Vec3::new(0.0, 0.0, 1.0), radius: 0.25 });
+        for &b in &Backend::all() {
+            let g = SceneGeometry::build_with(b, tris.clone(), vec![(1, sphere)]).unwrap();
+            let h = g.intersect(&Ray::new(Vec3::ZERO, Vec3::Z)).unwrap();
+            assert_eq!(h.object, 1, "{b:?}");
+            assert!((h.t - 0.75).abs() < 1e-5, "{b:?}");
+            assert_eq!(h.triangle, u32::MAX, "{b:?}");
+            // The sphere blocks the segment to the quad.
+            assert!(!g.unoccluded(Vec3::ZERO, Vec3::new(0.0, 0.0, 1.9)), "{b:?}");
+        }
     }
 }

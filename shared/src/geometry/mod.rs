@@ -2,11 +2,13 @@
 
 pub mod accel;
 pub mod analytic;
+#[cfg(feature = "embree")]
+mod embree;
 pub mod hit;
 pub mod mesh;
 pub mod ray;
 
-pub use accel::SceneGeometry;
+pub use accel::{AccelError, Backend, ObvhsPreset, SceneGeometry, BACKEND_VARIABLE};
 pub use analytic::{Analytic, Annulus, LensSurface, Sphere};
 pub use hit::SurfaceHit;
 pub use mesh::{Mesh, MeshTriangle};

@@ -96,7 +96,12 @@ impl Loader<'_> {
         parts: ObjectParts,
         lights: Vec<Light>,
     ) -> Result<Scene, SceneError> {
-        let geometry = SceneGeometry::build(parts.triangles, parts.analytic);
+        let geometry = SceneGeometry::build(parts.triangles, parts.analytic).map_err(|e| SceneError {
+            file: self.file.to_path_buf(),
+            line: None,
+            field: None,
+            message: e.to_string(),
+        })?;
         let lights = Lights::with_textures(lights, parts.light_textures, geometry.triangle_count());
         if !lights.any() {
             return Err(SceneError {
