@@ -26,12 +26,14 @@ pub const REPLICATES: usize = 4;
 /// sobol_burley's points per sequence: past them a stream takes a fresh scrambling.
 const SOBOL_POINTS: u64 = 1 << 16;
 
-/// Point `index` of the Sobol sequence scrambled by `seed`, and how many of its coordinates were drawn.
+/// Point `index` of the Sobol sequence scrambled by `seed`, how many of its coordinates were drawn, and the
+/// current set of four, which sobol_burley computes together (SIMD) for a quarter of the cost of one by one.
 #[derive(Clone, Copy, Debug)]
 struct SobolPoint {
     index: u32,
     seed: u32,
     dimension: u32,
+    set: [f32; 4],
 }
 
 /// Where phase `j` (1-based) of a pixel lies in its quasi-random sequences: its replicate and its index in
@@ -72,7 +74,8 @@ impl Sampler {
     pub fn with_sobol(self, sequence: u64, index: u64) -> Self {
         // Every 2^16 points the sequence continues with a fresh scrambling: still uniform, still unbiased.
         let seed = splitmix64(sequence ^ splitmix64(index / SOBOL_POINTS)) as u32;
-        Sampler { sobol: Some(SobolPoint { index: (index % SOBOL_POINTS) as u32, seed, dimension: 0 }), ..self }
+        let point = SobolPoint { index: (index % SOBOL_POINTS) as u32, seed, dimension: 0, set: [0.0; 4] };
+        Sampler { sobol: Some(point), ..self }
     }
 
     /// The camera stream of phase `j` (1-based) of `pixel`: pseudo-random as `new(seed, Pass::Camera, key,
@@ -104,7 +107,10 @@ impl Sampler {
     pub fn next_f32(&mut self) -> f32 {
         if let Some(p) = &mut self.sobol {
             if p.dimension < SOBOL_DIMENSIONS {
-                let u = sobol_burley::sample(p.index, p.dimension, p.seed);
+                if p.dimension % 4 == 0 {
+                    p.set = sobol_burley::sample_4d(p.index, p.dimension / 4, p.seed);
+                }
+                let u = p.set[(p.dimension % 4) as usize];
                 p.dimension += 1;
                 return u;
             }
