@@ -7,7 +7,8 @@
 use super::{Accumulator, AuxLayout, PixelSums};
 use crate::sampling::REPLICATES;
 
-const MAGIC: &[u8; 4] = b"PFD3";
+/// The first bytes of every uncompressed delta (its format version).
+pub const MAGIC: &[u8; 4] = b"PFD3";
 /// f64 planes: 12 layer sums (4 layers × RGB), 5 squared-luminance sums, then the replicates' luminance sums.
 const F64_PLANES: usize = 17 + REPLICATES;
 /// The squared-luminance planes, which no sum of phases can make negative.
