@@ -182,8 +182,9 @@ fn a_slurm_job_runs_one_worker_per_numa_node_and_renders_the_single_process_imag
 fn cancelling_one_worker_step_mid_run_keeps_its_phases_and_the_job_completes_with_the_other() {
     let dir = scratch_dir("slurm-cancel");
     let scene = cornell_at(&dir, SIZE as u32);
-    // Enough phases that the kept worker renders on for several seconds after the cancel.
-    let args = ["--phases", "2000", "--seed", "63", "--group-size", "1", "--snapshot-interval", "0.25"];
+    // A time, not a phase count, so that the kept worker renders on for seconds after the cancel however fast
+    // the machine is (2000 phases of this small image can end before the cancel on a quiet machine).
+    let args = ["--time", "10", "--seed", "63", "--group-size", "1", "--snapshot-interval", "0.25"];
     let job = Job::submit(&dir, &args);
     // Both worker steps run, and the one to cancel has had time to send snapshots (four a second).
     let start = Instant::now();
@@ -213,7 +214,7 @@ fn cancelling_one_worker_step_mid_run_keeps_its_phases_and_the_job_completes_wit
     // What the cancelled worker sent before its step was cancelled stays in the image.
     assert!(u64_at(cancelled, &["pixel_phases"]) > 0, "{cancelled}");
     assert!(u64_at(kept, &["pixel_phases"]) > u64_at(cancelled, &["pixel_phases"]), "{workers:?}");
-    assert!(u64_at(&r, &["error", "min_phases"]) >= 2000);
+    assert!(u64_at(&r, &["error", "min_phases"]) >= 100, "{}", r["error"]);
     assert_every_phase_counted_once(&r);
     assert_same_image(&single, &job.out(), "Slurm job with a cancelled worker against one process");
 }
