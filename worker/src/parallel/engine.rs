@@ -233,6 +233,7 @@ impl<'s> ParallelEngine<'s> {
             settings: &self.settings,
             slots: &self.slots,
             shared_maps: self.config.shared_maps,
+            sole_foreign_writer: self.config.groups == 2 && self.config.threads_per_group == 1,
             stop: &stop,
             deal: self.deals,
             numbering: PhaseNumbering {

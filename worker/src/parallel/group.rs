@@ -131,6 +131,9 @@ pub struct RoundContext<'a> {
     pub settings: &'a RenderSettings,
     pub slots: &'a [MapSlot<GroupMap>],
     pub shared_maps: bool,
+    /// Two groups of one thread each: the other group's thread is the only one adding into a group's open map,
+    /// so it adds without compare-and-swap.
+    pub sole_foreign_writer: bool,
     pub stop: &'a AtomicBool,
     pub deal: u64,
     /// The processes rendering the same pixels and the phases before this run, for the radius schedule (each
@@ -395,7 +398,9 @@ impl Group {
                 phase.trace_light_path(index, &mut tally.stats, &mut |v| {
                     merges[0] += phase.gather(&own.photons, v, sink);
                     for (g, m) in guards.iter().zip(merges[1..].iter_mut()) {
-                        *m += phase.gather(&g.data().photons, v, &mut g.data().shared.sink());
+                        let shared = &g.data().shared;
+                        let mut sink = if ctx.sole_foreign_writer { shared.sole_writer_sink() } else { shared.sink() };
+                        *m += phase.gather(&g.data().photons, v, &mut sink);
                     }
                 });
                 done += 1;
