@@ -156,11 +156,13 @@ fn the_memory_estimate_adds_exactly_the_ghost_planes_and_covers_what_an_engine_w
         // No ghost planes: the estimate is what it was.
         assert_eq!(config.bytes_per_pixel(bdd, &AuxLayout::for_scene(&cornell, 0)), before, "{method:?}");
         // Ghost planes: 3 f64 sums in the merged image, and per pixel a group covers 3 f64 sums and f32 buffers
-        // of the camera pass and of each buffer of gathered light.
+        // of the camera pass and of each buffer of gathered light, twice there (the ghost layer and the visible
+        // light registered on the sensor); a group with a mask holds a u32 per image pixel for the sensor.
         let coverage = if config.masks { 1 } else { config.groups } as f64;
         let estimate = config.bytes_per_pixel(bdd, &AuxLayout::for_scene(&lens, 0));
-        let gathered = 4.0 * gather_buffers(&config) as f64;
-        assert_eq!(estimate, before + 3.0 * (8.0 + coverage * (8.0 + 4.0 + gathered)), "{method:?}");
+        let gathered = 2.0 * 4.0 * gather_buffers(&config) as f64;
+        let tables = if config.masks { 4.0 * config.groups as f64 } else { 0.0 };
+        assert_eq!(estimate, before + tables + 3.0 * (8.0 + coverage * (8.0 + 4.0 + gathered)), "{method:?}");
         let mut engine = ParallelEngine::new(&lens, settings, config).unwrap();
         engine.run_round(&AtomicBool::new(false), None);
         let held = engine.capacity_bytes() as f64 / (72.0 * 48.0);
