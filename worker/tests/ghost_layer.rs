@@ -28,6 +28,21 @@ fn fill_lit_lens() -> Scene {
     Scene::from_toml(&text, Path::new("lens.toml"), &scenes_dir()).unwrap()
 }
 
+/// The uncoated lens at 72 × 48 pixels with its bright light and without its glasses' dispersion: most of its
+/// ghost layer is the light's chains through the lens, which light paths register on the sensor
+/// (docs/estimator.md, "The ghost layer"), and an RGB scene lets two-level groups share their maps.
+fn lamp_lit_lens() -> Scene {
+    let text = std::fs::read_to_string(scenes_dir().join("lens.toml")).unwrap();
+    assert!(text.contains("width = 360\n") && text.contains("height = 240\n") && text.contains("\nabbe = "));
+    let text = text.replace("width = 360\n", "width = 72\n").replace("height = 240\n", "height = 48\n");
+    let text: String = text
+        .lines()
+        .filter(|l| !l.starts_with("abbe = ") && !l.starts_with("ext_abbe = "))
+        .map(|l| l.to_owned() + "\n")
+        .collect();
+    Scene::from_toml(&text, Path::new("lens.toml"), &scenes_dir()).unwrap()
+}
+
 /// Σ over pixels of the luminance of the ghost layer's sums and of the total's sums.
 fn image_sums(sums: &Accumulator) -> (f64, f64) {
     sums.ghost_luminance_sums().expect("the scene has a ghost layer")
@@ -112,6 +127,13 @@ fn check(scene: &Scene, phases: u32, tile: u32, what: &str) {
 #[test]
 fn two_level_and_async_give_the_single_threaded_ghost_fraction_of_the_uncoated_lens() {
     check(&fill_lit_lens(), 200, 16, "lens lit by its fill light");
+}
+
+#[test]
+fn ghost_chains_registered_on_the_sensor_by_other_groups_light_paths_give_the_single_threaded_ghost_fraction() {
+    // With 16-pixel tiles a light path registers its ghost on whichever group's mask holds the pixel, its own
+    // or, through that group's open map, the other's; async groups register on their own whole image.
+    check(&lamp_lit_lens(), 200, 16, "lens lit by its bright light");
 }
 
 #[test]
