@@ -192,3 +192,43 @@ fn ghosts_from_light_and_camera_paths_converge_per_pixel_to_the_camera_only_imag
         }
     }
 }
+
+/// Mean and standard error over `n` emitted light paths of their flux, and of their flux leaving toward the
+/// front element's disc.
+fn emitted_flux(scene: &Scene, n: u64) -> [(f64, f64); 2] {
+    let disc = scene.lights.aim().unwrap_or(photonfarm::camera::RearElement {
+        center: glam::Vec3::ZERO,
+        axis: -glam::Vec3::Z,
+        radius: 0.01,
+    });
+    let (mut all, mut toward) = (Vec::with_capacity(n as usize), Vec::with_capacity(n as usize));
+    for i in 0..n {
+        let mut s = Sampler::light(9, 2, i);
+        let (u_select, u_pos, u_dir) = (s.next_f32(), s.next_2d(), s.next_2d());
+        let (flux, hits) = match scene.lights.sample_emission(&scene.geometry, u_select, u_pos, u_dir) {
+            Some(e) => {
+                let along = e.direction.dot(disc.axis);
+                let t = (disc.center - e.origin).dot(disc.axis) / along;
+                let p = e.origin + e.direction * t;
+                (luminance_f64(e.beta.to_array().map(f64::from)), t > 0.0 && (p - disc.center).length() <= disc.radius)
+            }
+            None => (0.0, false),
+        };
+        all.push(flux);
+        toward.push(if hits { flux } else { 0.0 });
+    }
+    [common::mean_sem(&all), common::mean_sem(&toward)]
+}
+
+#[test]
+fn light_paths_aimed_at_the_front_element_carry_the_same_flux_overall_and_toward_it() {
+    let (aimed, plain) = (scene(true), scene(false));
+    assert!(aimed.lights.aim().is_some() && plain.lights.aim().is_none());
+    let (a, p) = (emitted_flux(&aimed, 400_000), emitted_flux(&plain, 400_000));
+    for (what, a, p) in [("all", a[0], p[0]), ("toward the window", a[1], p[1])] {
+        println!("{what}: aimed {:.5e} ± {:.1e}, by the cosine {:.5e} ± {:.1e}", a.0, a.1, p.0, p.1);
+        assert!((a.0 - p.0).abs() < 4.0 * (a.1 * a.1 + p.1 * p.1).sqrt(), "{what}: the flux differs");
+    }
+    // Aiming is the point: the estimate of the flux toward the window is much better.
+    assert!(a[1].1 < 0.2 * p[1].1, "aiming did not help: {} against {}", a[1].1, p[1].1);
+}
