@@ -133,7 +133,7 @@ fn two_level_and_async_give_the_single_threaded_ghost_fraction_of_the_uncoated_l
 fn ghost_chains_registered_on_the_sensor_by_other_groups_light_paths_give_the_single_threaded_ghost_fraction() {
     // With 16-pixel tiles a light path registers its ghost on whichever group's mask holds the pixel, its own
     // or, through that group's open map, the other's; async groups register on their own whole image.
-    check(&lamp_lit_lens(), 200, 16, "lens lit by its bright light");
+    check(&lamp_lit_lens(), 100, 16, "lens lit by its bright light");
 }
 
 #[test]
