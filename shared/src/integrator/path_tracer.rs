@@ -41,10 +41,12 @@ fn layer_of(diffuse_vertices: u32, through_specular: bool) -> Layer {
 /// Estimates the camera ray's weight times the radiance arriving along it (the pixel measurement), split into
 /// layers, with the part of it that is ghost light (`crate::ghost`, as the PBPM backward pass decides it);
 /// `max_depth` counts path segments. `spectrum` holds the wavelength the path takes if it meets dispersion (a
-/// path tracer can draw one per path).
+/// path tracer can draw one per path). With `sensor_ghosts`, emitters seen through the lens after a reflection
+/// in it are left to light paths, as in the PBPM backward pass.
 pub fn trace(
     scene: &Scene,
     max_depth: u32,
+    sensor_ghosts: bool,
     spectrum: &PhaseSpectrum,
     camera_ray: CameraRay,
     sampler: &mut Sampler,
@@ -52,9 +54,9 @@ pub fn trace(
 ) -> (LayerValues, Rgb) {
     // RGB paths run the instantiation without spectral branches: RGB scenes keep their speed.
     if spectrum.wavelengths.is_some() {
-        trace_in::<true>(scene, max_depth, spectrum, camera_ray, sampler, stats)
+        trace_in::<true>(scene, max_depth, sensor_ghosts, spectrum, camera_ray, sampler, stats)
     } else {
-        trace_in::<false>(scene, max_depth, spectrum, camera_ray, sampler, stats)
+        trace_in::<false>(scene, max_depth, sensor_ghosts, spectrum, camera_ray, sampler, stats)
     }
 }
 
@@ -62,6 +64,7 @@ pub fn trace(
 fn trace_in<const S: bool>(
     scene: &Scene,
     max_depth: u32,
+    sensor_ghosts: bool,
     spectrum: &PhaseSpectrum,
     camera_ray: CameraRay,
     sampler: &mut Sampler,
@@ -90,6 +93,7 @@ fn trace_in<const S: bool>(
         if le != Rgb::ZERO {
             let le = path.quantity(le);
             match previous {
+                Previous::Specular if diffuse_vertices == 0 && ghost.is_some() && sensor_ghosts => {}
                 Previous::Specular => add_contribution(
                     &mut out,
                     &mut ghost,

@@ -25,6 +25,9 @@ pub struct BackwardSettings {
     pub phase: u64,
     /// The phase's wavelengths, for paths that meet dispersion.
     pub spectrum: PhaseSpectrum,
+    /// Light paths bring the ghost chains to the sensor: an emitter seen through the lens after a reflection in
+    /// it is theirs, not this path's.
+    pub sensor_ghosts: bool,
 }
 
 /// Counters of the backward pass.
@@ -103,6 +106,7 @@ fn camera_path<const S: bool>(
         if le != Rgb::ZERO {
             let le = path.quantity(le);
             match (k, from_diffuse) {
+                (0, _) if ghost.is_some() && settings.sensor_ghosts => {}
                 (0, _) => add_contribution(&mut out, &mut ghost, Layer::VisibleLights, path.to_image(beta * le)),
                 (_, Some((p, pdf))) => {
                     let w = power_heuristic(pdf, scene.lights.pdf_incident(p, &hit));

@@ -1,5 +1,6 @@
 //! Where the forward pass's gathered light waits for the phase to close: f32 (indirect, caustic) RGB per local
-//! pixel of the phase, then the pixel's auxiliary channels (the ghost layer's gathered light). A plain buffer
+//! pixel of the phase, then the pixel's auxiliary channels (the ghost layer's gathered light), then, in an image
+//! with a ghost layer, the visible light that ghost chains brought to the sensor. A plain buffer
 //! takes the adds of one thread; an atomic one takes adds from any thread, for light paths of other groups
 //! gathering into an open map (paper §4.2) and for groups whose threads share their own map.
 
@@ -14,24 +15,37 @@ use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 /// Values per pixel before the auxiliary channels: (indirect, caustic) × RGB.
 const FIXED: usize = 6;
 
-/// How a pixel's values are laid out: their count, and where the ghost layer's channels start.
+/// How a pixel's values are laid out: their count, where the ghost layer's channels start, and where the
+/// visible light of ghost chains registered on the sensor goes (an image without a ghost layer has none).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 struct Stride {
     values: usize,
     ghost: Option<usize>,
+    visible: Option<usize>,
 }
 
 impl Stride {
     fn of(aux: &AuxLayout) -> Self {
-        Stride { values: FIXED + aux.channels(), ghost: aux.offset(GHOST_LAYER).map(|o| FIXED + o) }
+        let ghost = aux.offset(GHOST_LAYER).map(|o| FIXED + o);
+        let visible = ghost.map(|_| FIXED + aux.channels());
+        Stride { values: FIXED + aux.channels() + if visible.is_some() { 3 } else { 0 }, ghost, visible }
     }
 
     /// The value indices an add of `value` to `layer` (and to the ghost layer, for ghost light) touches, with
     /// the channel each takes.
     #[inline]
     fn targets(&self, pixel: u32, layer: Layer, ghost: bool) -> (usize, Option<usize>) {
+        debug_assert!(
+            layer != Layer::VisibleLights || self.visible.is_some(),
+            "visible light gathered without a ghost layer"
+        );
         let base = pixel as usize * self.values;
-        let usual = base + if layer == Layer::Caustic { 3 } else { 0 };
+        let usual = base
+            + match (layer, self.visible) {
+                (Layer::Caustic, _) => 3,
+                (Layer::VisibleLights, Some(v)) => v,
+                _ => 0,
+            };
         (usual, self.ghost.filter(|_| ghost).map(|g| base + g))
     }
 }
@@ -56,9 +70,14 @@ impl GatherBuffer {
         self.values.resize(pixels * stride.values, 0.0);
     }
 
-    /// Values per pixel: 6, plus the auxiliary channels.
+    /// Values per pixel: 6, plus the auxiliary channels, plus 3 with a ghost layer.
     pub fn stride(&self) -> usize {
         self.stride.values
+    }
+
+    /// Where a pixel's visible light from the sensor starts among its values, in an image with a ghost layer.
+    pub fn visible_offset(&self) -> Option<usize> {
+        self.stride.visible
     }
 
     /// Every pixel's values, pixel after pixel.
@@ -363,7 +382,7 @@ mod tests {
         plain.reset(2, &AuxLayout::default());
         plain.add(1, Layer::Caustic, false, Rgb::ONE);
         plain.reset(3, &ghost_layout());
-        assert_eq!(plain.stride(), 10);
+        assert_eq!(plain.stride(), 13, "6 + the 4 auxiliary channels + the sensor's visible light");
         assert!((0..3).all(|p| plain.get(p) == [Rgb::ZERO; 2]));
     }
 }

@@ -16,9 +16,11 @@ pub mod radius;
 
 pub use backward_pass::{trace_camera_path, BackwardSettings};
 pub use executor::Executor;
-pub use forward_pass::{gather, trace_light_path, ForwardStats, Gather, LightVertex};
+pub use forward_pass::{
+    gather, trace_light_path, ForwardStats, Gather, LightEvent, LightSettings, LightVertex, SensorHit,
+};
 pub use gather_buffer::{AtomicGatherBuffer, AtomicSink, GatherBuffer};
-pub use phase::{Phase, PhaseBuffers};
+pub use phase::{LocalPixels, Phase, PhaseBuffers};
 pub use photon::BackwardPhoton;
 pub use photon_map::PhotonMap;
 pub use radius::{PhaseNumbering, RadiusSchedule};

@@ -7,8 +7,8 @@ use photonfarm::accumulation::{AuxSums, PixelSums};
 use photonfarm::color::Rgb;
 use photonfarm::integrator::Layer;
 use photonfarm::pbpm::{
-    AtomicGatherBuffer, AtomicSink, Executor, ForwardStats, Gather, GatherBuffer, Phase, PhaseBuffers, PhaseNumbering,
-    PhotonMap,
+    AtomicGatherBuffer, AtomicSink, Executor, ForwardStats, Gather, GatherBuffer, LocalPixels, Phase, PhaseBuffers,
+    PhaseNumbering, PhotonMap,
 };
 use photonfarm::render::RenderSettings;
 use photonfarm::scene::Scene;
@@ -34,6 +34,8 @@ pub struct GroupMap {
     /// Light gathered by other groups' paths, and by the group's own paths when it has several threads; the
     /// owner's paths of a one-thread group add into its plain buffer instead, without atomics.
     pub shared: AtomicGatherBuffer,
+    /// Which local pixel of the owner's phase an image pixel is, for light paths registering on the sensor.
+    pub pixels: LocalPixels,
     /// Light paths the phase needs counted against the map, the owner's and other groups' together.
     quota: u64,
     /// Light-path indices the owning group has handed to its threads this phase.
@@ -177,6 +179,8 @@ pub struct Group {
     /// Groups that render the same pixels in a deal (all of them without masks): the radius schedule counts
     /// their phases too, so that j tracks the pixel's total phase count as in a single-threaded run.
     groups_per_pixel: u32,
+    /// The mask changed since the map's `pixels` lookup was made.
+    new_mask: bool,
     pub stats: GroupStats,
 }
 
@@ -215,6 +219,7 @@ impl Group {
             aux_sums: AuxSums::new(aux, 0),
             phases_this_deal: 0,
             groups_per_pixel: 1,
+            new_mask: true,
             stats: GroupStats::default(),
         })
     }
@@ -249,7 +254,7 @@ impl Group {
             + self.aux_sums.capacity_bytes();
         // Asked between rounds, when every map is closed.
         let data = slot.data_mut(&mut self.token);
-        own + data.photons.capacity_bytes() + data.shared.capacity_bytes()
+        own + data.photons.capacity_bytes() + data.shared.capacity_bytes() + data.pixels.capacity_bytes()
     }
 
     /// Takes a new mask for the next deal; `phases_before[i]` is how many phases mask pixel i already had.
@@ -263,6 +268,7 @@ impl Group {
         self.mask = mask;
         self.phases_before = phases_before;
         self.phases_this_deal = 0;
+        self.new_mask = true;
     }
 
     /// Runs phases until the round's stop flag is set; reports on `done` when it has finished
@@ -323,6 +329,9 @@ impl Group {
         let uses_shared = ctx.shared_maps || !one_thread;
         {
             let data = slot.data_mut(&mut self.token);
+            if std::mem::take(&mut self.new_mask) {
+                data.pixels = LocalPixels::of_mask(&self.mask, ctx.scene.camera.pixel_count(), phase.sensor_ghosts);
+            }
             self.buffers.build_map(exec, &mut data.photons);
             if uses_shared {
                 data.shared.reset(self.mask.len(), self.buffers.aux());
@@ -396,11 +405,11 @@ impl Group {
                     break;
                 }
                 phase.trace_light_path(index, &mut tally.stats, &mut |v| {
-                    merges[0] += phase.gather(&own.photons, v, sink);
+                    merges[0] += phase.gather(&own.photons, &own.pixels, v, sink);
                     for (g, m) in guards.iter().zip(merges[1..].iter_mut()) {
                         let shared = &g.data().shared;
                         let mut sink = if ctx.sole_foreign_writer { shared.sole_writer_sink() } else { shared.sink() };
-                        *m += phase.gather(&g.data().photons, v, &mut sink);
+                        *m += phase.gather(&g.data().photons, &g.data().pixels, v, &mut sink);
                     }
                 });
                 done += 1;
