@@ -152,10 +152,10 @@ fn gather_buffers(config: &EngineConfig) -> usize {
 
 /// `EngineConfig::bytes_per_pixel` as it was before auxiliary layers: the merged sums, and per pixel a group
 /// covers its phase values, sums, mask and phase count entries, gathered light, and its photons (held twice,
-/// eight grid entries each in buffers with room to double, half a hash bucket).
+/// eight grid entries each in buffers with room to double, half a hash bucket, a u32 of its place in grid order).
 fn estimate_without_auxiliary_layers(config: &EngineConfig, backward_diffuse_depth: u32) -> f64 {
     let coverage = if config.masks { 1 } else { config.groups };
-    let photon = 2 * std::mem::size_of::<photonfarm::pbpm::BackwardPhoton>() + 2 * 8 * (4 + 8) + 2;
+    let photon = 2 * std::mem::size_of::<photonfarm::pbpm::BackwardPhoton>() + 2 * 8 * (4 + 8) + 2 + 4;
     // The camera pass's values and replicate, the sums, the mask and the phases before the deal.
     let per_pixel = std::mem::size_of::<photonfarm::integrator::LayerValues>()
         + 1
