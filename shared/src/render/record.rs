@@ -1,10 +1,11 @@
 //! The JSON record of a run: enough to reproduce it (scene hash, settings, seed) and to chart its speed against
 //! its accuracy (rays and δ after every phase).
 
+use super::forecast::ForecastRecord;
 use super::method::Method;
 use super::settings::RenderSettings;
 use super::totals::RayTotals;
-use crate::accumulation::ErrorEstimate;
+use crate::accumulation::{ErrorEstimate, LitMaskRecord};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use std::fmt;
 use std::str::FromStr;
@@ -197,6 +198,14 @@ pub struct RunRecord {
     pub peak_memory_bytes: Option<u64>,
     pub bytes_per_pixel: f64,
     pub error: ErrorEstimate,
+    /// The pixels that see a light, decided before the render: δ unlit and the true error over unlit pixels
+    /// leave them out.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lit_mask: Option<LitMaskRecord>,
+    /// With a target error: the estimate of the time still needed, and the one made when δ first came within
+    /// twice the target next to when the target was actually met.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub forecast: Option<ForecastRecord>,
     /// Phases summed over pixels: what the image holds, whichever process rendered them.
     #[serde(default)]
     pub pixel_phases: u64,
