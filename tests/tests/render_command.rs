@@ -73,6 +73,9 @@ fn the_in_process_two_level_render_gives_every_pixel_at_least_the_phases_asked_f
     assert!(r["totals"]["merges"].as_u64().unwrap() > 0);
 }
 
+/// Two synthetic NUMA nodes of one core each.
+const TWO_NODES: &str = "pack:1 numa:2 core:1 pu:1";
+
 #[test]
 fn every_method_measures_delta_over_the_same_lit_mask_kept_in_the_record_and_the_exr() {
     let dir = scratch_dir("lit-mask");
@@ -81,7 +84,7 @@ fn every_method_measures_delta_over_the_same_lit_mask_kept_in_the_record_and_the
     let runs = [
         ("pbpm", vec!["--method", "pbpm", "--seed", "1"]),
         ("two-level", vec!["--method", "two-level", "--threads", "2", "--group-size", "1", "--seed", "2"]),
-        ("three-level", vec!["--method", "three-level", "--topology", "2x1", "--seed", "3"]),
+        ("three-level", vec!["--method", "three-level", "--topology", TWO_NODES, "--group-size", "1", "--seed", "3"]),
     ];
     let mut masks = Vec::new();
     for (name, args) in runs {
@@ -103,7 +106,7 @@ fn every_method_measures_delta_over_the_same_lit_mask_kept_in_the_record_and_the
     assert!(first_record["lit_pixels"].as_u64().unwrap() > 0, "the Cornell box's light is seen");
     for (name, lit, r) in &masks[1..] {
         assert_eq!(lit, first, "{name}: the same mask as pbpm's");
-        assert_eq!(r, first_record);
+        assert_eq!(r["lit_pixels"], first_record["lit_pixels"], "{name}");
     }
 }
 
