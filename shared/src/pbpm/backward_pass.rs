@@ -2,6 +2,7 @@
 //! MIS, paper eq. 5) to their pixel and store backward photons at their first `backward_diffuse_depth`
 //! diffuse vertices.
 
+use super::gather_disc::gather_disc_area;
 use super::photon::BackwardPhoton;
 use super::radius::RadiusSchedule;
 use crate::camera::CameraRay;
@@ -134,7 +135,9 @@ fn camera_path<const S: bool>(
             if segments + 2 <= settings.max_depth {
                 let r = settings.radius.radius(path_length, settings.phase);
                 let normal = if wo.dot(hit.ng) >= 0.0 { hit.ng } else { -hit.ng };
-                let weight = beta * albedo * (std::f32::consts::FRAC_1_PI / (std::f32::consts::PI * r * r));
+                // eq. 4's τ · f / (π r²), with the disc's area on the surface for π r² (`gather_disc`).
+                let area = gather_disc_area(&scene.geometry, &hit, r);
+                let weight = beta * albedo * (std::f32::consts::FRAC_1_PI / area);
                 if weight.is_finite() && r > 0.0 {
                     stats.photons += 1;
                     store(BackwardPhoton {

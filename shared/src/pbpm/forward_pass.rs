@@ -52,8 +52,8 @@ impl<F: FnMut(u32, Layer, bool, Rgb)> Gather for F {
 }
 
 /// Normals of a photon's surface and the gathering surface must agree this well (cos 25°), so that light on
-/// one wall of a corner is not gathered by photons on the other.
-const NORMAL_AGREEMENT: f32 = 0.9;
+/// one wall of a corner is not gathered by photons on the other; the surface's edges are found by the same rule.
+const NORMAL_AGREEMENT: f32 = crate::geometry::SAME_SURFACE_COS;
 
 /// A diffuse light-path vertex y_m (m ≥ 2) where backward photons may gather light.
 #[derive(Clone, Copy, Debug)]

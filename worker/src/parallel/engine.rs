@@ -96,8 +96,8 @@ impl EngineConfig {
         // A photon is held twice (the backward pass's list, then the map's copy), and the grid enters it in at
         // most eight cells (its sphere spans at most two cells of three mean radii per axis), each entry a u32
         // plus the build's u64 (cell, photon) pair, in buffers that grow by doubling as the count varies from
-        // phase to phase, with a table of half a bucket per photon.
-        let photon = 2 * std::mem::size_of::<photonfarm::pbpm::BackwardPhoton>() + 2 * 8 * (4 + 8) + 2;
+        // phase to phase, with a table of half a bucket per photon and the u32 of its place in grid order.
+        let photon = 2 * std::mem::size_of::<photonfarm::pbpm::BackwardPhoton>() + 2 * 8 * (4 + 8) + 2 + 4;
         // Gathered light: the group's plain buffer, and the map's atomic one where other groups or several
         // threads add into it; each holds (indirect, caustic) RGB in f32 and the auxiliary channels.
         let gather_buffers = 1 + (self.shared_maps || self.threads_per_group > 1) as usize;

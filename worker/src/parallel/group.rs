@@ -196,6 +196,9 @@ impl Group {
                 }
             })
             .build()?;
+        // A thread runs its start handler before any work: once every thread has run one task, the pinned count
+        // is final, and the run record does not report threads as unpinned that were only not started yet.
+        pool.broadcast(|_| ());
         Ok(Group {
             index,
             pool: Arc::new(pool),
@@ -496,5 +499,19 @@ mod tests {
         map.start_phase(50);
         assert_eq!(map.claim_towards_quota(16, 60), None);
         assert_eq!(map.claim_towards_quota(16, 40), Some((0, 10)));
+    }
+
+    #[test]
+    fn a_new_groups_pinned_count_is_final_when_it_is_returned() {
+        let cores: Vec<usize> = core_affinity::get_core_ids().unwrap_or_default().iter().map(|c| c.id).collect();
+        // Whether this machine lets a thread pin itself at all, asked the same way the group's threads ask.
+        let can_pin =
+            std::thread::spawn(|| core_affinity::set_for_current(core_affinity::CoreId { id: 0 })).join().unwrap();
+        let threads = cores.len().clamp(1, 2);
+        for _ in 0..20 {
+            let slot = MapSlot::new(GroupMap::default());
+            let group = Group::new(0, vec![0; threads], slot.take_owner(), AuxLayout::default()).unwrap();
+            assert_eq!(group.pinned_threads(), if can_pin { threads } else { 0 });
+        }
     }
 }
