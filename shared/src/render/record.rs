@@ -20,7 +20,7 @@ pub struct HistoryEntry {
     pub delta_unlit: f64,
     pub backward_rays: u64,
     pub forward_rays: u64,
-    /// Relative RMSE against the reference over all pixels and over pixels that do not see a light directly.
+    /// Relative RMSE against the reference over all pixels and over the pixels the lit mask leaves unlit.
     /// Always serialized (null without a reference): checkpoints keep the history with bincode, which cannot
     /// skip fields.
     #[serde(default)]
@@ -36,7 +36,7 @@ pub struct TrueError {
     pub reference: String,
     /// Relative RMSE of luminance over all pixels.
     pub rmse_all: f64,
-    /// Relative RMSE over pixels that do not see a light directly.
+    /// Relative RMSE over the pixels the lit mask leaves unlit.
     pub rmse_unlit: f64,
     /// The reference's own δ over the same pixels (from its `sem` layer): it adds in quadrature to the error
     /// measured against it, so a true error near it says more about the reference than about the run.

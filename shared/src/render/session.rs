@@ -71,7 +71,7 @@ impl Progressive for Engine<'_> {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum ErrorOver {
-    /// Pixels that do not see a light directly (default: the lights would flatter δ).
+    /// Pixels the lit mask leaves unlit (default: the lights would flatter δ).
     Unlit,
     /// Every pixel, the paper's eq. 6.
     All,
