@@ -1,12 +1,12 @@
 //! The output folder of a run: the multi-layer EXR, the PNG preview and the JSON record.
 
 use anyhow::{Context, Result};
-use photonfarm::accumulation::{relative_mean_difference, relative_rmse, Accumulator, LitMask, LIT_LAYER};
+use photonfarm::accumulation::{relative_mean_difference, relative_rmse, Accumulator, LitMask};
 use photonfarm::color::luminance_f64;
 use photonfarm::image_io::exr_file::{find_layer, read_exr, write_exr, LayerImage};
 use photonfarm::image_io::preview::{auto_exposure, write_preview_png};
 use photonfarm::render::images::luminance_of;
-use photonfarm::render::images::{layer_images, total_image};
+use photonfarm::render::images::{layer_images, lit_layer, total_image};
 use photonfarm::render::record::{RunRecord, TrueError};
 use std::path::{Path, PathBuf};
 
@@ -72,11 +72,7 @@ impl Reference {
 /// atomically.
 pub fn save(dir: &Path, sums: &Accumulator, lit: &LitMask, record: &RunRecord) -> Result<()> {
     let mut layers: Vec<LayerImage> = layer_images(sums);
-    let mut mask = LayerImage::new(LIT_LAYER, sums.width as usize, sums.height as usize);
-    for (i, px) in mask.rgb.iter_mut().enumerate() {
-        *px = [if lit.is_lit(i) { 1.0 } else { 0.0 }; 3];
-    }
-    layers.push(mask);
+    layers.push(lit_layer(lit));
     write_exr(&dir.join("image.exr"), &layers)?;
     let total = layers.iter().find(|l| l.name == "total").context("total layer missing")?;
     write_preview_png(&dir.join("preview.png"), total, auto_exposure(total))?;

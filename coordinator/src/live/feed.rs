@@ -51,13 +51,15 @@ pub struct RunView {
     pub elapsed_s: f64,
     /// With a target error: the latest estimate of the time still needed.
     pub forecast: Option<Estimate>,
+    /// The run's lit pixels, shown as a layer beside the image's.
+    pub lit: Arc<LitMask>,
 }
 
 impl RunView {
     /// The view before the first merge: a black image of the scene's size.
-    fn empty(sums: Accumulator, lit: &LitMask) -> RunView {
+    fn empty(sums: Accumulator, lit: Arc<LitMask>) -> RunView {
         RunView {
-            error: sums.error(lit),
+            error: sums.error(&lit),
             sums: Arc::new(sums),
             true_error: None,
             totals: RayTotals::default(),
@@ -66,6 +68,7 @@ impl RunView {
             state: RunState::Running,
             elapsed_s: 0.0,
             forecast: None,
+            lit,
         }
     }
 }
@@ -87,7 +90,7 @@ impl LiveFeed {
     /// A feed whose first view is `blank` (empty sums of the scene's size and layers), and a receiver of it;
     /// δ unlit leaves out the pixels of `lit`.
     pub fn new(blank: Accumulator, lit: Arc<LitMask>) -> (LiveFeed, watch::Receiver<Arc<RunView>>) {
-        let (tx, rx) = watch::channel(Arc::new(RunView::empty(blank, &lit)));
+        let (tx, rx) = watch::channel(Arc::new(RunView::empty(blank, lit.clone())));
         (LiveFeed { tx, last_publish: None, last_copy: Duration::ZERO, seen: Vec::new(), lit, forecast: None }, rx)
     }
 
@@ -168,6 +171,7 @@ impl LiveFeed {
             state,
             elapsed_s,
             forecast: self.forecast,
+            lit: self.lit.clone(),
         }
     }
 
