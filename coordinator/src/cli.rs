@@ -126,7 +126,7 @@ fn method_parser() -> impl TypedValueParser<Value = Method> {
 /// Which pixels δ is computed over for --target-error and the progress display.
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ErrorOverArg {
-    /// Pixels that do not see a light directly.
+    /// Pixels that see no light, directly or through specular surfaces (a mask decided before the render).
     Unlit,
     /// All pixels (the paper's eq. 6).
     All,

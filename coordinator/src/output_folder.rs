@@ -1,12 +1,12 @@
 //! The output folder of a run: the multi-layer EXR, the PNG preview and the JSON record.
 
 use anyhow::{Context, Result};
-use photonfarm::accumulation::{relative_mean_difference, relative_rmse, Accumulator};
+use photonfarm::accumulation::{relative_mean_difference, relative_rmse, Accumulator, LitMask};
 use photonfarm::color::luminance_f64;
 use photonfarm::image_io::exr_file::{find_layer, read_exr, write_exr, LayerImage};
 use photonfarm::image_io::preview::{auto_exposure, write_preview_png};
 use photonfarm::render::images::luminance_of;
-use photonfarm::render::images::{layer_images, total_image};
+use photonfarm::render::images::{layer_images, lit_layer, total_image};
 use photonfarm::render::record::{RunRecord, TrueError};
 use std::path::{Path, PathBuf};
 
@@ -14,8 +14,6 @@ use std::path::{Path, PathBuf};
 pub struct Reference {
     pub path: PathBuf,
     pub total: Vec<[f64; 3]>,
-    /// Pixels that see a light directly in the reference (its visible_lights layer, when it has one).
-    pub lit: Option<Vec<bool>>,
     /// Luminance of the reference's standard error per pixel (its `sem` layer, when it has one).
     pub sem: Option<Vec<f64>>,
 }
@@ -35,25 +33,19 @@ impl Reference {
                 height
             );
         }
-        let lit = find_layer(&layers, path, "visible_lights")
-            .ok()
-            .map(|v| v.rgb.iter().map(|p| p.iter().any(|&c| c > 0.0)).collect());
         let sem = find_layer(&layers, path, "sem").ok().map(|s| s.rgb.iter().map(|&p| luminance_of(p)).collect());
         Ok(Reference {
             path: path.to_path_buf(),
             total: total.rgb.iter().map(|p| [p[0] as f64, p[1] as f64, p[2] as f64]).collect(),
-            lit,
             sem,
         })
     }
 
-    /// Relative RMSE of the sums' mean image against this reference.
-    pub fn compare(&self, sums: &Accumulator) -> TrueError {
+    /// Relative RMSE of the sums' mean image against this reference, over every pixel and over the pixels
+    /// that `lit`, the run's mask, leaves unlit (the pixels of δ unlit).
+    pub fn compare(&self, sums: &Accumulator, lit: &LitMask) -> TrueError {
         let image = total_image(sums);
-        let lit = |i: usize| match &self.lit {
-            Some(l) => l[i],
-            None => sums.sees_light(i),
-        };
+        let lit = |i: usize| lit.is_lit(i);
         // δ of the reference itself: its SEMs against its own values (paper eq. 6).
         let reference_delta = |include: &dyn Fn(usize) -> bool| {
             let sem = self.sem.as_ref()?;
@@ -76,9 +68,11 @@ impl Reference {
     }
 }
 
-/// Writes image.exr, preview.png and run.json; each file is replaced atomically.
-pub fn save(dir: &Path, sums: &Accumulator, record: &RunRecord) -> Result<()> {
-    let layers: Vec<LayerImage> = layer_images(sums);
+/// Writes image.exr (with the lit mask as its `lit` layer), preview.png and run.json; each file is replaced
+/// atomically.
+pub fn save(dir: &Path, sums: &Accumulator, lit: &LitMask, record: &RunRecord) -> Result<()> {
+    let mut layers: Vec<LayerImage> = layer_images(sums);
+    layers.push(lit_layer(lit));
     write_exr(&dir.join("image.exr"), &layers)?;
     let total = layers.iter().find(|l| l.name == "total").context("total layer missing")?;
     write_preview_png(&dir.join("preview.png"), total, auto_exposure(total))?;

@@ -9,12 +9,13 @@ use crate::live::session::{LiveOptions, LiveSession};
 use crate::output_folder::{self, Reference};
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
-use photonfarm::accumulation::Accumulator;
+use photonfarm::accumulation::{Accumulator, LitMask};
 use photonfarm::protocol::Secret;
 use photonfarm::render::checkpoint::Checkpoint;
+use photonfarm::render::forecast::Forecast;
 use photonfarm::render::method::{Images, Processes};
 use photonfarm::render::record::{flags_of, HistoryEntry, RunRecord, WorkerRecord, WorkerState};
-use photonfarm::render::session::{self, ErrorOver, Progressive, StopReason, StopRule};
+use photonfarm::render::session::{self, ErrorOver, Progressive, StopReason, StopRule, Tracking};
 use photonfarm::render::{memory, Engine, Method, RenderSettings};
 use photonfarm::scene::Scene;
 use std::path::{Path, PathBuf};
@@ -37,9 +38,16 @@ pub fn run(args: RenderArgs) -> Result<()> {
         None => None,
     };
     let checkpoint = load_checkpoint(&args, &scene)?;
-    if let (Some(c), Some(from)) = (&checkpoint, &args.resume) {
-        check_resume_has_work(c, &stop, from)?;
+    if let Some(c) = &checkpoint {
         settings = c.settings;
+    }
+    // Decided once, before the render, from the scene and the path depth alone: every figure over unlit pixels
+    // (δ, the stop on the target error, the true error) measures the same pixels from the first phase on.
+    let deciding = Instant::now();
+    let lit = Arc::new(LitMask::of_scene(&scene, settings.max_depth));
+    let lit_seconds = deciding.elapsed().as_secs_f64();
+    if let (Some(c), Some(from)) = (&checkpoint, &args.resume) {
+        check_resume_has_work(c, &stop, from, &lit)?;
     }
     let dir = output_dir(&args)?;
     let interrupted = catch_interrupts()?;
@@ -47,7 +55,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
 
     let mut notes = Vec::new();
     let (mut engine, layout) = start_engine(&args, &scene, settings, &dir, checkpoint.as_ref(), &mut notes)?;
-    let mut live = LiveSession::start(live_options(&args, &scene, &layout, &dir, engine.as_ref(), &interrupted)?)?;
+    let mut live =
+        LiveSession::start(live_options(&args, &scene, &layout, &dir, engine.as_ref(), &interrupted, &lit)?)?;
     if let Some(url) = live.as_ref().and_then(|l| l.url.as_ref()) {
         println!("live page: {url}  (results in {})", dir.display());
     }
@@ -57,6 +66,9 @@ pub fn run(args: RenderArgs) -> Result<()> {
         dir: &dir,
         layout,
         reference: reference.as_ref(),
+        lit: &lit,
+        lit_seconds,
+        stop: &stop,
         notes,
         session: checkpoint.as_ref().map_or(1, |c| c.session + 1),
         elapsed_before: Duration::from_secs_f64(checkpoint.as_ref().map_or(0.0, |c| c.elapsed_s)),
@@ -64,12 +76,14 @@ pub fn run(args: RenderArgs) -> Result<()> {
     };
     let mut history = checkpoint.map(|c| c.history).unwrap_or_default();
     let mut feed = live.as_mut().map(|l| &mut l.feed);
-    let run = run_until_stop(engine.as_mut(), &stop, &interrupted, &outputs, &bar, &mut history, feed.as_deref_mut());
+    let mut forecast = Forecast::new(stop.target_error);
+    let run =
+        run_until_stop(engine.as_mut(), &interrupted, &outputs, &bar, &mut history, &mut forecast, feed.as_deref_mut());
     bar.set_message("stopping: collecting the last completed phases");
     if let Some(f) = feed.as_deref_mut() {
         f.stopping(engine.as_ref(), &history, outputs.elapsed_s());
     }
-    finish(engine.as_mut(), &outputs, &mut history);
+    finish(engine.as_mut(), &outputs, &mut history, &mut forecast);
     bar.finish_and_clear();
     let reason = run.context("writing the periodic results failed; the run was stopped")?;
     if reason == StopReason::NoWorkers && engine.sums().pixels.iter().all(|p| p.phases == 0) {
@@ -77,7 +91,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
             engine.workers().unwrap_or_default().iter().map(|w| format!("{}: {}", w.name, w.state)).collect();
         bail!("no worker rendered anything ({})", why.join("; "));
     }
-    let record = outputs.save(engine.as_ref(), &history, reason.name())?;
+    let record = outputs.save(engine.as_ref(), &history, reason.name(), &forecast)?;
     if let Some(f) = feed {
         f.finished(engine.as_ref(), &record);
     }
@@ -96,6 +110,7 @@ fn live_options(
     dir: &Path,
     engine: &dyn Progressive,
     interrupted: &Arc<AtomicBool>,
+    lit: &Arc<LitMask>,
 ) -> Result<LiveOptions> {
     if !(args.serve_linger.is_finite() && args.serve_linger >= 0.0) {
         bail!("--serve-linger must be a number of seconds, 0 or more");
@@ -133,6 +148,7 @@ fn live_options(
         serve,
         tev: args.display.as_ref().map(|Display::Tev(address)| address.clone()),
         blank: Accumulator::with_aux(sums.width, sums.height, sums.aux.layout().clone()),
+        lit: lit.clone(),
         settings,
         dir: dir.to_path_buf(),
         interrupted: interrupted.clone(),
@@ -220,7 +236,7 @@ fn load_checkpoint(args: &RenderArgs, scene: &Scene) -> Result<Option<Checkpoint
 
 /// Refuses to resume a run whose checkpoint already meets the stop rule: starting workers only to stop them at
 /// once would add nothing and say nothing about why.
-fn check_resume_has_work(c: &Checkpoint, stop: &StopRule, from: &Path) -> Result<()> {
+fn check_resume_has_work(c: &Checkpoint, stop: &StopRule, from: &Path, lit: &LitMask) -> Result<()> {
     let place = from.display();
     if let Some(t) = stop.time {
         if c.elapsed_s >= t.as_secs_f64() {
@@ -234,7 +250,7 @@ fn check_resume_has_work(c: &Checkpoint, stop: &StopRule, from: &Path) -> Result
         }
     }
     let sums = c.sums().map_err(|e| anyhow::anyhow!("the checkpoint's sums: {e}"))?;
-    let e = sums.error();
+    let e = sums.error(lit);
     if let Some(n) = stop.phases {
         if e.min_phases as u64 >= n {
             bail!(
@@ -370,6 +386,11 @@ struct Outputs<'a> {
     /// The engine's layout in words.
     layout: String,
     reference: Option<&'a Reference>,
+    /// The pixels that see a light, decided before the render, and the seconds that took.
+    lit: &'a LitMask,
+    lit_seconds: f64,
+    /// The stop rule, whose δ the forecast follows.
+    stop: &'a StopRule,
     /// What the run changed from what it was asked (flags of the record).
     notes: Vec<String>,
     /// This session of the run (1 unless resumed).
@@ -385,7 +406,13 @@ impl Outputs<'_> {
         self.elapsed_before.as_secs_f64() + self.start.elapsed().as_secs_f64()
     }
 
-    fn record(&self, engine: &dyn Progressive, history: &[HistoryEntry], reason: &str) -> RunRecord {
+    fn record(
+        &self,
+        engine: &dyn Progressive,
+        history: &[HistoryEntry],
+        reason: &str,
+        forecast: &Forecast,
+    ) -> RunRecord {
         let workers = engine.workers();
         let dropped = photonfarm::accumulation::non_finite_dropped()
             + workers.iter().flatten().map(|w| w.non_finite_dropped).sum::<u64>();
@@ -408,10 +435,12 @@ impl Outputs<'_> {
             wall_time_s: self.elapsed_s(),
             peak_memory_bytes: memory::peak_rss_bytes(),
             bytes_per_pixel: engine.bytes_per_pixel(),
-            error: engine.sums().error(),
+            error: engine.sums().error(self.lit),
+            lit_mask: Some(self.lit.record(self.lit_seconds)),
+            forecast: forecast.record(),
             pixel_phases: engine.sums().pixels.iter().map(|p| p.phases as u64).sum(),
             session: self.session,
-            true_error: self.reference.map(|r| r.compare(engine.sums())),
+            true_error: self.reference.map(|r| r.compare(engine.sums(), self.lit)),
             history: history.to_vec(),
             flags: self.notes.iter().cloned().chain(flags_of(&engine.totals(), dropped, workers.as_deref())).collect(),
             workers,
@@ -419,7 +448,13 @@ impl Outputs<'_> {
     }
 
     /// Writes the checkpoint (distributed methods), the image and the record.
-    fn save(&self, engine: &dyn Progressive, history: &[HistoryEntry], reason: &str) -> Result<RunRecord> {
+    fn save(
+        &self,
+        engine: &dyn Progressive,
+        history: &[HistoryEntry],
+        reason: &str,
+        forecast: &Forecast,
+    ) -> Result<RunRecord> {
         if self.args.method.is_distributed() {
             // The checkpoint first: it is what a resumed run needs.
             Checkpoint::new(
@@ -434,8 +469,8 @@ impl Outputs<'_> {
             )
             .save(&self.dir.join(CHECKPOINT))?;
         }
-        let record = self.record(engine, history, reason);
-        output_folder::save(self.dir, engine.sums(), &record)?;
+        let record = self.record(engine, history, reason, forecast);
+        output_folder::save(self.dir, engine.sums(), self.lit, &record)?;
         Ok(record)
     }
 }
@@ -444,29 +479,31 @@ impl Outputs<'_> {
 /// `--save-interval`. A refresh that fails stops the run, and is the error returned.
 fn run_until_stop(
     engine: &mut dyn Progressive,
-    stop: &StopRule,
     interrupted: &AtomicBool,
     outputs: &Outputs,
     bar: &ProgressBar,
     history: &mut Vec<HistoryEntry>,
+    forecast: &mut Forecast,
     mut feed: Option<&mut LiveFeed>,
 ) -> Result<StopReason> {
     let save_interval = Duration::from_secs_f64(outputs.args.save_interval.max(0.5));
     let mut last_save = Instant::now();
     let mut save_error: Option<anyhow::Error> = None;
-    let reason = session::run(engine, stop, interrupted, history, outputs.elapsed_before, |engine, history| {
+    let stop = outputs.stop;
+    let tracking = Tracking { lit: outputs.lit, forecast, elapsed_before: outputs.elapsed_before };
+    let reason = session::run(engine, stop, interrupted, history, tracking, |engine, history, forecast| {
         let Some(entry) = history.last_mut() else { return };
         if let Some(r) = outputs.reference {
-            let t = r.compare(engine.sums());
+            let t = r.compare(engine.sums(), outputs.lit);
             (entry.true_all, entry.true_unlit) = (Some(t.rmse_all), Some(t.rmse_unlit));
         }
-        bar.set_message(progress(entry, stop.error_over, engine.workers().as_deref()));
+        bar.set_message(progress(entry, stop.error_over, forecast, engine.workers().as_deref()));
         if let Some(f) = feed.as_deref_mut() {
-            f.after_merge(engine, history, outputs.elapsed_s());
+            f.after_merge(engine, history, outputs.elapsed_s(), forecast.latest());
         }
         if last_save.elapsed() >= save_interval && save_error.is_none() {
             last_save = Instant::now();
-            if let Err(e) = outputs.save(engine, history, "running") {
+            if let Err(e) = outputs.save(engine, history, "running", forecast) {
                 save_error = Some(e);
             }
         }
@@ -477,8 +514,14 @@ fn run_until_stop(
     }
 }
 
-/// The progress line after a step: phases, ray rate, δ, and the workers' states.
-fn progress(entry: &HistoryEntry, error_over: ErrorOver, workers: Option<&[WorkerRecord]>) -> String {
+/// The progress line after a step: phases, ray rate, δ, the time still needed to reach a target error, and the
+/// workers' states.
+fn progress(
+    entry: &HistoryEntry,
+    error_over: ErrorOver,
+    forecast: &Forecast,
+    workers: Option<&[WorkerRecord]>,
+) -> String {
     let secs = entry.time_s.max(1e-9);
     let rays = (entry.backward_rays + entry.forward_rays) as f64;
     let delta = match error_over {
@@ -495,25 +538,38 @@ fn progress(entry: &HistoryEntry, error_over: ErrorOver, workers: Option<&[Worke
             count(&|s| matches!(s, WorkerState::Lost(_))),
         )
     });
+    let left = forecast.latest().map(|f| format!("  about {} to the target", short_duration(f.remaining_s)));
     format!(
-        "phase {}  {:.2} Mrays/s  δ {} {}{}",
+        "phase {}  {:.2} Mrays/s  δ {} {}{}{}",
         entry.phase,
         rays / secs / 1e6,
         if delta.is_finite() { format!("{:.2}%", 100.0 * delta) } else { "–".to_string() },
         if error_over == ErrorOver::Unlit { "(unlit pixels)" } else { "(all pixels)" },
+        left.unwrap_or_default(),
         workers.unwrap_or_default(),
     )
 }
 
+/// Seconds as "42 s", "3 min 20 s" or "2 h 05 min".
+fn short_duration(s: f64) -> String {
+    let s = s.max(0.0).round() as u64;
+    match s {
+        0..=99 => format!("{s} s"),
+        100..=5999 => format!("{} min {:02} s", s / 60, s % 60),
+        _ => format!("{} h {:02} min", s / 3600, s / 60 % 60),
+    }
+}
+
 /// Stops the engine. Worker processes send their last snapshots only now: one more history entry for them,
 /// timed when they were merged.
-fn finish(engine: &mut dyn Progressive, outputs: &Outputs, history: &mut Vec<HistoryEntry>) {
+fn finish(engine: &mut dyn Progressive, outputs: &Outputs, history: &mut Vec<HistoryEntry>, forecast: &mut Forecast) {
     engine.finish();
     if !outputs.args.method.is_distributed() {
         return;
     }
-    let (e, t) = (engine.sums().error(), engine.totals());
-    let truth = outputs.reference.map(|r| r.compare(engine.sums()));
+    let (e, t) = (engine.sums().error(outputs.lit), engine.totals());
+    forecast.step(outputs.elapsed_s(), engine.sums().image_phases(), outputs.stop.delta_of(&e));
+    let truth = outputs.reference.map(|r| r.compare(engine.sums(), outputs.lit));
     history.push(HistoryEntry {
         phase: t.phases,
         time_s: outputs.elapsed_s(),

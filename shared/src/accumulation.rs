@@ -3,9 +3,11 @@
 
 pub mod auxiliary;
 pub mod delta;
+pub mod lit_mask;
 mod non_finite;
 
 pub use auxiliary::{AuxLayer, AuxLayout, AuxSums};
+pub use lit_mask::{LitMask, LitMaskRecord, LIT_LAYER};
 pub use non_finite::non_finite_dropped;
 
 use crate::color::{luminance, luminance_f64, Rgb};
@@ -89,7 +91,7 @@ pub struct Accumulator {
 pub struct ErrorEstimate {
     /// Paper eq. 6 over every pixel (dominated by directly visible lights).
     pub delta_all: f64,
-    /// Eq. 6 restricted to pixels whose visible-lights layer is zero: the figure stopping rules use.
+    /// Eq. 6 restricted to the pixels the run's `LitMask` leaves unlit: the figure stopping rules use.
     pub delta_unlit: f64,
     /// Fewest phases at any pixel (δ needs at least two).
     pub min_phases: u32,
@@ -204,22 +206,28 @@ impl Accumulator {
         means.iter().map(|m| (m - mean) * (m - mean)).sum::<f64>() / (r * (r - 1)) as f64
     }
 
-    /// True when the pixel sees an emitter directly (its visible-lights layer is not zero).
-    pub fn sees_light(&self, pixel: usize) -> bool {
-        self.pixels[pixel].sum[Layer::VisibleLights as usize].iter().any(|&v| v > 0.0)
+    /// Phases per pixel, averaged over the image: the work the sums hold, whichever masks it was rendered over.
+    pub fn image_phases(&self) -> f64 {
+        let total: u64 = self.pixels.iter().map(|p| p.phases as u64).sum();
+        total as f64 / self.pixels.len().max(1) as f64
     }
 
-    /// δ (paper eq. 6, with `replicate_sem2` for the SEM) over all pixels and over unlit pixels.
-    pub fn error(&self) -> ErrorEstimate {
+    /// Fewest phases at any pixel (0 for an image without pixels).
+    pub fn min_phases(&self) -> u32 {
+        self.pixels.iter().map(|p| p.phases).min().unwrap_or(0)
+    }
+
+    /// δ (paper eq. 6, with `replicate_sem2` for the SEM) over all pixels and over the pixels `lit` does not
+    /// mark as seeing a light.
+    pub fn error(&self, lit: &LitMask) -> ErrorEstimate {
+        assert_eq!(lit.len(), self.pixels.len(), "a lit mask of another image");
         let (mut num_all, mut den_all, mut num_unlit, mut den_unlit) = (0.0, 0.0, 0.0, 0.0);
-        let mut min_phases = u32::MAX;
         for i in 0..self.pixels.len() {
-            min_phases = min_phases.min(self.pixels[i].phases);
             let l = luminance_f64(self.mean_total(i));
             let s = self.replicate_sem2(i);
             num_all += s;
             den_all += l * l;
-            if !self.sees_light(i) {
+            if !lit.is_lit(i) {
                 num_unlit += s;
                 den_unlit += l * l;
             }
@@ -228,7 +236,7 @@ impl Accumulator {
         ErrorEstimate {
             delta_all: ratio(num_all, den_all),
             delta_unlit: ratio(num_unlit, den_unlit),
-            min_phases: if self.pixels.is_empty() { 0 } else { min_phases },
+            min_phases: self.min_phases(),
         }
     }
 
@@ -301,7 +309,7 @@ mod tests {
         assert!((acc.sem2(0) - 3.5 / 4.0).abs() < 1e-6);
         // One phase per replicate: the replicate means are the samples, SEM² = Σ (x − 3)² / (4 · 3) = 14 / 12.
         assert!((acc.replicate_sem2(0) - 14.0 / 12.0).abs() < 1e-6);
-        let e = acc.error();
+        let e = acc.error(&LitMask::none(1, 1));
         assert!((e.delta_all - (14.0f64 / 12.0).sqrt() / 3.0).abs() < 1e-6);
         assert_eq!(e.min_phases, 4);
     }
@@ -329,15 +337,22 @@ mod tests {
     }
 
     #[test]
-    fn unlit_delta_ignores_pixels_that_see_a_light() {
-        let mut acc = Accumulator::new(2, 1);
+    fn unlit_delta_is_computed_over_the_pixels_the_mask_leaves_unlit_whatever_their_samples() {
+        let mut acc = Accumulator::new(3, 1);
         for (j, x) in [1.0f32, 3.0].into_iter().enumerate() {
             acc.add_phase(0, &[Rgb::splat(100.0), Rgb::ZERO, Rgb::ZERO, Rgb::ZERO], 1, j);
             acc.add_phase(1, &[Rgb::ZERO, Rgb::splat(x), Rgb::ZERO, Rgb::ZERO], 1, j);
+            // Pixel 2 sees a light through glass in its first phase only: the mask keeps it lit anyway.
+            let light = if j == 0 { 50.0 } else { 0.0 };
+            acc.add_phase(2, &[Rgb::splat(light), Rgb::splat(x), Rgb::ZERO, Rgb::ZERO], 1, j);
         }
-        let e = acc.error();
+        let mask = LitMask::from_flags(3, 1, vec![true, false, true], 16);
+        let e = acc.error(&mask);
         // Pixel 1 alone: replicate means 1 and 3, SEM² = (1 + 1) / (2 · 1) = 1.
         assert!((e.delta_unlit - 1.0 / 2.0).abs() < 1e-9);
         assert!(e.delta_all < e.delta_unlit);
+        // Over a mask without lit pixels δ unlit is δ over all of them.
+        let none = acc.error(&LitMask::none(3, 1));
+        assert_eq!(none.delta_unlit, none.delta_all);
     }
 }

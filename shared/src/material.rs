@@ -102,12 +102,7 @@ impl Material {
                 }
             }
             Material::Dielectric { ior, ext_ior, anti_reflection } => {
-                // A dispersive index not yet resolved to a wavelength (an RGB path) acts at the d line.
-                let (eta_o, eta_t) = if front { (ext_ior.d, ior.d) } else { (ior.d, ext_ior.d) };
-                let cos_o = wo.dot(ns).clamp(-1.0, 1.0).abs();
-                let f = fresnel_dielectric(cos_o, eta_o, eta_t);
-                // A coating cannot undo total internal reflection (f = 1): there is no transmitted wave.
-                let f = if anti_reflection && f < 1.0 { 0.0 } else { f };
+                let (eta_o, eta_t, cos_o, f) = dielectric_reflectance(ior, ext_ior, anti_reflection, front, wo, ns);
                 if u.x < f {
                     ScatterSample::specular(reflect(wo, ns), Rgb::ONE)
                 } else {
@@ -136,6 +131,59 @@ impl Material {
         }
         Some(sample)
     }
+}
+
+impl Material {
+    /// Every continuation a delta event can take for outgoing direction `wo`, with the probability that
+    /// `sample` picks it: a reflection, a transmission, or both. Empty at a diffuse surface. Lets a caller
+    /// follow every specular branch of a camera path instead of sampling one.
+    pub fn delta_branches(&self, hit: &SurfaceHit, wo: Vec3) -> Vec<(ScatterSample, f32)> {
+        let front = wo.dot(hit.ng) >= 0.0;
+        let p_reflect = match *self {
+            Material::Diffuse { .. } => return Vec::new(),
+            Material::Mirror { .. } => 1.0,
+            Material::Coating { reflectance, transmittance } => {
+                let (lr, lt) = (luminance(reflectance), luminance(transmittance));
+                if lr + lt <= 0.0 {
+                    return Vec::new();
+                }
+                lr / (lr + lt)
+            }
+            Material::Dielectric { ior, ext_ior, anti_reflection } => {
+                let ns = if front { hit.ns } else { -hit.ns };
+                dielectric_reflectance(ior, ext_ior, anti_reflection, front, wo, ns).3
+            }
+        };
+        // `sample` reflects when u.x < p_reflect and transmits otherwise.
+        let mut branches = Vec::with_capacity(2);
+        for (u, p) in [(0.0, p_reflect), (1.0 - f32::EPSILON / 2.0, 1.0 - p_reflect)] {
+            if p > 0.0 {
+                if let Some(s) = self.sample(hit, wo, Vec2::new(u, 0.5), Transport::Radiance) {
+                    branches.push((s, p));
+                }
+            }
+        }
+        branches
+    }
+}
+
+/// A dielectric interface seen from the side of `wo` (`front` of the geometric normal, `ns` the shading normal
+/// turned to that side): the indices on either side, the cosine of `wo` and the probability of reflection.
+fn dielectric_reflectance(
+    ior: RefractiveIndex,
+    ext_ior: RefractiveIndex,
+    anti_reflection: bool,
+    front: bool,
+    wo: Vec3,
+    ns: Vec3,
+) -> (f32, f32, f32, f32) {
+    // A dispersive index not yet resolved to a wavelength (an RGB path) acts at the d line.
+    let (eta_o, eta_t) = if front { (ext_ior.d, ior.d) } else { (ior.d, ext_ior.d) };
+    let cos_o = wo.dot(ns).clamp(-1.0, 1.0).abs();
+    let f = fresnel_dielectric(cos_o, eta_o, eta_t);
+    // A coating cannot undo total internal reflection (f = 1): there is no transmitted wave.
+    let f = if anti_reflection && f < 1.0 { 0.0 } else { f };
+    (eta_o, eta_t, cos_o, f)
 }
 
 impl Dispersive for Material {

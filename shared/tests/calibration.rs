@@ -7,6 +7,7 @@
 mod common;
 
 use common::{settings, shipped};
+use photonfarm::accumulation::LitMask;
 use photonfarm::color::luminance_f64;
 use photonfarm::image_io::exr_file::{find_layer, read_exr};
 use photonfarm::render::images::luminance_of;
@@ -19,27 +20,26 @@ fn check_calibration(scene_file: &str, reference_file: &str) {
     let layers = read_exr(&path).unwrap_or_else(|e| panic!("{e}"));
     let reference = find_layer(&layers, &path, "total").unwrap();
     let ref_sem = find_layer(&layers, &path, "sem").unwrap();
-    let ref_visible = find_layer(&layers, &path, "visible_lights").unwrap();
 
-    let mut engine = Engine::new(&sc, settings(&sc, Method::Pbpm, 2024));
+    let settings = settings(&sc, Method::Pbpm, 2024);
+    // The run's mask of lit pixels, decided before the render: δ and the true error use the same pixel sets.
+    let lit = LitMask::of_scene(&sc, settings.max_depth);
+    let mut engine = Engine::new(&sc, settings);
     let mut phases = 0;
     loop {
         engine.run_phase();
         phases += 1;
-        let e = engine.sums().error();
+        let e = engine.sums().error(&lit);
         if e.delta_unlit < 0.10 && phases >= 8 {
             break;
         }
         assert!(phases < 400, "{scene_file}: δ (unlit) still {} after {phases} phases", e.delta_unlit);
     }
     let sums = engine.sums();
-    // Pixels that see a light in either image are "lit"; δ and the true error use the same pixel sets.
-    let lit: Vec<bool> =
-        (0..sums.pixels.len()).map(|i| sums.sees_light(i) || ref_visible.rgb[i].iter().any(|&c| c > 0.0)).collect();
     for (name, include) in [("all pixels", None), ("unlit pixels", Some(false))] {
         let (mut sem2, mut ref_sem2, mut err2, mut norm) = (0.0, 0.0, 0.0, 0.0);
         for i in 0..sums.pixels.len() {
-            if include.is_some_and(|want| lit[i] != want) {
+            if include.is_some_and(|want| lit.is_lit(i) != want) {
                 continue;
             }
             let mine = luminance_f64(sums.mean_total(i));

@@ -121,8 +121,9 @@ fn check_partition(sc: &photonfarm::scene::Scene, pbpm_phases: usize, path_phase
         }
     }
     let rmse = relative_rmse(&total_image(a), &total_image(b), |_| true);
-    let e = a.error();
-    let f = b.error();
+    let all = photonfarm::accumulation::LitMask::none(a.width, a.height);
+    let e = a.error(&all);
+    let f = b.error(&all);
     eprintln!("relative RMSE {rmse:.4}; δ PBPM {:.4}, δ path {:.4}", e.delta_all, f.delta_all);
     assert!(rmse < 0.02, "PBPM and the path tracer differ by {:.2}% relative RMSE", 100.0 * rmse);
 }

@@ -7,7 +7,7 @@ mod common;
 
 use common::{mean_sem, regions_phase_means, settings, shipped};
 use glam::{Vec2, Vec3};
-use photonfarm::accumulation::non_finite_dropped;
+use photonfarm::accumulation::{non_finite_dropped, LitMask};
 use photonfarm::geometry::{ray::offset_origin, Ray, SurfaceHit};
 use photonfarm::integrator::Layer;
 use photonfarm::material::Transport;
@@ -45,12 +45,16 @@ struct Run<'s> {
     engine: Engine<'s>,
     regions: Vec<Region>,
     per_phase: Vec<Vec<f64>>,
+    /// The scene's lit pixels, which δ unlit leaves out.
+    lit: LitMask,
 }
 
 impl<'s> Run<'s> {
     fn new(scene: &'s Scene, method: Method, seed: u64, regions: Vec<Region>) -> Self {
         let per_phase = vec![Vec::new(); regions.len()];
-        Run { engine: Engine::new(scene, settings(scene, method, seed)), regions, per_phase }
+        let settings = settings(scene, method, seed);
+        let lit = LitMask::of_scene(scene, settings.max_depth);
+        Run { engine: Engine::new(scene, settings), regions, per_phase, lit }
     }
 
     /// Runs more phases, then checks that nothing non-finite was produced.
@@ -64,7 +68,7 @@ impl<'s> Run<'s> {
 
     /// δ over the pixels that do not see a light directly (the figure the project's stopping rules use).
     fn delta(&self) -> f64 {
-        self.engine.sums().error().delta_unlit
+        self.engine.sums().error(&self.lit).delta_unlit
     }
 
     /// Mean and SEM of region `r` over the first `phases` phases.

@@ -31,7 +31,7 @@ fn render_writes_layers_preview_and_a_complete_run_record() {
     let layers = photonfarm::image_io::exr_file::read_exr(&out.join("image.exr")).unwrap();
     let mut names: Vec<&str> = layers.iter().map(|l| l.name.as_str()).collect();
     names.sort();
-    assert_eq!(names, ["caustic", "direct", "indirect", "sem", "total", "visible_lights"]);
+    assert_eq!(names, ["caustic", "direct", "indirect", "lit", "sem", "total", "visible_lights"]);
     assert!(layers.iter().all(|l| l.rgb.iter().flatten().all(|v| v.is_finite())));
     assert!(std::fs::metadata(out.join("preview.png")).unwrap().len() > 1000);
     let r = record(&out);
@@ -71,6 +71,61 @@ fn the_in_process_two_level_render_gives_every_pixel_at_least_the_phases_asked_f
     assert!(r["layout"].as_str().unwrap().starts_with("2 groups × 1 thread"), "{}", r["layout"]);
     assert!(r["error"]["min_phases"].as_u64().unwrap() >= 3);
     assert!(r["totals"]["merges"].as_u64().unwrap() > 0);
+}
+
+/// Two synthetic NUMA nodes of one core each.
+const TWO_NODES: &str = "pack:1 numa:2 core:1 pu:1";
+
+#[test]
+fn every_method_measures_delta_over_the_same_lit_mask_kept_in_the_record_and_the_exr() {
+    let dir = scratch_dir("lit-mask");
+    let scene = cornell_at(&dir, 48);
+    let scene = scene.to_str().unwrap();
+    let runs = [
+        ("pbpm", vec!["--method", "pbpm", "--seed", "1"]),
+        ("two-level", vec!["--method", "two-level", "--threads", "2", "--group-size", "1", "--seed", "2"]),
+        ("three-level", vec!["--method", "three-level", "--topology", TWO_NODES, "--group-size", "1", "--seed", "3"]),
+    ];
+    let mut masks = Vec::new();
+    for (name, args) in runs {
+        let out = dir.join(name);
+        let mut all = vec![scene, "--phases", "2", "--quiet"];
+        all.extend(args);
+        render(&all, &out);
+        let layers = photonfarm::image_io::exr_file::read_exr(&out.join("image.exr")).unwrap();
+        let lit = layers.iter().find(|l| l.name == "lit").expect("a lit layer").rgb.clone();
+        let r = record(&out);
+        let m = &r["lit_mask"];
+        let count = lit.iter().filter(|p| p[0] == 1.0).count() as u64;
+        assert_eq!(m["lit_pixels"].as_u64(), Some(count), "{name}: the record counts the EXR's lit pixels");
+        assert_eq!(m["lit_pixels"].as_u64().unwrap() + m["unlit_pixels"].as_u64().unwrap(), 48 * 48);
+        assert_eq!(m["exr_layer"], "lit");
+        masks.push((name, lit, r["lit_mask"].clone()));
+    }
+    let (_, first, first_record) = &masks[0];
+    assert!(first_record["lit_pixels"].as_u64().unwrap() > 0, "the Cornell box's light is seen");
+    for (name, lit, r) in &masks[1..] {
+        assert_eq!(lit, first, "{name}: the same mask as pbpm's");
+        assert_eq!(r["lit_pixels"], first_record["lit_pixels"], "{name}");
+    }
+}
+
+#[test]
+fn a_run_with_a_target_error_keeps_its_forecast_next_to_when_the_target_was_met() {
+    let dir = scratch_dir("forecast");
+    let scene = cornell_at(&dir, 48);
+    let out = dir.join("out");
+    render(&[scene.to_str().unwrap(), "--method", "pbpm", "--target-error", "0.05", "--quiet"], &out);
+    let r = record(&out);
+    assert_eq!(r["stop_reason"], "target-error");
+    let f = &r["forecast"];
+    assert_eq!(f["target"], 0.05);
+    let made = &f["within_2x"];
+    let reached = f["reached_phases"].as_f64().expect("the phases at which the target was met");
+    assert!(made["end_phases"].as_f64().unwrap() > made["at_phases"].as_f64().unwrap());
+    assert!(made["remaining_s"].as_f64().unwrap() >= 0.0);
+    assert!(reached >= made["at_phases"].as_f64().unwrap());
+    assert!(f["reached_s"].as_f64().unwrap() <= r["wall_time_s"].as_f64().unwrap());
 }
 
 #[test]

@@ -99,7 +99,7 @@ fn check(scene: &Scene, phases: u32, tile: u32, what: &str) {
         let mut engine = ParallelEngine::new(scene, settings(seed), config).unwrap();
         let never = AtomicBool::new(false);
         let (mut before, mut batches) = ((0.0, 0.0), Vec::new());
-        while engine.sums().error().min_phases < phases {
+        while engine.sums().min_phases() < phases {
             engine.run_round(&never, None);
             push_increment(engine.sums(), &mut before, &mut batches);
         }

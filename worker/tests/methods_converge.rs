@@ -3,7 +3,7 @@
 mod common;
 
 use common::{mean_z2, scene, variance_ratio};
-use photonfarm::accumulation::{relative_rmse, Accumulator};
+use photonfarm::accumulation::{relative_rmse, Accumulator, LitMask};
 use photonfarm::color::luminance_f64;
 use photonfarm::integrator::Layer;
 use photonfarm::render::images::total_image;
@@ -57,20 +57,21 @@ fn check(sc: &Scene, name: &str, reference: &Accumulator, config: EngineConfig, 
     let label = format!("{name} {:?} {}×{}", config.method, config.groups, config.threads_per_group);
     let mut engine = ParallelEngine::new(sc, RenderSettings::for_scene(sc, Method::Pbpm, 5), config).unwrap();
     let never = AtomicBool::new(false);
-    while engine.sums().error().min_phases < min_phases {
+    while engine.sums().min_phases() < min_phases {
         engine.run_round(&never, None);
     }
     let sums = engine.sums();
     let rmse = relative_rmse(&total_image(sums), &total_image(reference), |_| true);
     let mean_z2 = mean_z2(sums, reference);
-    let variance_ratio = variance_ratio(sums, reference);
+    let variance_ratio = variance_ratio(sums, reference, &LitMask::of_scene(sc, engine.settings().max_depth));
     let a = blocks(sums, sums.width / 4);
     let b = blocks(reference, sums.width / 4);
     let mut worst: f64 = 0.0;
     for ((ma, _), (mb, _)) in a.iter().zip(&b) {
         worst = worst.max((ma - mb).abs() / mb);
     }
-    let combined = (sums.error().delta_all.powi(2) + reference.error().delta_all.powi(2)).sqrt();
+    let all = LitMask::none(sums.width, sums.height);
+    let combined = (sums.error(&all).delta_all.powi(2) + reference.error(&all).delta_all.powi(2)).sqrt();
     // Relative RMSE of 8×8-block means: the 2% criterion at this budget, with pixel noise averaged down.
     let (fa, fb) = (blocks(sums, 8), blocks(reference, 8));
     let block_rmse = (fa.iter().zip(&fb).map(|((a, _), (b, _))| (a - b) * (a - b)).sum::<f64>()
@@ -78,7 +79,7 @@ fn check(sc: &Scene, name: &str, reference: &Accumulator, config: EngineConfig, 
     .sqrt();
     eprintln!(
         "{label}: {} phases/pixel, RMSE {:.2}% (8×8 blocks {:.2}%), mean z² {mean_z2:.2}, difference² / SEM² {variance_ratio:.2}, worst quarter-image block {:.2}% (3 × combined δ = {:.2}%)",
-        sums.error().min_phases,
+        sums.min_phases(),
         100.0 * rmse,
         100.0 * block_rmse,
         100.0 * worst,

@@ -51,7 +51,7 @@ fn stopping_rounds_at_random_moments_does_not_change_the_expected_image() {
         let mut engine = ParallelEngine::new(&sc, settings, config).unwrap();
         let never = AtomicBool::new(false);
         let mut s = Sampler::new(77, Pass::Path, 0, 0);
-        while engine.sums().error().min_phases < 300 {
+        while engine.sums().min_phases() < 300 {
             // A deadline somewhere inside the round: groups are caught in every stage of a phase.
             let deadline = cut.then(|| Instant::now() + Duration::from_micros((s.next_f32() * 8000.0) as u64));
             engine.run_round(&never, deadline);
@@ -151,9 +151,9 @@ fn groups_sharing_maps_give_every_phase_its_light_with_fewer_light_paths_of_thei
     let phases: u64 = stats.iter().map(|s| s.phases).sum();
     let traced: u64 = stats.iter().map(|s| s.light_paths).sum();
     let counted: u64 = stats.iter().map(|s| s.light_paths_counted).sum();
-    // Each group's phase needs light paths for half the image; only the phases a round's stop cut (at most one
-    // per group and round) may have fewer.
-    let quota = settings.light_paths_per_phase(64 * 64 / 2);
+    // Each group's phase renders half the image but needs light paths for all of it (L counts per image pixel);
+    // only the phases a round's stop cut (at most one per group and round) may have fewer.
+    let quota = settings.light_paths_per_phase(64 * 64);
     let full_phases = phases - 2 * rounds;
     eprintln!("{phases} phases: {traced} light paths traced, {counted} counted by the maps (quota {quota})");
     assert!(counted >= full_phases * quota, "{counted} light paths counted for {full_phases} full phases of {quota}");

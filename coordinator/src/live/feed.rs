@@ -1,7 +1,8 @@
 //! The render loop's side of the live view: after a merge it publishes the merged sums and the run's progress
 //! as one immutable [`RunView`] on a `tokio::sync::watch` channel, which the page and tev read when they like.
 
-use photonfarm::accumulation::{Accumulator, ErrorEstimate};
+use photonfarm::accumulation::{Accumulator, ErrorEstimate, LitMask};
+use photonfarm::render::forecast::Estimate;
 use photonfarm::render::record::{HistoryEntry, RunRecord, WorkerRecord};
 use photonfarm::render::session::Progressive;
 use photonfarm::render::RayTotals;
@@ -48,13 +49,17 @@ pub struct RunView {
     pub state: RunState,
     /// Rendering time so far, seconds.
     pub elapsed_s: f64,
+    /// With a target error: the latest estimate of the time still needed.
+    pub forecast: Option<Estimate>,
+    /// The run's lit pixels, shown as a layer beside the image's.
+    pub lit: Arc<LitMask>,
 }
 
 impl RunView {
     /// The view before the first merge: a black image of the scene's size.
-    fn empty(sums: Accumulator) -> RunView {
+    fn empty(sums: Accumulator, lit: Arc<LitMask>) -> RunView {
         RunView {
-            error: sums.error(),
+            error: sums.error(&lit),
             sums: Arc::new(sums),
             true_error: None,
             totals: RayTotals::default(),
@@ -62,6 +67,8 @@ impl RunView {
             workers: Vec::new(),
             state: RunState::Running,
             elapsed_s: 0.0,
+            forecast: None,
+            lit,
         }
     }
 }
@@ -73,18 +80,30 @@ pub struct LiveFeed {
     last_copy: Duration,
     /// Per worker: snapshots merged when last seen, and when the count last grew.
     seen: Vec<(u64, Option<f64>)>,
+    /// The run's lit pixels, which δ unlit leaves out.
+    lit: Arc<LitMask>,
+    /// The latest estimate of the time still needed.
+    forecast: Option<Estimate>,
 }
 
 impl LiveFeed {
-    /// A feed whose first view is `blank` (empty sums of the scene's size and layers), and a receiver of it.
-    pub fn new(blank: Accumulator) -> (LiveFeed, watch::Receiver<Arc<RunView>>) {
-        let (tx, rx) = watch::channel(Arc::new(RunView::empty(blank)));
-        (LiveFeed { tx, last_publish: None, last_copy: Duration::ZERO, seen: Vec::new() }, rx)
+    /// A feed whose first view is `blank` (empty sums of the scene's size and layers), and a receiver of it;
+    /// δ unlit leaves out the pixels of `lit`.
+    pub fn new(blank: Accumulator, lit: Arc<LitMask>) -> (LiveFeed, watch::Receiver<Arc<RunView>>) {
+        let (tx, rx) = watch::channel(Arc::new(RunView::empty(blank, lit.clone())));
+        (LiveFeed { tx, last_publish: None, last_copy: Duration::ZERO, seen: Vec::new(), lit, forecast: None }, rx)
     }
 
-    /// Called after every step of the render loop: notes the workers' snapshots, and publishes a view unless
-    /// one was published too recently.
-    pub fn after_merge(&mut self, engine: &dyn Progressive, history: &[HistoryEntry], elapsed_s: f64) {
+    /// Called after every step of the render loop with the latest forecast: notes the workers' snapshots, and
+    /// publishes a view unless one was published too recently.
+    pub fn after_merge(
+        &mut self,
+        engine: &dyn Progressive,
+        history: &[HistoryEntry],
+        elapsed_s: f64,
+        forecast: Option<Estimate>,
+    ) {
+        self.forecast = forecast.or(self.forecast);
         let workers = self.worker_rows(engine, elapsed_s);
         let wait = MIN_INTERVAL.max(self.last_copy * COPY_COST_FACTOR);
         if self.last_publish.is_some_and(|t| t.elapsed() < wait) {
@@ -110,6 +129,7 @@ impl LiveFeed {
         let state = RunState::Finished(record.stop_reason.clone());
         let mut view = self.view(engine, &record.history, workers, true_error, state, record.wall_time_s);
         (view.error, view.totals) = (record.error, record.totals);
+        view.forecast = record.forecast.as_ref().and_then(|f| f.latest);
         self.send(view);
     }
 
@@ -142,7 +162,7 @@ impl LiveFeed {
         let sums = Arc::new(engine.sums().clone());
         self.last_copy = copying.elapsed();
         RunView {
-            error: sums.error(),
+            error: sums.error(&self.lit),
             sums,
             true_error,
             totals: engine.totals(),
@@ -150,6 +170,8 @@ impl LiveFeed {
             workers,
             state,
             elapsed_s,
+            forecast: self.forecast,
+            lit: self.lit.clone(),
         }
     }
 

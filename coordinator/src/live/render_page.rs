@@ -66,6 +66,9 @@ struct StateJson {
     rays_per_s: f64,
     mean_rays_per_s: f64,
     rays: u64,
+    /// With a target error: the estimated seconds still needed, and the estimated end of the run (run time, s).
+    remaining_s: Option<f64>,
+    predicted_end_s: Option<f64>,
     history: Vec<Point>,
     workers: Vec<WorkerJson>,
 }
@@ -182,6 +185,8 @@ fn state_json(view: &RunView) -> StateJson {
         rays_per_s,
         mean_rays_per_s: if view.elapsed_s > 0.0 { rays as f64 / view.elapsed_s } else { 0.0 },
         rays,
+        remaining_s: view.forecast.and_then(|f| finite(f.remaining_s)),
+        predicted_end_s: view.forecast.and_then(|f| finite(f.end_s())),
         history,
         workers,
     }

@@ -7,7 +7,7 @@ use super::render_page::{self, RenderPage};
 use super::server::{url_of, LiveThread};
 use super::tev;
 use anyhow::Result;
-use photonfarm::accumulation::Accumulator;
+use photonfarm::accumulation::{Accumulator, LitMask};
 use photonfarm::protocol::Secret;
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -22,6 +22,8 @@ pub struct LiveOptions {
     pub tev: Option<String>,
     /// Empty sums of the run's size and layers: what the page shows before the first merge.
     pub blank: Accumulator,
+    /// The run's lit pixels, which δ unlit leaves out.
+    pub lit: Arc<LitMask>,
     /// The run's settings as the page serves them.
     pub settings: serde_json::Value,
     pub dir: PathBuf,
@@ -49,7 +51,7 @@ impl LiveSession {
             None => None,
         };
         let thread = LiveThread::start()?;
-        let (feed, views) = LiveFeed::new(options.blank);
+        let (feed, views) = LiveFeed::new(options.blank, options.lit);
         let mut url = None;
         if let Some((addr, access)) = access {
             let page = RenderPage {

@@ -1,6 +1,7 @@
 //! Camera-path pieces shared by the reference path tracer and the PBPM backward pass: the image layers and
 //! next-event estimation of direct light.
 
+mod lit_pixels;
 pub mod path_tracer;
 
 use crate::color::Rgb;

@@ -1,6 +1,6 @@
 //! Images made from the running sums: the mean of every layer, the total and the per-pixel SEM.
 
-use crate::accumulation::Accumulator;
+use crate::accumulation::{Accumulator, LitMask, LIT_LAYER};
 use crate::color::luminance_f64;
 use crate::image_io::exr_file::LayerImage;
 use crate::integrator::Layer;
@@ -34,6 +34,15 @@ pub fn layer_images(sums: &Accumulator) -> Vec<LayerImage> {
         out.push(image);
     }
     out
+}
+
+/// The lit mask as a grey layer: 1 where a pixel sees a light, 0 where δ unlit counts it.
+pub fn lit_layer(lit: &LitMask) -> LayerImage {
+    let mut image = LayerImage::new(LIT_LAYER, lit.width as usize, lit.height as usize);
+    for (i, px) in image.rgb.iter_mut().enumerate() {
+        *px = [if lit.is_lit(i) { 1.0 } else { 0.0 }; 3];
+    }
+    image
 }
 
 /// The mean total image, f64 per channel.

@@ -1,8 +1,9 @@
 //! Rendering runs: settings, the counters a run reports, the single-threaded progressive engine, images from the
-//! sums, memory, checkpoints and the run record.
+//! sums, memory, checkpoints, the run record and the forecast of a run's remaining time.
 
 pub mod checkpoint;
 pub mod engine;
+pub mod forecast;
 pub mod images;
 pub mod memory;
 pub mod method;

@@ -1,10 +1,11 @@
 //! The JSON record of a run: enough to reproduce it (scene hash, settings, seed) and to chart its speed against
 //! its accuracy (rays and δ after every phase).
 
+use super::forecast::ForecastRecord;
 use super::method::Method;
 use super::settings::RenderSettings;
 use super::totals::RayTotals;
-use crate::accumulation::ErrorEstimate;
+use crate::accumulation::{ErrorEstimate, LitMaskRecord};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use std::fmt;
 use std::str::FromStr;
@@ -19,7 +20,7 @@ pub struct HistoryEntry {
     pub delta_unlit: f64,
     pub backward_rays: u64,
     pub forward_rays: u64,
-    /// Relative RMSE against the reference over all pixels and over pixels that do not see a light directly.
+    /// Relative RMSE against the reference over all pixels and over the pixels the lit mask leaves unlit.
     /// Always serialized (null without a reference): checkpoints keep the history with bincode, which cannot
     /// skip fields.
     #[serde(default)]
@@ -35,7 +36,7 @@ pub struct TrueError {
     pub reference: String,
     /// Relative RMSE of luminance over all pixels.
     pub rmse_all: f64,
-    /// Relative RMSE over pixels that do not see a light directly.
+    /// Relative RMSE over the pixels the lit mask leaves unlit.
     pub rmse_unlit: f64,
     /// The reference's own δ over the same pixels (from its `sem` layer): it adds in quadrature to the error
     /// measured against it, so a true error near it says more about the reference than about the run.
@@ -203,6 +204,14 @@ pub struct RunRecord {
     pub peak_memory_bytes: Option<u64>,
     pub bytes_per_pixel: f64,
     pub error: ErrorEstimate,
+    /// The pixels that see a light, decided before the render: δ unlit and the true error over unlit pixels
+    /// leave them out.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lit_mask: Option<LitMaskRecord>,
+    /// With a target error: the estimate of the time still needed, and the one made when δ first came within
+    /// twice the target next to when the target was actually met.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub forecast: Option<ForecastRecord>,
     /// Phases summed over pixels: what the image holds, whichever process rendered them.
     #[serde(default)]
     pub pixel_phases: u64,

@@ -1,10 +1,11 @@
 //! A progressive run: phases until a time, phase or error target is met, or the user interrupts.
 
 use super::engine::Engine;
+use super::forecast::Forecast;
 use super::record::HistoryEntry;
 use super::settings::RenderSettings;
 use super::totals::RayTotals;
-use crate::accumulation::Accumulator;
+use crate::accumulation::{Accumulator, LitMask};
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -70,7 +71,7 @@ impl Progressive for Engine<'_> {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum ErrorOver {
-    /// Pixels that do not see a light directly (default: the lights would flatter δ).
+    /// Pixels the lit mask leaves unlit (default: the lights would flatter δ).
     Unlit,
     /// Every pixel, the paper's eq. 6.
     All,
@@ -109,29 +110,50 @@ impl StopReason {
     }
 }
 
-/// Runs phases until `stop` or `interrupted`; `on_phase` sees the engine and the history after every phase. `elapsed_before`
-/// is wall time spent in earlier sessions of the same run (resume).
+/// What a run measures its error over and forecasts with, besides the stop rule.
+pub struct Tracking<'a> {
+    /// The pixels that see a light, left out of δ unlit.
+    pub lit: &'a LitMask,
+    /// The forecast of the time to the target error (it estimates nothing without one).
+    pub forecast: &'a mut Forecast,
+    /// Wall time spent in earlier sessions of the same run (resume).
+    pub elapsed_before: Duration,
+}
+
+impl StopRule {
+    /// The δ of `e` that the target error refers to.
+    pub fn delta_of(&self, e: &crate::accumulation::ErrorEstimate) -> f64 {
+        match self.error_over {
+            ErrorOver::Unlit => e.delta_unlit,
+            ErrorOver::All => e.delta_all,
+        }
+    }
+}
+
+/// Runs phases until `stop` or `interrupted`; `on_phase` sees the engine, the history and the forecast after
+/// every phase.
 pub fn run<R: Progressive + ?Sized>(
     engine: &mut R,
     stop: &StopRule,
     interrupted: &AtomicBool,
     history: &mut Vec<HistoryEntry>,
-    elapsed_before: Duration,
-    mut on_phase: impl FnMut(&R, &mut [HistoryEntry]),
+    tracking: Tracking,
+    mut on_phase: impl FnMut(&R, &mut [HistoryEntry], &Forecast),
 ) -> StopReason {
+    let Tracking { lit, forecast, elapsed_before } = tracking;
     let start = Instant::now();
     loop {
         if interrupted.load(Ordering::Relaxed) {
             return StopReason::Interrupted;
         }
         if let Some(n) = stop.phases {
-            if engine.sums().error().min_phases as u64 >= n {
+            if engine.sums().min_phases() as u64 >= n {
                 return StopReason::Phases;
             }
         }
         let deadline = stop.time.map(|t| start + t.saturating_sub(elapsed_before));
         engine.step(interrupted, deadline);
-        let e = engine.sums().error();
+        let e = engine.sums().error(lit);
         let t = engine.totals();
         let entry = HistoryEntry {
             phase: t.phases,
@@ -143,16 +165,13 @@ pub fn run<R: Progressive + ?Sized>(
             ..HistoryEntry::default()
         };
         history.push(entry);
-        on_phase(engine, history);
+        forecast.step(entry.time_s, engine.sums().image_phases(), stop.delta_of(&e));
+        on_phase(engine, history, forecast);
         if !engine.active() {
             return StopReason::NoWorkers;
         }
         if let Some(target) = stop.target_error {
-            let d = match stop.error_over {
-                ErrorOver::Unlit => e.delta_unlit,
-                ErrorOver::All => e.delta_all,
-            };
-            if d <= target {
+            if stop.delta_of(&e) <= target {
                 return StopReason::TargetError;
             }
         }

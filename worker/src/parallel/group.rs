@@ -321,8 +321,10 @@ impl Group {
         // 2. Build the map while it is closed. The phase's quota counts every light path traced against the map,
         // its own group's and the other groups' (paper §4.2): a light path that gathers into several open maps
         // serves each of them, so a group whose map others trace against needs fewer paths of its own for the
-        // same light per pixel.
-        let required = ctx.settings.light_paths_per_phase(self.mask.len());
+        // same light per pixel. The quota is per image pixel, not per mask pixel: light paths leave the lights
+        // over the whole scene, so a pixel's gathered estimate has the variance of the map's light-path count,
+        // and every method gives a pixel the same light at the same `light_paths_per_pixel`.
+        let required = ctx.settings.light_paths_per_phase(ctx.scene.camera.pixel_count());
         let t0 = Instant::now();
         // One thread adds its own paths' light without atomics; several share the map's atomic buffer.
         let one_thread = rayon::current_num_threads() == 1;

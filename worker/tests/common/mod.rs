@@ -1,7 +1,7 @@
 //! Helpers shared by the worker's integration tests.
 #![allow(dead_code)]
 
-use photonfarm::accumulation::Accumulator;
+use photonfarm::accumulation::{Accumulator, LitMask};
 use photonfarm::color::luminance_f64;
 use photonfarm::scene::Scene;
 use std::path::Path;
@@ -35,13 +35,13 @@ pub fn mean_z2(a: &Accumulator, b: &Accumulator) -> f64 {
         / n as f64
 }
 
-/// Σ (a − b)² / Σ (SEM_a² + SEM_b²) of the total luminance over the pixels that see no light in either sum,
+/// Σ (a − b)² / Σ (SEM_a² + SEM_b²) of the total luminance over the pixels `lit` leaves unlit,
 /// with the replicate SEMs that δ uses: about 1 when both sums estimate the same image and δ is honest. A sum
 /// over pixels has the expectation of its terms however the pixels of one phase are correlated, and it averages
 /// out the few degrees of freedom of each pixel's replicate SEM.
-pub fn variance_ratio(a: &Accumulator, b: &Accumulator) -> f64 {
+pub fn variance_ratio(a: &Accumulator, b: &Accumulator, lit: &LitMask) -> f64 {
     let (mut d2, mut s2) = (0.0, 0.0);
-    for i in (0..a.pixels.len()).filter(|&i| !a.sees_light(i) && !b.sees_light(i)) {
+    for i in (0..a.pixels.len()).filter(|&i| !lit.is_lit(i)) {
         let d = luminance_f64(a.mean_total(i)) - luminance_f64(b.mean_total(i));
         d2 += d * d;
         s2 += a.replicate_sem2(i) + b.replicate_sem2(i);

@@ -1,0 +1,84 @@
+//! The pixels that see a light: decided once per scene before the render, so that δ over the other pixels
+//! (δ unlit), the `--target-error` stop and the true error all measure the same pixels from the first phase on.
+
+use serde::{Deserialize, Serialize};
+
+/// Primary rays per pixel the mask is decided from (a 4 × 4 stratification of the pixel and of the aperture).
+pub const LIT_MASK_SAMPLES: u32 = 16;
+
+/// Which pixels see an emitter directly or through specular surfaces only (the `visible_lights` layer's
+/// pixels): found from `LIT_MASK_SAMPLES` stratified primary rays per pixel that follow every specular branch,
+/// so the mask is the same whatever the seed, the method and the noise of the run.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct LitMask {
+    pub width: u32,
+    pub height: u32,
+    lit: Vec<bool>,
+    /// Primary rays traced per pixel to decide it.
+    pub samples_per_pixel: u32,
+}
+
+/// What the run record says of the mask: how many pixels are lit and where the mask is kept.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LitMaskRecord {
+    /// Pixels that see a light (left out of δ unlit and the true error over unlit pixels).
+    pub lit_pixels: u64,
+    /// Pixels δ unlit is computed over.
+    pub unlit_pixels: u64,
+    /// Primary rays per pixel the mask was decided from.
+    pub samples_per_pixel: u32,
+    /// The EXR layer of `image.exr` that holds the mask (1 where a pixel is lit, 0 elsewhere).
+    pub exr_layer: String,
+    /// Wall seconds deciding the mask took, before the render started.
+    #[serde(default)]
+    pub seconds: f64,
+}
+
+/// The name of the mask's EXR layer.
+pub const LIT_LAYER: &str = "lit";
+
+impl LitMask {
+    /// A mask from one flag per pixel, row by row.
+    pub fn from_flags(width: u32, height: u32, lit: Vec<bool>, samples_per_pixel: u32) -> Self {
+        assert_eq!(lit.len(), width as usize * height as usize, "one flag per pixel");
+        LitMask { width, height, lit, samples_per_pixel }
+    }
+
+    /// A mask in which no pixel is lit: δ unlit is then δ over every pixel.
+    pub fn none(width: u32, height: u32) -> Self {
+        LitMask::from_flags(width, height, vec![false; width as usize * height as usize], 0)
+    }
+
+    /// True when pixel `i` sees a light.
+    #[inline]
+    pub fn is_lit(&self, i: usize) -> bool {
+        self.lit[i]
+    }
+
+    /// Pixels that see a light.
+    pub fn lit_count(&self) -> u64 {
+        self.lit.iter().filter(|&&l| l).count() as u64
+    }
+
+    /// Pixels of the image.
+    pub fn len(&self) -> usize {
+        self.lit.len()
+    }
+
+    /// True for an image without pixels.
+    pub fn is_empty(&self) -> bool {
+        self.lit.is_empty()
+    }
+
+    /// The summary kept in the run record; deciding the mask took `seconds`.
+    pub fn record(&self, seconds: f64) -> LitMaskRecord {
+        let lit = self.lit_count();
+        LitMaskRecord {
+            lit_pixels: lit,
+            unlit_pixels: self.len() as u64 - lit,
+            samples_per_pixel: self.samples_per_pixel,
+            exr_layer: LIT_LAYER.to_string(),
+            seconds,
+        }
+    }
+}
