@@ -161,6 +161,11 @@ impl Lights {
         }
     }
 
+    /// Every light, area lights (one per emitting triangle) first, then the `[[lights]]` entries in order.
+    pub fn all(&self) -> &[Light] {
+        &self.lights
+    }
+
     /// True when the scene has at least one light with power.
     pub fn any(&self) -> bool {
         self.by_power.is_some()

@@ -235,6 +235,11 @@ impl SceneGeometry {
         &self.by_index[index as usize].1
     }
 
+    /// The object a triangle (by the index it was added with) belongs to.
+    pub fn object_of_triangle(&self, index: u32) -> u32 {
+        self.by_index[index as usize].0
+    }
+
     /// The closest surface along the ray, if any.
     pub fn intersect(&self, ray: &Ray) -> Option<SurfaceHit> {
         let mut best_t = ray.t_max;

@@ -6,6 +6,7 @@ use crate::color::Rgb;
 use crate::geometry::{ray::offset_origin, Ray, SurfaceHit};
 use crate::integrator::Layer;
 use crate::material::Transport;
+use crate::ray_map::{events::scatter_event, Events, RecordedPath};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::spectrum::{join, PathSpectrum, PhaseSpectrum};
@@ -85,15 +86,32 @@ pub fn trace_light_path(
     stats: &mut ForwardStats,
     visit: &mut impl FnMut(&LightVertex),
 ) {
+    trace_light_path_logged(scene, max_depth, spectrum, index, sampler, stats, visit, None)
+}
+
+/// `trace_light_path` that also records the path's vertices and events into `log` (a ray map's path) when
+/// given one, its source being the light's emitter (`ray_map::emitter_of`); the image is the same either way.
+#[allow(clippy::too_many_arguments)]
+pub fn trace_light_path_logged(
+    scene: &Scene,
+    max_depth: u32,
+    spectrum: &PhaseSpectrum,
+    index: u64,
+    sampler: &mut Sampler,
+    stats: &mut ForwardStats,
+    visit: &mut impl FnMut(&LightVertex),
+    log: Option<&mut RecordedPath>,
+) {
     // An RGB phase runs the instantiation without spectral branches: RGB scenes keep their speed.
     if spectrum.wavelengths.is_some() {
-        light_path::<true>(scene, max_depth, spectrum, index, sampler, stats, visit)
+        light_path::<true>(scene, max_depth, spectrum, index, sampler, stats, visit, log)
     } else {
-        light_path::<false>(scene, max_depth, spectrum, index, sampler, stats, visit)
+        light_path::<false>(scene, max_depth, spectrum, index, sampler, stats, visit, log)
     }
 }
 
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn light_path<const S: bool>(
     scene: &Scene,
     max_depth: u32,
@@ -102,6 +120,7 @@ fn light_path<const S: bool>(
     sampler: &mut Sampler,
     stats: &mut ForwardStats,
     visit: &mut impl FnMut(&LightVertex),
+    mut log: Option<&mut RecordedPath>,
 ) {
     stats.light_paths += 1;
     let u_select = sampler.next_f32();
@@ -114,10 +133,22 @@ fn light_path<const S: bool>(
     let beta0 = beta.max_element();
     let mut all_specular = true;
     let mut m = 0u32;
+    if let Some(l) = log.as_deref_mut() {
+        l.source = crate::ray_map::emitter_of(scene, e.light);
+        l.begin(e.origin, e.normal, Events::EMISSION, beta);
+    }
     loop {
         stats.rays += 1;
-        let Some(hit) = scene.geometry.intersect(&ray) else { break };
+        let Some(hit) = scene.geometry.intersect(&ray) else {
+            if let Some(l) = log.as_deref_mut() {
+                l.escape(ray.direction, beta);
+            }
+            break;
+        };
         m += 1;
+        if let Some(l) = log.as_deref_mut() {
+            l.hit(&hit, beta);
+        }
         let material = path.material(scene.material(&hit), &mut beta);
         let wi = -ray.direction;
         if material.diffuse_albedo().is_some() {
@@ -141,16 +172,30 @@ fn light_path<const S: bool>(
             }
             break;
         }
-        let Some(s) = material.sample(&hit, wi, sampler.next_2d(), Transport::Importance) else { break };
+        let Some(s) = material.sample(&hit, wi, sampler.next_2d(), Transport::Importance) else {
+            if let Some(l) = log.as_deref_mut() {
+                l.event(Events::ABSORB);
+            }
+            break;
+        };
+        if let Some(l) = log.as_deref_mut() {
+            l.event(scatter_event(&material, &hit, wi, s.wi, s.delta));
+        }
         beta *= s.weight;
         if m >= 3 {
             let q = (beta.max_element() / beta0).min(1.0);
             if sampler.next_f32() >= q {
+                if let Some(l) = log.as_deref_mut() {
+                    l.event(Events::ABSORB);
+                }
                 break;
             }
             beta /= q;
         }
         ray = Ray::new(offset_origin(hit.p, hit.ng, s.wi), s.wi);
+    }
+    if let Some(l) = log {
+        l.finish(e.beta, path.wavelength_nm());
     }
 }
 

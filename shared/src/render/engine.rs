@@ -7,9 +7,11 @@ use crate::accumulation::{Accumulator, AuxLayout};
 use crate::integrator::path_tracer;
 use crate::pbpm::phase::{start_aux, Closing};
 use crate::pbpm::{Executor, GatherBuffer, PhaseBuffers, PhotonMap};
+use crate::ray_map::{PathKind, RecordedPath, Recorder};
 use crate::sampling::{replicate_of, Sampler};
 use crate::scene::Scene;
 use crate::spectrum::PhaseSpectrum;
+use std::sync::Arc;
 
 /// Runs phases over the whole image on the calling thread and keeps the running sums: one group of one thread
 /// whose map nobody shares, running the stages of `pbpm::phase`.
@@ -21,6 +23,8 @@ pub struct Engine<'s> {
     map: PhotonMap,
     gathered: GatherBuffer,
     totals: RayTotals,
+    /// Records the kept camera and light paths into a ray map.
+    recorder: Option<Arc<Recorder>>,
 }
 
 impl<'s> Engine<'s> {
@@ -43,7 +47,15 @@ impl<'s> Engine<'s> {
             map,
             gathered,
             totals: RayTotals::default(),
+            recorder: None,
         }
+    }
+
+    /// Records the paths `recorder` keeps (a ray map) from the next phase on; recording does not change the
+    /// image.
+    pub fn set_recorder(&mut self, recorder: Option<Arc<Recorder>>) {
+        self.buffers.set_recorder(recorder.clone());
+        self.recorder = recorder;
     }
 
     /// The running sums.
@@ -96,6 +108,7 @@ impl<'s> Engine<'s> {
         let closing = Closing { inv_n: 0.0, bands: aux.bands() };
         let mut aux_phase = vec![0.0; channels];
         let (replicate, _) = replicate_of(phase);
+        let mut log = RecordedPath::new(PathKind::Camera, 0, 0, 0);
         for pixel in 0..cam.pixel_count() {
             let (x, y) = ((pixel % cam.width as usize) as u32, (pixel / cam.width as usize) as u32);
             let mut s = Sampler::path(self.settings.seed, pixel as u64, phase);
@@ -106,7 +119,16 @@ impl<'s> Engine<'s> {
             } else {
                 PhaseSpectrum::RGB
             };
-            let (v, ghost) = path_tracer::trace(scene, self.settings.max_depth, &spectrum, ray, &mut s, &mut stats);
+            let kept = self.recorder.as_deref().filter(|r| r.keeps(PathKind::Camera, phase, pixel as u64));
+            if kept.is_some() {
+                (log.phase, log.item, log.source) = (phase as u32, pixel as u32, pixel as u32);
+            }
+            let max_depth = self.settings.max_depth;
+            let logged = kept.is_some().then_some(&mut log);
+            let (v, ghost) = path_tracer::trace_logged(scene, max_depth, &spectrum, ray, &mut s, &mut stats, logged);
+            if let Some(r) = kept {
+                r.record(&log);
+            }
             start_aux(&mut aux_phase, ghost_offset, ghost);
             // Nothing is gathered.
             let aux_sums = &mut self.sums.aux.values_mut()[pixel * channels..(pixel + 1) * channels];
@@ -128,7 +150,8 @@ impl<'s> Engine<'s> {
         let backward = self.buffers.camera_pass(exec, &phase, None, |_| number, &mut self.map);
         self.buffers.build_map(exec, &mut self.map);
         let n = self.settings.light_paths_per_phase(self.scene.camera.pixel_count());
-        let forward = phase.forward_pass(0..n, &self.map, &mut self.gathered);
+        let recorder = self.recorder.as_deref().map(|r| (r, number));
+        let forward = phase.forward_pass_recorded(0..n, &self.map, &mut self.gathered, recorder);
         self.buffers.close(exec, &phase, &mut self.gathered, n, &mut self.sums.pixels, &mut self.sums.aux);
         self.totals.backward_photons += backward.photons;
         self.totals.capped_light_paths += forward.capped;
