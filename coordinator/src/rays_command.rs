@@ -38,7 +38,8 @@ pub fn select(args: RaysSelectArgs) -> Result<()> {
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("cannot start the threads")?;
     let bar = if args.quiet { ProgressBar::hidden() } else { ProgressBar::new(0) };
     bar.set_style(
-        ProgressStyle::with_template("{bar:40} {bytes}/{total_bytes} {msg} [{elapsed_precise}]").expect("static template"),
+        ProgressStyle::with_template("{bar:40} {bytes}/{total_bytes} {msg} [{elapsed_precise}]")
+            .expect("static template"),
     );
     let start = std::time::Instant::now();
     let (header, selection) = pool.install(|| run_selection(&args.map, &args.expr, args.limit, &bar))?;

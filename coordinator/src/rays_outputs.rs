@@ -35,12 +35,16 @@ pub fn write_all(
     std::fs::write(&json, report).with_context(|| format!("cannot write {}", json.display()))?;
     written.push(("report", json));
     let table = out.join("report.txt");
-    std::fs::write(&table, report_table(header, sel, expr)).with_context(|| format!("cannot write {}", table.display()))?;
+    std::fs::write(&table, report_table(header, sel, expr))
+        .with_context(|| format!("cannot write {}", table.display()))?;
     written.push(("table", table));
     match Scene::load(Path::new(&header.scene)) {
         Ok(scene) => {
             if scene.hash != header.scene_hash {
-                eprintln!("note: {} changed since the map was recorded; the overlay uses its camera as it is now", header.scene);
+                eprintln!(
+                    "note: {} changed since the map was recorded; the overlay uses its camera as it is now",
+                    header.scene
+                );
             }
             let png = out.join("overlay.png");
             write_overlay(&png, &render_folder(map).join("preview.png"), &scene, &sel.paths, colour)?;
@@ -83,7 +87,9 @@ fn source_name(header: &MapHeader, path: &RecordedPath) -> String {
             let w = header.width.max(1);
             format!("pixel ({}, {})", path.source % w, path.source / w)
         }
-        PathKind::Light => header.emitters.get(path.source as usize).cloned().unwrap_or_else(|| format!("emitter {}", path.source)),
+        PathKind::Light => {
+            header.emitters.get(path.source as usize).cloned().unwrap_or_else(|| format!("emitter {}", path.source))
+        }
     }
 }
 
@@ -96,7 +102,8 @@ fn kind_name(k: PathKind) -> &'static str {
 
 /// The OBJ file: one object and one polyline per path, named by kind, phase and number.
 fn obj_text(header: &MapHeader, paths: &[RecordedPath]) -> String {
-    let mut s = format!("# ray map selection of {} ({} paths); open with the scene's meshes\n", header.scene, paths.len());
+    let mut s =
+        format!("# ray map selection of {} ({} paths); open with the scene's meshes\n", header.scene, paths.len());
     let mut next = 1usize;
     for (i, p) in paths.iter().enumerate() {
         let points = polyline(p);
@@ -178,7 +185,11 @@ fn report_table(header: &MapHeader, sel: &Selection, expr: &str) -> String {
             p.weight[1],
             p.weight[2]
         );
-        let _ = writeln!(s, "  {:>3}  {:>34}  {:<16} {:<22} throughput", "#", "point (or escape direction)", "object", "events");
+        let _ = writeln!(
+            s,
+            "  {:>3}  {:>34}  {:<16} {:<22} throughput",
+            "#", "point (or escape direction)", "object", "events"
+        );
         for (k, v) in p.vertices.iter().enumerate() {
             let [x, y, z] = v.point;
             let [r, g, b] = v.throughput();
@@ -228,7 +239,13 @@ fn natural_colour(p: &RecordedPath) -> [f32; 3] {
 
 /// Draws the paths projected through the scene's camera over the preview (black where there is none) and
 /// writes the PNG. Path colours add up where paths overlap and are scaled so that the busiest pixels saturate.
-fn write_overlay(png_path: &Path, preview: &Path, scene: &Scene, paths: &[RecordedPath], colour: PathColour) -> Result<()> {
+fn write_overlay(
+    png_path: &Path,
+    preview: &Path,
+    scene: &Scene,
+    paths: &[RecordedPath],
+    colour: PathColour,
+) -> Result<()> {
     let cam = &scene.camera;
     let (w, h) = (cam.width as usize, cam.height as usize);
     let background = read_rgb8(preview, w, h).unwrap_or_else(|e| {
