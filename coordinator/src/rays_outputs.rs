@@ -135,7 +135,6 @@ fn report_json(header: &MapHeader, sel: &Selection, expr: &str) -> serde_json::V
                         "primitive": (v.primitive != u32::MAX).then_some(v.primitive),
                         "normal": v.normal().to_array(),
                         "events": v.events.names(),
-                        "throughput": v.throughput(),
                     })
                 })
                 .collect();
@@ -185,17 +184,12 @@ fn report_table(header: &MapHeader, sel: &Selection, expr: &str) -> String {
             p.weight[1],
             p.weight[2]
         );
-        let _ = writeln!(
-            s,
-            "  {:>3}  {:>34}  {:<16} {:<22} throughput",
-            "#", "point (or escape direction)", "object", "events"
-        );
+        let _ = writeln!(s, "  {:>3}  {:>34}  {:<16} events", "#", "point (or escape direction)", "object");
         for (k, v) in p.vertices.iter().enumerate() {
             let [x, y, z] = v.point;
-            let [r, g, b] = v.throughput();
             let _ = writeln!(
                 s,
-                "  {k:>3}  {:>34}  {:<16} {:<22} [{r:.3e}, {g:.3e}, {b:.3e}]",
+                "  {k:>3}  {:>34}  {:<16} {}",
                 format!("({x:.5}, {y:.5}, {z:.5})"),
                 object_name(header, v.object),
                 v.events.names()
@@ -253,20 +247,42 @@ fn write_overlay(
         vec![0; w * h * 3]
     });
     let mut acc = vec![0f32; w * h * 3];
+    // Inside a sensor camera's lens the first-order projection means nothing: paths are drawn from their pixel
+    // (camera paths) through their vertices outside the lens's glass.
+    let sensor = matches!(cam.lens, photonfarm::camera::Lens::Sensor { .. });
+    let in_lens = |object: u16| {
+        sensor
+            && scene.objects.get(object as usize).is_some_and(|o| {
+                matches!(scene.materials[o.material as usize], photonfarm::material::Material::Dielectric { .. })
+            })
+    };
     for p in paths {
         let points = polyline(p);
         let natural = natural_colour(p);
-        let mut projected: Vec<Option<glam::Vec2>> = points.iter().map(|&q| cam.project(q)).collect();
-        if p.kind == PathKind::Camera {
-            // The camera path starts at its pixel, which a sensor camera's projection cannot reach.
-            let px = glam::Vec2::new((p.source % cam.width) as f32 + 0.5, (p.source / cam.width) as f32 + 0.5);
-            projected[0] = Some(px);
+        let mut drawn: Vec<(glam::Vec2, usize)> = Vec::with_capacity(points.len());
+        for (k, (q, v)) in points.iter().zip(&p.vertices).enumerate() {
+            let projected = if k == 0 && p.kind == PathKind::Camera {
+                // The camera path starts at its pixel, which a sensor camera's projection cannot reach.
+                Some(glam::Vec2::new((p.source % cam.width) as f32 + 0.5, (p.source / cam.width) as f32 + 0.5))
+            } else if in_lens(v.object) {
+                continue;
+            } else {
+                cam.project(*q)
+            };
+            match projected {
+                Some(x) => drawn.push((x, k)),
+                // A point behind the camera breaks the polyline.
+                None => drawn.push((glam::Vec2::NAN, k)),
+            }
         }
-        for (k, pair) in projected.windows(2).enumerate() {
-            let (Some(a), Some(b)) = (pair[0], pair[1]) else { continue };
+        for pair in drawn.windows(2) {
+            let ((a, _), (b, k)) = (pair[0], pair[1]);
+            if a.is_nan() || b.is_nan() {
+                continue;
+            }
             let c = match colour {
                 PathColour::Natural => natural,
-                PathColour::Event => event_colour(p.vertices[k + 1].events),
+                PathColour::Event => event_colour(p.vertices[k].events),
             };
             draw_line(&mut acc, w, h, a, b, c);
         }

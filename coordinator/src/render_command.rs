@@ -47,7 +47,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let bar = progress_bar(args.quiet);
 
     let mut notes = Vec::new();
-    let recorder = start_ray_map(&args, &scene, &dir)?;
+    let recorder = start_ray_map(&args, &scene, &settings, &dir)?;
     let (mut engine, layout) =
         start_engine(&args, &scene, settings, &dir, checkpoint.as_ref(), recorder.clone(), &mut notes)?;
     let mut live = LiveSession::start(live_options(&args, &scene, &layout, &dir, engine.as_ref(), &interrupted)?)?;
@@ -307,9 +307,22 @@ fn progress_bar(quiet: bool) -> ProgressBar {
 
 /// The ray map recorder `--ray-map` asks for, writing into raymap/ of the output folder; refused for the
 /// methods whose paths it cannot reach yet.
-fn start_ray_map(args: &RenderArgs, scene: &Scene, dir: &Path) -> Result<Option<Arc<Recorder>>> {
+fn start_ray_map(
+    args: &RenderArgs,
+    scene: &Scene,
+    settings: &RenderSettings,
+    dir: &Path,
+) -> Result<Option<Arc<Recorder>>> {
     if !args.ray_map {
         return Ok(None);
+    }
+    // A path has at most max_depth segments and one origin.
+    if settings.max_depth as usize >= ray_map::format::MAX_VERTICES {
+        bail!(
+            "--ray-map stores paths of fewer than {} segments; max_depth is {}",
+            ray_map::format::MAX_VERTICES,
+            settings.max_depth
+        );
     }
     if args.method != Method::Pbpm && args.method != Method::Path {
         bail!(

@@ -6,7 +6,6 @@ mod common;
 
 use common::{scene, settings};
 use photonfarm::ray_map::format::{MapHeader, VERSION};
-use photonfarm::ray_map::path::NO_OBJECT;
 use photonfarm::ray_map::reader::{read_all, StreamReader};
 use photonfarm::ray_map::select::{parse, Expr};
 use photonfarm::ray_map::writer::stream_file;
@@ -113,30 +112,27 @@ fn in_the_mirror_scene_every_path_reaching_the_mirrored_spot_is_selected_by_a_re
     assert!(reaching > 100, "only {reaching} light paths reached the mirrored spot");
 }
 
-/// A small map of fabricated paths over objects 0..4 and emitters 0..2, for the format tests.
+/// A small map of fabricated paths over objects 0..4 and emitters 0..2, for the format tests: built as the
+/// integrators build them (`begin`, then vertices), so that every field survives the map.
 fn fabricated(n: usize) -> Vec<RecordedPath> {
     (0..n)
         .map(|i| {
             let kind = if i % 3 == 0 { PathKind::Light } else { PathKind::Camera };
-            let mut p = RecordedPath::new(
-                kind,
-                (i / 7) as u32 + 1,
-                i as u32,
-                (i % 64) as u32 % if kind == PathKind::Light { 2 } else { 64 },
-            );
-            let vertices = 1 + i % 6;
-            p.vertices = (0..vertices)
-                .map(|k| Vertex {
+            let source = if kind == PathKind::Light { (i % 2) as u32 } else { (i % 64) as u32 };
+            let item = if kind == PathKind::Light { i as u32 } else { source };
+            let mut p = RecordedPath::new(kind, (i / 7) as u32 + 1, item, source);
+            p.begin(glam::Vec3::new(i as f32 * 0.1, 0.5, -1.0), glam::Vec3::new(0.0, 1.0, 0.0));
+            for k in 1..1 + i % 6 {
+                p.vertices.push(Vertex {
                     point: [i as f32 * 0.1, k as f32, -(k as f32) * 0.5],
                     normal: (i * 31 + k) as u32,
-                    object: if k == 0 { NO_OBJECT } else { ((i + k) % 4) as u16 },
+                    object: ((i + k) % 4) as u16,
                     primitive: (i * k) as u32,
                     events: Events(((i * 7 + k * 13) % 256) as u8),
-                    throughput: (i * 1000 + k) as u32,
-                })
-                .collect();
-            p.weight = [i as f32, 0.5, 1e-3];
-            p.wavelength_nm = if i % 5 == 0 { 400.0 + i as f32 } else { 0.0 };
+                });
+            }
+            let wavelength = if i % 5 == 0 { Some(400.0 + i as f32) } else { None };
+            p.finish(glam::Vec3::new(i as f32, 0.5, 1e-3), wavelength);
             p
         })
         .collect()

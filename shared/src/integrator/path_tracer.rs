@@ -99,19 +99,19 @@ fn trace_in<const S: bool>(
     let mut diffuse_vertices = 0u32;
     let mut segments = 0u32;
     if let Some(l) = log.as_deref_mut() {
-        l.begin(ray.origin, Vec3::ZERO, Events::SENSOR, beta);
+        l.begin(ray.origin, Vec3::ZERO);
     }
     loop {
         stats.rays += 1;
         let Some(hit) = scene.geometry.intersect(&ray) else {
             if let Some(l) = log.as_deref_mut() {
-                l.escape(ray.direction, beta);
+                l.escape(ray.direction);
             }
             break;
         };
         segments += 1;
         if let Some(l) = log.as_deref_mut() {
-            l.hit(&hit, beta);
+            l.hit(&hit);
         }
         let le = scene.lights.emitted(&hit, ray.direction);
         if le != Rgb::ZERO {

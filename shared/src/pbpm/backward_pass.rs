@@ -113,20 +113,20 @@ fn camera_path<const S: bool>(
     // D_k's direct light, weighted against its next-event estimate.
     let mut from_diffuse: Option<(Vec3, f32)> = None;
     if let Some(l) = log.as_deref_mut() {
-        l.begin(ray.origin, Vec3::ZERO, Events::SENSOR, beta);
+        l.begin(ray.origin, Vec3::ZERO);
     }
     loop {
         stats.rays += 1;
         let Some(hit) = scene.geometry.intersect(&ray) else {
             if let Some(l) = log.as_deref_mut() {
-                l.escape(ray.direction, beta);
+                l.escape(ray.direction);
             }
             break;
         };
         segments += 1;
         path_length += hit.t;
         if let Some(l) = log.as_deref_mut() {
-            l.hit(&hit, beta);
+            l.hit(&hit);
         }
         let le = scene.lights.emitted(&hit, ray.direction);
         if le != Rgb::ZERO {

@@ -135,19 +135,19 @@ fn light_path<const S: bool>(
     let mut m = 0u32;
     if let Some(l) = log.as_deref_mut() {
         l.source = crate::ray_map::emitter_of(scene, e.light);
-        l.begin(e.origin, e.normal, Events::EMISSION, beta);
+        l.begin(e.origin, e.normal);
     }
     loop {
         stats.rays += 1;
         let Some(hit) = scene.geometry.intersect(&ray) else {
             if let Some(l) = log.as_deref_mut() {
-                l.escape(ray.direction, beta);
+                l.escape(ray.direction);
             }
             break;
         };
         m += 1;
         if let Some(l) = log.as_deref_mut() {
-            l.hit(&hit, beta);
+            l.hit(&hit);
         }
         let material = path.material(scene.material(&hit), &mut beta);
         let wi = -ray.direction;

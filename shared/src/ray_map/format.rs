@@ -3,10 +3,12 @@
 //! A stream file is `MAGIC`, the version (u32), the header's length (u32) and the header (JSON, `MapHeader`),
 //! then portions. A portion is `PORTION_MAGIC`, its compressed length, raw length, path count and segment
 //! count (u32 each) and one zstd frame with a content checksum. The raw bytes are the paths one after the other:
-//! a path header of `PATH_BYTES` and `VERTEX_BYTES` per vertex, little-endian throughout.
+//! a path header (`CAMERA_PATH_BYTES` or `LIGHT_PATH_BYTES`, holding the origin) and `VERTEX_BYTES` per
+//! segment, little-endian throughout.
 
 use super::events::Events;
-use super::path::{PathKind, RecordedPath, Vertex};
+use super::path::{PathKind, RecordedPath, Vertex, NO_OBJECT};
+use super::quantise::{decode_rgb, encode_rgb};
 use serde::{Deserialize, Serialize};
 
 /// The first bytes of a stream file.
@@ -17,14 +19,18 @@ pub const VERSION: u32 = 1;
 pub const PORTION_MAGIC: &[u8; 4] = b"PRTN";
 /// Bytes before a portion's compressed frame.
 pub const PORTION_HEADER_BYTES: usize = 20;
-/// Bytes of a path's header: kind (u8), vertex count (u16), source, phase, item (u32 each), wavelength (f32),
-/// weight (3 × f32).
-pub const PATH_BYTES: usize = 1 + 2 + 4 * 3 + 4 + 12;
-/// Bytes of a vertex: point (3 × f32), normal (u32), object (u16), primitive (u32), events (u8), throughput
-/// (u32).
-pub const VERTEX_BYTES: usize = 12 + 4 + 2 + 4 + 1 + 4;
-/// Most vertices a path may have (its count is a u16).
-pub const MAX_VERTICES: usize = u16::MAX as usize;
+/// Bytes of a camera path's header: vertex count and kind (u16, the kind in the top bit), phase, item (u32
+/// each), wavelength (f32), weight (RGB9E5, u32), origin (3 × f32).
+pub const CAMERA_PATH_BYTES: usize = 2 + 4 + 4 + 4 + 4 + 12;
+/// Bytes of a light path's header: a camera path's, then its emitter (u32) and the origin's normal (u32).
+pub const LIGHT_PATH_BYTES: usize = CAMERA_PATH_BYTES + 8;
+/// Bytes of every vertex after the origin (one per segment): point (3 × f32), normal (u32), object (u16),
+/// primitive (u32), events (u8).
+pub const VERTEX_BYTES: usize = 12 + 4 + 2 + 4 + 1;
+/// Most vertices a path may have (its count has 15 bits).
+pub const MAX_VERTICES: usize = (1 << 15) - 1;
+/// The kind's bit in the vertex count.
+const LIGHT_BIT: u16 = 1 << 15;
 /// The largest header or raw portion a reader accepts, so that a corrupt length cannot ask for all memory.
 pub const MAX_BLOCK_BYTES: usize = 1 << 30;
 
@@ -51,18 +57,25 @@ pub struct MapHeader {
     pub stream: u32,
 }
 
-/// Appends `path`'s bytes to `out`. The caller keeps vertex counts within `MAX_VERTICES`.
+/// Appends `path`'s bytes to `out`: its origin as `RecordedPath::begin` made it (the rest of vertex 0 is
+/// implied by the kind), at most `MAX_VERTICES` vertices. A path without vertices is not written.
 pub fn encode_path(path: &RecordedPath, out: &mut Vec<u8>) {
-    out.push(path.kind as u8);
-    out.extend_from_slice(&(path.vertices.len().min(MAX_VERTICES) as u16).to_le_bytes());
-    for v in [path.source, path.phase, path.item] {
-        out.extend_from_slice(&v.to_le_bytes());
-    }
+    let Some(origin) = path.vertices.first() else { return };
+    let count = path.vertices.len().min(MAX_VERTICES) as u16;
+    let light = path.kind == PathKind::Light;
+    out.extend_from_slice(&(count | if light { LIGHT_BIT } else { 0 }).to_le_bytes());
+    out.extend_from_slice(&path.phase.to_le_bytes());
+    out.extend_from_slice(&path.item.to_le_bytes());
     out.extend_from_slice(&path.wavelength_nm.to_le_bytes());
-    for w in path.weight {
-        out.extend_from_slice(&w.to_le_bytes());
+    out.extend_from_slice(&encode_rgb(path.weight).to_le_bytes());
+    for c in origin.point {
+        out.extend_from_slice(&c.to_le_bytes());
     }
-    for v in path.vertices.iter().take(MAX_VERTICES) {
+    if light {
+        out.extend_from_slice(&path.source.to_le_bytes());
+        out.extend_from_slice(&origin.normal.to_le_bytes());
+    }
+    for v in &path.vertices[1..count as usize] {
         for c in v.point {
             out.extend_from_slice(&c.to_le_bytes());
         }
@@ -70,7 +83,6 @@ pub fn encode_path(path: &RecordedPath, out: &mut Vec<u8>) {
         out.extend_from_slice(&v.object.to_le_bytes());
         out.extend_from_slice(&v.primitive.to_le_bytes());
         out.push(v.events.0);
-        out.extend_from_slice(&v.throughput.to_le_bytes());
     }
 }
 
@@ -98,29 +110,34 @@ impl<'a> Bytes<'a> {
 /// Decodes a portion's raw bytes into `paths` paths; the error says what is wrong.
 pub fn decode_paths(raw: &[u8], paths: usize) -> Result<Vec<RecordedPath>, String> {
     let mut b = Bytes { data: raw, at: 0 };
-    let mut out = Vec::with_capacity(paths.min(raw.len() / PATH_BYTES + 1));
+    let mut out = Vec::with_capacity(paths.min(raw.len() / CAMERA_PATH_BYTES + 1));
     for _ in 0..paths {
-        let kind = match b.take::<1>("kind")?[0] {
-            0 => PathKind::Camera,
-            1 => PathKind::Light,
-            k => return Err(format!("a path has kind {k} at byte {} (0 camera, 1 light)", b.at - 1)),
-        };
-        let count = u16::from_le_bytes(b.take::<2>("vertex count")?) as usize;
-        let (source, phase, item) = (b.u32("source")?, b.u32("phase")?, b.u32("item")?);
+        let tagged = u16::from_le_bytes(b.take::<2>("vertex count")?);
+        let count = (tagged & !LIGHT_BIT) as usize;
+        let kind = if tagged & LIGHT_BIT != 0 { PathKind::Light } else { PathKind::Camera };
+        if count == 0 {
+            return Err(format!("a path without vertices at byte {}", b.at - 2));
+        }
+        let (phase, item) = (b.u32("phase")?, b.u32("item")?);
         let wavelength_nm = b.f32("wavelength")?;
-        let weight = [b.f32("weight")?, b.f32("weight")?, b.f32("weight")?];
-        if raw.len() - b.at < count * VERTEX_BYTES {
+        let weight = decode_rgb(b.u32("weight")?);
+        let point = [b.f32("origin")?, b.f32("origin")?, b.f32("origin")?];
+        let (source, normal, events) = match kind {
+            PathKind::Camera => (item, 0, Events::SENSOR),
+            PathKind::Light => (b.u32("emitter")?, b.u32("origin normal")?, Events::EMISSION),
+        };
+        if raw.len() - b.at < (count - 1) * VERTEX_BYTES {
             return Err(format!("a path of {count} vertices ends after {} bytes", raw.len() - b.at));
         }
         let mut vertices = Vec::with_capacity(count);
-        for _ in 0..count {
+        vertices.push(Vertex { point, normal, object: NO_OBJECT, primitive: u32::MAX, events });
+        for _ in 1..count {
             let point = [b.f32("point")?, b.f32("point")?, b.f32("point")?];
             let normal = b.u32("normal")?;
             let object = u16::from_le_bytes(b.take::<2>("object")?);
             let primitive = b.u32("primitive")?;
             let events = Events(b.take::<1>("events")?[0]);
-            let throughput = b.u32("throughput")?;
-            vertices.push(Vertex { point, normal, object, primitive, events, throughput });
+            vertices.push(Vertex { point, normal, object, primitive, events });
         }
         out.push(RecordedPath { kind, source, phase, item, wavelength_nm, weight, vertices });
     }
@@ -160,7 +177,7 @@ impl PortionHeader {
         if h.raw as usize > MAX_BLOCK_BYTES || h.compressed as usize > MAX_BLOCK_BYTES {
             return Err(format!("a portion claims {} bytes ({} compressed), beyond any portion", h.raw, h.compressed));
         }
-        if (h.paths as usize) * PATH_BYTES + (h.segments as usize) * VERTEX_BYTES > h.raw as usize {
+        if (h.paths as usize) * CAMERA_PATH_BYTES + (h.segments as usize) * VERTEX_BYTES > h.raw as usize {
             return Err(format!("{} paths of {} segments cannot fit in {} bytes", h.paths, h.segments, h.raw));
         }
         Ok(h)

@@ -1,5 +1,8 @@
 //! A recorded path: its header (camera or light path, its pixel or emitter, phase, wavelength, weight) and its
 //! vertices, quantised as the map stores them so that what a render records is exactly what a reader gets back.
+//! Vertex 0 is the origin: a camera path's on the sensor (events SENSOR, no normal), a light path's on its
+//! light (events EMISSION, the light's surface normal); neither is on an object, so the map stores only its
+//! point and, for a light path, its normal.
 //! The integrators fill one through `Option<&mut RecordedPath>`, which costs a branch per vertex when off.
 
 use super::events::Events;
@@ -30,8 +33,6 @@ pub struct Vertex {
     /// The triangle index, `u32::MAX` for analytic surfaces and off surfaces.
     pub primitive: u32,
     pub events: Events,
-    /// The path's throughput arriving here (radiance weight for a camera path, flux for a light path), RGB9E5.
-    pub throughput: u32,
 }
 
 impl Vertex {
@@ -43,11 +44,6 @@ impl Vertex {
     /// The decoded normal.
     pub fn normal(&self) -> Vec3 {
         decode_normal(self.normal)
-    }
-
-    /// The decoded throughput.
-    pub fn throughput(&self) -> [f32; 3] {
-        decode_rgb(self.throughput)
     }
 }
 
@@ -65,6 +61,7 @@ pub struct RecordedPath {
     /// The wavelength the path was carried at once it met dispersion; 0 for an RGB path.
     pub wavelength_nm: f32,
     /// A camera path's contribution to its pixel in its phase (before gathered light); a light path's flux.
+    /// Quantised to RGB9E5 as the map stores it.
     pub weight: [f32; 3],
     pub vertices: Vec<Vertex>,
 }
@@ -75,18 +72,22 @@ impl RecordedPath {
         RecordedPath { kind, source, phase, item, wavelength_nm: 0.0, weight: [0.0; 3], vertices: Vec::new() }
     }
 
-    /// Starts the path again at `origin`, with the surface normal there (zero off surfaces).
+    /// Starts the path again at `origin`, with the light's surface normal there for a light path.
     #[inline]
-    pub fn begin(&mut self, origin: Vec3, normal: Vec3, events: Events, throughput: Rgb) {
+    pub fn begin(&mut self, origin: Vec3, normal: Vec3) {
         self.vertices.clear();
-        self.push(origin, normal, NO_OBJECT, u32::MAX, events, throughput);
+        let (normal, events) = match self.kind {
+            PathKind::Camera => (Vec3::ZERO, Events::SENSOR),
+            PathKind::Light => (normal, Events::EMISSION),
+        };
+        self.push(origin, normal, NO_OBJECT, u32::MAX, events);
     }
 
-    /// Adds the vertex where the path met `hit`, with the throughput it arrives with.
+    /// Adds the vertex where the path met `hit`.
     #[inline]
-    pub fn hit(&mut self, hit: &SurfaceHit, throughput: Rgb) {
+    pub fn hit(&mut self, hit: &SurfaceHit) {
         // Scenes with more objects than a u16 holds are refused before recording starts.
-        self.push(hit.p, hit.ng, hit.object as u16, hit.triangle, Events::default(), throughput);
+        self.push(hit.p, hit.ng, hit.object as u16, hit.triangle, Events::default());
     }
 
     /// Adds events to the last vertex.
@@ -99,14 +100,14 @@ impl RecordedPath {
 
     /// Adds the vertex of a path that left the scene in `direction`.
     #[inline]
-    pub fn escape(&mut self, direction: Vec3, throughput: Rgb) {
-        self.push(direction, Vec3::ZERO, NO_OBJECT, u32::MAX, Events::ESCAPED, throughput);
+    pub fn escape(&mut self, direction: Vec3) {
+        self.push(direction, Vec3::ZERO, NO_OBJECT, u32::MAX, Events::ESCAPED);
     }
 
     /// Ends the path with its weight and wavelength.
     #[inline]
     pub fn finish(&mut self, weight: Rgb, wavelength_nm: Option<f32>) {
-        self.weight = [weight.x, weight.y, weight.z];
+        self.weight = decode_rgb(encode_rgb([weight.x, weight.y, weight.z]));
         self.wavelength_nm = wavelength_nm.unwrap_or(0.0);
     }
 
@@ -115,14 +116,7 @@ impl RecordedPath {
         self.vertices.len().saturating_sub(1)
     }
 
-    fn push(&mut self, p: Vec3, n: Vec3, object: u16, primitive: u32, events: Events, throughput: Rgb) {
-        self.vertices.push(Vertex {
-            point: p.to_array(),
-            normal: encode_normal(n),
-            object,
-            primitive,
-            events,
-            throughput: encode_rgb([throughput.x, throughput.y, throughput.z]),
-        });
+    fn push(&mut self, p: Vec3, n: Vec3, object: u16, primitive: u32, events: Events) {
+        self.vertices.push(Vertex { point: p.to_array(), normal: encode_normal(n), object, primitive, events });
     }
 }
