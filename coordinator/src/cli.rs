@@ -36,6 +36,21 @@ pub enum RaysCommand {
     /// Select the recorded paths that satisfy an expression of optical events, and write an overlay PNG over
     /// the render's preview, the paths as OBJ polylines, and a report (JSON and a table).
     Select(RaysSelectArgs),
+    /// For a scene with a lens in front of a sensor: rank the pairs of lens surfaces at which ghost camera
+    /// paths took their first two reflections, by their share of the recorded ghost light, with footprints.
+    Ghosts(RaysGhostsArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct RaysGhostsArgs {
+    /// The map: a render's output folder, its raymap/ folder, or one stream file.
+    pub map: PathBuf,
+    /// How many pairs to list (with a footprint PNG each).
+    #[arg(long, default_value_t = 10, value_name = "N")]
+    pub top: usize,
+    /// Output folder (default: ghosts/ next to the map's raymap/ folder).
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
 }
 
 /// How `rays select` colours the paths it draws.
