@@ -74,3 +74,49 @@ fn ray_maps_are_refused_for_methods_the_recorder_does_not_reach_and_for_bad_frac
     let o = rays(&["select", Path::new(&dir).join("nothing").to_str().unwrap(), "--where", "camera"]);
     assert!(!o.status.success(), "{}", text(&o));
 }
+
+/// The shipped lens scene at 72 × 48 pixels in `dir`, its last surface (s10) coated against reflection when
+/// `coat_s10`.
+fn lens_at(dir: &Path, coat_s10: bool) -> std::path::PathBuf {
+    let mut text = std::fs::read_to_string(repo_root().join("scenes/lens.toml")).unwrap();
+    assert!(text.contains("width = 360\n") && text.contains("[materials.n1717_to_air]\ntype = \"dielectric\"\n"));
+    text = text.replace("width = 360\n", "width = 72\n").replace("height = 240\n", "height = 48\n");
+    if coat_s10 {
+        text = text.replace(
+            "[materials.n1717_to_air]\ntype = \"dielectric\"\n",
+            "[materials.n1717_to_air]\ntype = \"dielectric\"\nanti_reflection = true\n",
+        );
+    }
+    let path = dir.join(if coat_s10 { "lens-coated.toml" } else { "lens.toml" });
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// `rays ghosts` on a path-traced lens whose every path was recorded: its report.
+fn ghosts(dir: &Path, coat_s10: bool) -> serde_json::Value {
+    let scene = lens_at(dir, coat_s10);
+    let run = dir.join(if coat_s10 { "coated" } else { "uncoated" });
+    let o = render_output(&scene, &run, &["--method", "path", "--phases", "3", "--ray-map", "--ray-map-fraction", "1"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let o = rays(&["ghosts", run.to_str().unwrap(), "--top", "1000"]);
+    assert!(o.status.success(), "{}", text(&o));
+    serde_json::from_str(&std::fs::read_to_string(run.join("ghosts/ghosts.json")).unwrap()).unwrap()
+}
+
+#[test]
+fn ghost_pairs_carry_the_ghost_layers_light_and_a_coated_surface_is_in_none() {
+    let dir = scratch_dir("ray-maps-ghosts");
+    let uncoated = ghosts(&dir, false);
+    // Every path recorded: the pairs' light is the ghost layer's, up to f32 sums.
+    let recorded = uncoated["ghost_light"].as_f64().unwrap();
+    let layer = uncoated["ghost_layer"]["total"].as_f64().unwrap();
+    assert!(layer > 0.0 && (recorded / layer - 1.0).abs() < 1e-3, "pairs {recorded}, ghost layer {layer}");
+    let pairs = uncoated["pairs"].as_array().unwrap();
+    let shares: f64 = pairs.iter().map(|p| p["share"].as_f64().unwrap()).sum();
+    assert!((shares - 1.0).abs() < 1e-6, "shares add up to {shares}");
+    let has_s10 = |p: &serde_json::Value| p["first"] == "s10" || p["second"] == "s10";
+    assert!(pairs.iter().any(has_s10), "no pair involves s10 on the uncoated lens");
+    let coated = ghosts(&dir, true);
+    let pairs = coated["pairs"].as_array().unwrap();
+    assert!(!pairs.is_empty() && !pairs.iter().any(has_s10), "{coated}");
+}

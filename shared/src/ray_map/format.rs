@@ -8,7 +8,6 @@
 
 use super::events::Events;
 use super::path::{PathKind, RecordedPath, Vertex, NO_OBJECT};
-use super::quantise::{decode_rgb, encode_rgb};
 use serde::{Deserialize, Serialize};
 
 /// The first bytes of a stream file.
@@ -20,8 +19,9 @@ pub const PORTION_MAGIC: &[u8; 4] = b"PRTN";
 /// Bytes before a portion's compressed frame.
 pub const PORTION_HEADER_BYTES: usize = 20;
 /// Bytes of a camera path's header: vertex count and kind (u16, the kind in the top bit), phase, item (u32
-/// each), wavelength (f32), weight (RGB9E5, u32), origin (3 × f32).
-pub const CAMERA_PATH_BYTES: usize = 2 + 4 + 4 + 4 + 4 + 12;
+/// each), wavelength (f32), weight (3 × f32: a spectral path's colour may have a negative channel), origin
+/// (3 × f32).
+pub const CAMERA_PATH_BYTES: usize = 2 + 4 + 4 + 4 + 12 + 12;
 /// Bytes of a light path's header: a camera path's, then its emitter (u32) and the origin's normal (u32).
 pub const LIGHT_PATH_BYTES: usize = CAMERA_PATH_BYTES + 8;
 /// Bytes of every vertex after the origin (one per segment): point (3 × f32), normal (u32), object (u16),
@@ -67,7 +67,9 @@ pub fn encode_path(path: &RecordedPath, out: &mut Vec<u8>) {
     out.extend_from_slice(&path.phase.to_le_bytes());
     out.extend_from_slice(&path.item.to_le_bytes());
     out.extend_from_slice(&path.wavelength_nm.to_le_bytes());
-    out.extend_from_slice(&encode_rgb(path.weight).to_le_bytes());
+    for w in path.weight {
+        out.extend_from_slice(&w.to_le_bytes());
+    }
     for c in origin.point {
         out.extend_from_slice(&c.to_le_bytes());
     }
@@ -120,7 +122,7 @@ pub fn decode_paths(raw: &[u8], paths: usize) -> Result<Vec<RecordedPath>, Strin
         }
         let (phase, item) = (b.u32("phase")?, b.u32("item")?);
         let wavelength_nm = b.f32("wavelength")?;
-        let weight = decode_rgb(b.u32("weight")?);
+        let weight = [b.f32("weight")?, b.f32("weight")?, b.f32("weight")?];
         let point = [b.f32("origin")?, b.f32("origin")?, b.f32("origin")?];
         let (source, normal, events) = match kind {
             PathKind::Camera => (item, 0, Events::SENSOR),

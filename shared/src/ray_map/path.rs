@@ -6,7 +6,7 @@
 //! The integrators fill one through `Option<&mut RecordedPath>`, which costs a branch per vertex when off.
 
 use super::events::Events;
-use super::quantise::{decode_normal, decode_rgb, encode_normal, encode_rgb};
+use super::quantise::{decode_normal, encode_normal};
 use crate::color::Rgb;
 use crate::geometry::SurfaceHit;
 use glam::Vec3;
@@ -61,7 +61,6 @@ pub struct RecordedPath {
     /// The wavelength the path was carried at once it met dispersion; 0 for an RGB path.
     pub wavelength_nm: f32,
     /// A camera path's contribution to its pixel in its phase (before gathered light); a light path's flux.
-    /// Quantised to RGB9E5 as the map stores it.
     pub weight: [f32; 3],
     pub vertices: Vec<Vertex>,
 }
@@ -107,7 +106,7 @@ impl RecordedPath {
     /// Ends the path with its weight and wavelength.
     #[inline]
     pub fn finish(&mut self, weight: Rgb, wavelength_nm: Option<f32>) {
-        self.weight = decode_rgb(encode_rgb([weight.x, weight.y, weight.z]));
+        self.weight = weight.to_array();
         self.wavelength_nm = wavelength_nm.unwrap_or(0.0);
     }
 
