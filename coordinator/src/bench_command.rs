@@ -244,6 +244,8 @@ fn read_run(path: &Path, key: RunKey, plan: Planned) -> Result<Run> {
         bytes_per_pixel: f(&r["bytes_per_pixel"]),
         idle: if key.method.is_distributed() { None } else { idle },
         reference_delta_unlit: r["true_error"]["reference_delta_unlit"].as_f64(),
+        mean_difference_unlit: r["true_error"]["mean_difference_unlit"].as_f64(),
+        mean_difference_all: r["true_error"]["mean_difference_all"].as_f64(),
     };
     Ok(Run { row, series, snapshot_bytes })
 }
@@ -371,6 +373,11 @@ fn pct(x: Option<f64>) -> String {
     x.map(|v| format!("{:.2}%", 100.0 * v)).unwrap_or_else(|| "–".into())
 }
 
+/// A signed percentage with the precision a bias of a few hundredths of a percent needs.
+fn signed_pct(x: Option<f64>) -> String {
+    x.map(|v| format!("{:+.3}%", 100.0 * v)).unwrap_or_else(|| "–".into())
+}
+
 fn mean(values: impl Iterator<Item = f64>) -> f64 {
     let v: Vec<f64> = values.collect();
     v.iter().sum::<f64>() / v.len().max(1) as f64
@@ -403,8 +410,8 @@ fn report(runs: &[Run], args: &BenchArgs, threads: &[usize]) -> String {
          directly.\n",
         args.repeats, args.time, threads[0], threads[0]
     );
-    let _ = writeln!(s, "| scene | method | threads | processes × groups × threads | forward rays | backward rays | tracing speedup | δ unlit / all | true error unlit / all | peak memory | bytes/pixel | idle | maps per light path |");
-    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(s, "| scene | method | threads | processes × groups × threads | forward rays | backward rays | tracing speedup | δ unlit / all | true error unlit / all | mean against the reference unlit / all | peak memory | bytes/pixel | idle | maps per light path |");
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     let mut keys: Vec<(&str, Method, usize)> = Vec::new();
     for r in runs {
         let k = (r.row.scene.as_str(), r.row.method, r.row.threads);
@@ -430,7 +437,7 @@ fn report(runs: &[Run], args: &BenchArgs, threads: &[usize]) -> String {
         let g = &group[0].row;
         let _ = writeln!(
             s,
-            "| {scene} | {method} | {t} | {}×{}×{} | {:.2} M | {:.2} M | {:.2}× | {:.2}%{range} / {:.2}% | {} / {} | {} | {:.0} | {} | {} |",
+            "| {scene} | {method} | {t} | {}×{}×{} | {:.2} M | {:.2} M | {:.2}× | {:.2}%{range} / {:.2}% | {} / {} | {} / {} | {} | {:.0} | {} | {} |",
             g.processes,
             g.groups / g.processes.max(1),
             g.threads_per_group,
@@ -441,6 +448,8 @@ fn report(runs: &[Run], args: &BenchArgs, threads: &[usize]) -> String {
             100.0 * mean(group.iter().map(|r| r.row.delta_all)),
             pct(opt_mean(group.iter().map(|r| r.row.true_unlit))),
             pct(opt_mean(group.iter().map(|r| r.row.true_all))),
+            signed_pct(opt_mean(group.iter().map(|r| r.row.mean_difference_unlit))),
+            signed_pct(opt_mean(group.iter().map(|r| r.row.mean_difference_all))),
             opt_mean(group.iter().map(|r| r.row.peak_memory_bytes.map(|b| b as f64)))
                 .map(|b| format!("{:.0} MB", b / 1e6))
                 .unwrap_or_else(|| "–".into()),
@@ -630,6 +639,8 @@ mod tests {
             bytes_per_pixel: 0.0,
             idle: None,
             reference_delta_unlit: None,
+            mean_difference_unlit: None,
+            mean_difference_all: None,
         };
         Run { row, series: Vec::new(), snapshot_bytes: None }
     }

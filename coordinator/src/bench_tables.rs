@@ -47,6 +47,11 @@ pub struct ResultsRow {
     /// The reference's own δ over unlit pixels: it adds in quadrature to every true error of the run.
     #[serde(default)]
     pub reference_delta_unlit: Option<f64>,
+    /// The image's mean relative to the reference's, minus one, over unlit and over all pixels: the bias.
+    #[serde(default)]
+    pub mean_difference_unlit: Option<f64>,
+    #[serde(default)]
+    pub mean_difference_all: Option<f64>,
 }
 
 /// One step of a run (a phase, a round or a merged snapshot): its error against time and rays.
@@ -73,7 +78,8 @@ pub trait TableRow: DeserializeOwned {
 }
 
 impl TableRow for ResultsRow {
-    const OPTIONAL_COLUMNS: &'static [&'static str] = &["light_paths", "map_light_paths", "reference_delta_unlit"];
+    const OPTIONAL_COLUMNS: &'static [&'static str] =
+        &["light_paths", "map_light_paths", "reference_delta_unlit", "mean_difference_unlit", "mean_difference_all"];
 }
 
 impl TableRow for SeriesRow {}
@@ -202,6 +208,8 @@ mod tests {
             bytes_per_pixel: 520.5,
             idle: None,
             reference_delta_unlit: Some(0.002),
+            mean_difference_unlit: Some(-0.0004),
+            mean_difference_all: None,
         }
     }
 
@@ -216,7 +224,8 @@ mod tests {
             text.lines().next().unwrap(),
             "scene,method,topology,processes,groups,threads_per_group,threads,repeat,wall_s,backward_rays,\
              forward_rays,merges,light_paths,map_light_paths,phases,delta_unlit,delta_all,true_unlit,true_all,\
-             peak_memory_bytes,bytes_per_pixel,idle_fraction,reference_delta_unlit"
+             peak_memory_bytes,bytes_per_pixel,idle_fraction,reference_delta_unlit,mean_difference_unlit,\
+             mean_difference_all"
         );
         assert!(text.lines().nth(1).unwrap().starts_with("cornell,three-level,synthetic pack:1 numa:2"), "{text}");
         let back: Vec<ResultsRow> = read_table(&path).unwrap();

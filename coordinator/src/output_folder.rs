@@ -1,7 +1,7 @@
 //! The output folder of a run: the multi-layer EXR, the PNG preview and the JSON record.
 
 use anyhow::{Context, Result};
-use photonfarm::accumulation::{relative_rmse, Accumulator};
+use photonfarm::accumulation::{relative_mean_difference, relative_rmse, Accumulator};
 use photonfarm::color::luminance_f64;
 use photonfarm::image_io::exr_file::{find_layer, read_exr, write_exr, LayerImage};
 use photonfarm::image_io::preview::{auto_exposure, write_preview_png};
@@ -70,6 +70,8 @@ impl Reference {
             rmse_unlit: relative_rmse(&image, &self.total, |i| !lit(i)),
             reference_delta_all: reference_delta(&|_| true),
             reference_delta_unlit: reference_delta(&|i| !lit(i)),
+            mean_difference_all: Some(relative_mean_difference(&image, &self.total, |_| true)),
+            mean_difference_unlit: Some(relative_mean_difference(&image, &self.total, |i| !lit(i))),
         }
     }
 }

@@ -1,5 +1,5 @@
-//! `coordinator rays ghosts`: ranks the pairs of lens surfaces at which ghost camera paths took their first two
-//! reflections, by their share of the ghost light the recorded paths carry, with each pair's footprint on the
+//! `coordinator rays ghosts`: ranks the pairs of lens surfaces at which ghost paths took their first two
+//! reflections (camera paths, and light paths whose ghost chain registered on the sensor), by their share of the ghost light the recorded paths carry, with each pair's footprint on the
 //! image, and compares the recorded ghost light with the render's ghost layer.
 
 use crate::cli::RaysGhostsArgs;
@@ -8,7 +8,7 @@ use anyhow::{bail, Context, Result};
 use photonfarm::color::luminance;
 use photonfarm::material::Material;
 use photonfarm::ray_map::reader::open_streams;
-use photonfarm::ray_map::{Events, PathKind, RecordedPath};
+use photonfarm::ray_map::{Events, PathKind, RecordedPath, Vertex};
 use photonfarm::scene::Scene;
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -28,20 +28,31 @@ struct PairTotals {
     footprint: Vec<f32>,
 }
 
-/// The ghost pair of a camera path: its dielectric reflections before its first diffuse vertex (the ghost
-/// layer's rule), or None for a path that is not a ghost path.
-fn ghost_pair(path: &RecordedPath, dielectric: &[bool]) -> Option<Pair> {
-    if path.kind != PathKind::Camera {
-        return None;
+/// The ghost pair of a recorded path and the pixel its ghost light lands on, or None for a path that carries
+/// no ghost light. A camera path's pair is its dielectric reflections before its first diffuse vertex (the ghost
+/// layer's rule); a light path's, one that registered on the sensor (a ghost chain the light side owns), is its
+/// dielectric reflections before the sensor taken from the sensor's side, so that both name a ghost alike.
+fn ghost_pair(path: &RecordedPath, dielectric: &[bool]) -> Option<(Pair, u32)> {
+    let is_reflection =
+        |v: &&Vertex| v.events.contains(Events::REFLECT) && dielectric.get(v.object as usize).copied().unwrap_or(false);
+    match path.kind {
+        PathKind::Camera => {
+            let mut reflections = path
+                .vertices
+                .iter()
+                .take_while(|v| !v.events.contains(Events::DIFFUSE))
+                .filter(is_reflection)
+                .map(|v| v.object);
+            let first = reflections.next()?;
+            Some(((first, reflections.next()), path.source))
+        }
+        PathKind::Light => {
+            let sensor = path.vertices.iter().skip(1).position(|v| v.events.contains(Events::SENSOR))? + 1;
+            let mut reflections = path.vertices[..sensor].iter().rev().filter(is_reflection).map(|v| v.object);
+            let first = reflections.next()?;
+            Some(((first, reflections.next()), path.vertices[sensor].primitive))
+        }
     }
-    let mut reflections = path
-        .vertices
-        .iter()
-        .take_while(|v| !v.events.contains(Events::DIFFUSE))
-        .filter(|v| v.events.contains(Events::REFLECT) && dielectric.get(v.object as usize).copied().unwrap_or(false))
-        .map(|v| v.object);
-    let first = reflections.next()?;
-    Some((first, reflections.next()))
 }
 
 /// Runs `rays ghosts`.
@@ -70,16 +81,28 @@ pub fn ghosts(args: RaysGhostsArgs) -> Result<()> {
             eprintln!("note: {} ends inside a portion; its last {bytes} bytes were left", s.path().display());
         }
     }
+    // A light path's weight is what it registered before the division by its phase's light paths; the record
+    // of the render says how many each phase traced, once a light path is found that needs it.
+    let light_paths_per_phase = std::sync::OnceLock::new();
     let per_portion: Vec<Vec<(Pair, f64, u32)>> = portions
         .par_iter()
         .map(|p| -> Result<_> {
-            Ok(p.decode()?
+            p.decode()?
                 .iter()
                 .filter_map(|path| {
-                    let pair = ghost_pair(path, &dielectric)?;
-                    Some((pair, luminance(glam::Vec3::from_array(path.weight)) as f64, path.source))
+                    let (pair, pixel) = ghost_pair(path, &dielectric)?;
+                    let energy = luminance(glam::Vec3::from_array(path.weight)) as f64;
+                    Some(match path.kind {
+                        PathKind::Camera => Ok((pair, energy, pixel)),
+                        PathKind::Light => {
+                            match light_paths_per_phase.get_or_init(|| light_paths_per_phase_of(&args.map)) {
+                                Ok(n) => Ok((pair, energy / *n, pixel)),
+                                Err(e) => Err(anyhow::anyhow!("{e}")),
+                            }
+                        }
+                    })
                 })
-                .collect())
+                .collect()
         })
         .collect::<Result<_>>()?;
     for (pair, energy, pixel) in per_portion.into_iter().flatten() {
@@ -155,6 +178,27 @@ fn ghost_layer_total(map: &Path) -> Result<(f64, u64)> {
     let ghost = photonfarm::image_io::exr_file::find_layer(&layers, &exr, photonfarm::ghost::GHOST_LAYER)?;
     let sum: f64 = ghost.rgb.iter().map(|p| luminance(glam::Vec3::from_array(*p)) as f64).sum();
     Ok((sum * phases as f64, phases))
+}
+
+/// The light paths each phase of the map's render traced, from its run.json: what a light path's registered
+/// value is divided by in the image. Errors are kept as text so that every thread can report the one error.
+fn light_paths_per_phase_of(map: &Path) -> std::result::Result<f64, String> {
+    let dir = render_folder(map);
+    let read = || -> Result<f64> {
+        let record: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(dir.join("run.json"))
+                .with_context(|| format!("no run.json in {}", dir.display()))?,
+        )?;
+        let phases = record["totals"]["phases"].as_u64().context("run.json has no totals.phases")?;
+        let light_paths = record["totals"]["light_paths"].as_u64().context("run.json has no totals.light_paths")?;
+        if phases == 0 || light_paths == 0 {
+            bail!("run.json records {light_paths} light paths over {phases} phases");
+        }
+        Ok(light_paths as f64 / phases as f64)
+    };
+    read().map_err(|e| {
+        format!("light paths reached the sensor, but their share needs the render's light paths per phase: {e:#}")
+    })
 }
 
 /// A footprint as a grey PNG, the brightest pixel white.

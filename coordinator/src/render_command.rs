@@ -600,6 +600,13 @@ fn print_summary(record: &RunRecord, reason: StopReason, dir: &Path) {
             100.0 * t.rmse_unlit,
             100.0 * t.rmse_all
         );
+        if let (Some(unlit), Some(all)) = (t.mean_difference_unlit, t.mean_difference_all) {
+            println!(
+                "mean against the reference: {:+.3}% (unlit pixels) / {:+.3}% (all pixels)",
+                100.0 * unlit,
+                100.0 * all
+            );
+        }
     }
     if reason == StopReason::Interrupted {
         println!("interrupted: the results of every completed phase were written");

@@ -13,7 +13,8 @@ use photonfarm::geometry::SurfaceHit;
 use photonfarm::integrator::Layer;
 use photonfarm::pbpm::backward_pass::BackwardStats;
 use photonfarm::pbpm::{
-    gather, trace_camera_path, trace_light_path, BackwardPhoton, BackwardSettings, ForwardStats, LightVertex, PhotonMap,
+    gather, trace_camera_path, trace_light_path, BackwardPhoton, BackwardSettings, ForwardStats, LightEvent,
+    LightSettings, LightVertex, PhotonMap,
 };
 use photonfarm::render::{Method, RenderSettings};
 use photonfarm::sampling::{Pass, Sampler};
@@ -66,6 +67,7 @@ fn backward_photons(scene: &Scene, settings: &RenderSettings) -> Vec<BackwardPho
         radius: settings.radius_schedule(scene),
         phase: PHASE,
         spectrum: PhaseSpectrum::RGB,
+        sensor_ghosts: false,
     };
     let mut photons = Vec::new();
     let mut stats = BackwardStats::default();
@@ -84,17 +86,12 @@ fn light_vertices(scene: &Scene, settings: &RenderSettings) -> Vec<OwnedVertex> 
     let mut stats = ForwardStats::default();
     for i in 0..settings.light_paths_per_phase(scene.camera.pixel_count()) {
         let mut s = Sampler::new(settings.seed, Pass::Light, PHASE, i);
-        trace_light_path(
-            scene,
-            settings.max_depth,
-            &PhaseSpectrum::RGB,
-            i,
-            &mut s,
-            &mut stats,
-            &mut |v: &LightVertex| {
+        let light = LightSettings { max_depth: settings.max_depth, sensor: false, vertices: true };
+        trace_light_path(scene, light, &PhaseSpectrum::RGB, i, &mut s, &mut stats, &mut |e: &LightEvent| {
+            if let LightEvent::Vertex(v) = e {
                 vertices.push(OwnedVertex { hit: *v.hit, wi: v.wi, flux: v.flux, m: v.m, all_specular: v.all_specular })
-            },
-        );
+            }
+        });
     }
     vertices
 }

@@ -90,6 +90,11 @@ impl Camera {
         camera
     }
 
+    /// Unit view direction (a sensor camera's: along the optical axis, toward the lens).
+    pub fn forward(&self) -> Vec3 {
+        self.forward
+    }
+
     /// Number of pixels.
     pub fn pixel_count(&self) -> usize {
         self.width as usize * self.height as usize
@@ -174,6 +179,46 @@ impl Camera {
                 Some(Vec2::new((u + 0.5) * w, (v + 0.5) * h))
             }
         }
+    }
+
+    /// Where a light ray registers on a sensor camera: the pixel its segment from `origin` along the unit
+    /// `direction` crosses the sensor in (before `t_max`), with the pixel's importance, 1 over the pixel's area.
+    /// None for other cameras, for a ray arriving from behind the sensor, and for one whose line back from the
+    /// sensor misses the rear element's disc: that is the measurement `sensor_ray` estimates from the camera
+    /// side, so that a light path registering here and a camera path estimate the same pixel value.
+    pub fn sensor_pixel(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<(u32, f32)> {
+        let Lens::Sensor { width, rear } = self.lens else { return None };
+        let toward = direction.dot(self.forward);
+        if toward >= 0.0 {
+            return None;
+        }
+        let t = (self.position - origin).dot(self.forward) / toward;
+        if !(t > 0.0 && t < t_max) {
+            return None;
+        }
+        let p = origin + direction * t;
+        let height = width * self.height as f32 / self.width as f32;
+        // The inverse of `sensor_ray`'s placement of a pixel point on the rotated sensor.
+        let u = -(p - self.position).dot(self.right) / width + 0.5;
+        let v = (p - self.position).dot(self.up) / height + 0.5;
+        if !((0.0..1.0).contains(&u) && (0.0..1.0).contains(&v)) {
+            return None;
+        }
+        let (x, y) = (
+            ((u * self.width as f32) as u32).min(self.width - 1),
+            ((v * self.height as f32) as u32).min(self.height - 1),
+        );
+        let back = -direction;
+        let along = back.dot(rear.axis);
+        if along == 0.0 {
+            return None;
+        }
+        let s = (rear.center - p).dot(rear.axis) / along;
+        if s.is_nan() || s <= 0.0 || (p + back * s - rear.center).length_squared() > rear.radius * rear.radius {
+            return None;
+        }
+        let pixel_area = (width / self.width as f32) * (height / self.height as f32);
+        Some((y * self.width + x, 1.0 / pixel_area))
     }
 
     /// Angle one pixel subtends at the image centre (radians): the footprint of a pixel at distance d is
@@ -280,6 +325,23 @@ mod tests {
         let sin2 = 0.01f64.powi(2) / (0.01f64.powi(2) + 0.05f64.powi(2));
         let exact = std::f64::consts::PI * sin2;
         assert!((estimate / exact - 1.0).abs() < 2e-3, "{estimate} vs {exact}");
+    }
+
+    #[test]
+    fn a_camera_ray_reversed_registers_on_its_own_pixel_and_light_from_outside_the_rear_element_does_not() {
+        let c = sensor_camera();
+        for (x, y) in [(0, 0), (359, 239), (200, 90), (17, 230)] {
+            let r = c.generate_ray(x, y, Vec2::new(0.3, 0.7), Vec2::new(0.9, 0.2)).ray;
+            let far = r.at(0.2);
+            let (pixel, importance) = c.sensor_pixel(far, -r.direction, f32::INFINITY).expect("registers");
+            assert_eq!(pixel, y * 360 + x);
+            assert!((importance - 1.0 / (1e-4 * 1e-4)).abs() < 1e-3 / (1e-4 * 1e-4), "{importance}");
+            assert_eq!(c.sensor_pixel(far, -r.direction, 0.1), None, "stopped before the sensor");
+            assert_eq!(c.sensor_pixel(r.origin - r.direction * 0.1, r.direction, f32::INFINITY), None, "from behind");
+        }
+        // Aimed at the sensor's centre from well outside the rear element's disc.
+        let from = Vec3::new(0.03, 0.0, 0.05);
+        assert_eq!(c.sensor_pixel(from, (Vec3::ZERO - from).normalize(), f32::INFINITY), None);
     }
 
     #[test]

@@ -4,7 +4,8 @@
 //! light later gathered into its backward photons) is ghost light. The ghost layer shows that part of the total; the
 //! light stays in its usual layer as well.
 
-use crate::geometry::SurfaceHit;
+use crate::camera::{Camera, Lens, RearElement};
+use crate::geometry::{LensSurface, SurfaceHit};
 use crate::material::Material;
 use crate::scene::Scene;
 use glam::Vec3;
@@ -18,6 +19,28 @@ pub const GHOST_LAYER: &str = "ghost";
 pub fn scene_can_make_ghosts(scene: &Scene) -> bool {
     matches!(scene.camera.lens, crate::camera::Lens::Sensor { .. })
         && scene.objects.iter().any(|o| matches!(scene.materials[o.material as usize], Material::Dielectric { .. }))
+}
+
+/// True when light paths register the ghost chains on the scene's sensor and camera paths leave those chains to
+/// them: the scene can make ghosts and does not ask camera paths to find them alone (`[render]
+/// ghost_light_paths = false`).
+pub fn sensor_ghosts(scene: &Scene) -> bool {
+    scene.render.ghost_light_paths && scene_can_make_ghosts(scene)
+}
+
+/// The disc light paths aim at so that ghost chains start often: the clear aperture of the lens surface
+/// farthest in front of a sensor camera (the front element), in the plane of its rim. None for other cameras.
+pub fn front_element(camera: &Camera, lens_surfaces: impl IntoIterator<Item = LensSurface>) -> Option<RearElement> {
+    let Lens::Sensor { .. } = camera.lens else { return None };
+    let forward = camera.forward();
+    lens_surfaces
+        .into_iter()
+        .map(|s| RearElement { center: s.vertex + s.axis * s.rim_sag(), axis: s.axis, radius: s.aperture_radius })
+        .filter(|d| (d.center - camera.position).dot(forward) > 0.0)
+        .max_by(|a, b| {
+            let depth = |d: &RearElement| (d.center - camera.position).dot(forward);
+            depth(a).total_cmp(&depth(b))
+        })
 }
 
 /// True when the direction `wi` sampled at `material` for outgoing `wo` is a reflection at a dielectric: the

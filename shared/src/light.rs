@@ -1,9 +1,10 @@
 //! Light sources: emissive triangles (one-sided, front = CCW winding), point lights and spot lights, chosen by
 //! power both for next-event estimation and for emitting light paths.
 
+use crate::camera::RearElement;
 use crate::color::{luminance, Rgb};
 use crate::geometry::{SceneGeometry, SurfaceHit};
-use crate::sampling::cosine_hemisphere;
+use crate::sampling::{concentric_disk, cosine_hemisphere};
 use crate::sampling::{uniform_cone, uniform_sphere, uniform_triangle, Discrete, Frame};
 use crate::texture::{barycentric, interpolate_uv, Texture};
 use glam::{Vec2, Vec3};
@@ -50,6 +51,36 @@ pub struct EmissionSample {
     pub light: u32,
 }
 
+/// A direction leaving `origin` (on a light with `normal`) toward a uniform point of `disc` with probability
+/// `AIMED_FRACTION`, by the cosine otherwise, chosen by `u.x` and rescaled so that `u` stays stratified. None
+/// when it points behind the light, which emits nothing there.
+fn aimed_direction(disc: &RearElement, origin: Vec3, normal: Vec3, u: Vec2) -> Option<Vec3> {
+    let direction = if u.x < AIMED_FRACTION {
+        let d = concentric_disk(Vec2::new(u.x / AIMED_FRACTION, u.y)) * disc.radius;
+        let frame = Frame::from_normal(disc.axis);
+        let to = disc.center + frame.s * d.x + frame.t * d.y - origin;
+        to.try_normalize()?
+    } else {
+        let local = cosine_hemisphere(Vec2::new((u.x - AIMED_FRACTION) / (1.0 - AIMED_FRACTION), u.y));
+        Frame::from_normal(normal).to_world(local)
+    };
+    (direction.dot(normal) > 0.0).then_some(direction)
+}
+
+/// Solid-angle pdf of aiming at a uniform point of `disc` from `origin` and leaving along `direction`: d² / (A
+/// cos θ_d) where the ray crosses the disc, zero where it misses it.
+fn disc_pdf(disc: &RearElement, origin: Vec3, direction: Vec3) -> f32 {
+    let along = direction.dot(disc.axis);
+    if along == 0.0 {
+        return 0.0;
+    }
+    let t = (disc.center - origin).dot(disc.axis) / along;
+    if t <= 0.0 || (origin + direction * t - disc.center).length_squared() > disc.radius * disc.radius {
+        return 0.0;
+    }
+    t * t / (PI * disc.radius * disc.radius * along.abs())
+}
+
 /// An emission texture on one emitting triangle: its radiance is `emission` times the texture at the point.
 #[derive(Clone, Debug)]
 pub struct EmissionTexture {
@@ -91,7 +122,13 @@ pub struct Lights {
     light_of_triangle: Vec<u32>,
     /// Emission texture of each light, parallel to `lights` (None for most).
     textures: Vec<Option<EmissionTexture>>,
+    /// The disc area lights aim part of their light paths at (a lens's front element), if any.
+    aim: Option<RearElement>,
 }
+
+/// The share of an area light's light paths aimed at the disc of `Lights::aim_at`, when the disc is in front of
+/// it; the others leave by the cosine as without a disc, so the rest of the scene keeps its light.
+pub const AIMED_FRACTION: f32 = 0.5;
 
 impl Light {
     /// Emitted power in luminance units, the weight that chooses this light (without an emission texture:
@@ -149,7 +186,7 @@ impl Lights {
                 _ => l.power(),
             })
             .collect();
-        Lights { by_power: Discrete::new(&powers), lights, light_of_triangle, textures }
+        Lights { by_power: Discrete::new(&powers), lights, light_of_triangle, textures, aim: None }
     }
 
     /// The emission texture's factor for light `l` at barycentrics `b` (one when it has none).
@@ -164,6 +201,17 @@ impl Lights {
     /// Every light, area lights (one per emitting triangle) first, then the `[[lights]]` entries in order.
     pub fn all(&self) -> &[Light] {
         &self.lights
+    }
+
+    /// Makes area lights aim `AIMED_FRACTION` of their light paths at `disc` (those that have it in front of
+    /// them), with the pdf of the mixture of the two ways of leaving, so that estimates keep their expectation.
+    pub fn aim_at(&mut self, disc: RearElement) {
+        self.aim = Some(disc);
+    }
+
+    /// The disc light paths aim at, if any.
+    pub fn aim(&self) -> Option<RearElement> {
+        self.aim
     }
 
     /// True when the scene has at least one light with power.
@@ -261,6 +309,19 @@ impl Lights {
                 let tri = geometry.triangle(triangle);
                 let b = uniform_triangle(u_pos);
                 let origin = tri.v[0] * (1.0 - b.x - b.y) + tri.v[1] * b.x + tri.v[2] * b.y;
+                if let Some(disc) = self.aim.filter(|d| (d.center - tri.v[0]).dot(normal) > 0.0) {
+                    let direction = aimed_direction(&disc, origin, normal, u_dir)?;
+                    let cos = direction.dot(normal);
+                    let pdf = (1.0 - AIMED_FRACTION) * cos * std::f32::consts::FRAC_1_PI
+                        + AIMED_FRACTION * disc_pdf(&disc, origin, direction);
+                    return Some(EmissionSample {
+                        origin,
+                        normal,
+                        direction,
+                        beta: emission * self.texture_factor(index, |_| b) * (cos * area / (pmf * pdf)),
+                        light: index as u32,
+                    });
+                }
                 let local = cosine_hemisphere(u_dir);
                 if local.z <= 0.0 {
                     return None;

@@ -42,10 +42,10 @@ fn check_furnace(method: Method, backward_diffuse_depth: u32, phases: usize) {
     let (mean, sem) = mean_sem(&samples);
     let expect = le as f64 / (1.0 - albedo as f64); // Le / (1 − ρ)
     let err = (mean - expect).abs();
-    // PBPM's density estimate loses the part of a photon's disc that a wall cuts off along the cube's edges:
-    // over seeds 11–16 its mean sits 0.14–0.18% low (quasi-random or pseudo-random streams), which this
-    // allowance states until the kernel's normalisation accounts for the edges.
-    let bias = if method == Method::Path { 0.0 } else { 0.0025 * expect };
+    // A photon's disc hangs over the cube's edges; divided by the whole disc the mean sat 0.14–0.18% low
+    // (seeds 11–16), so the allowance for what the disc's area on the wall leaves is well below that.
+    let bias = if method == Method::Path { 0.0 } else { 0.0005 * expect };
+    eprintln!("{method:?}: furnace radiance {mean:.5} ± {sem:.5}, analytic {expect}");
     assert!(
         err <= 3.0 * sem + bias && err <= 0.01 * expect,
         "{method:?}: furnace radiance {mean:.5} ± {sem:.5}, analytic {expect}, error {:.2} SEM",

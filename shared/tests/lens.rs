@@ -472,12 +472,13 @@ fn only_a_sensor_behind_glass_gets_ghost_planes_and_other_scenes_keep_their_byte
         assert_eq!(engine.bytes_per_pixel(), expected, "{name}: bytes per pixel changed");
     }
     // The sensor behind the lens, coated or not (total internal reflection survives a coating): the ghost
-    // layer's sums (3 × f64) and two per-phase buffers (3 × f32 each) per pixel, nothing else.
+    // layer's sums (3 × f64), two per-phase buffers (3 × f32 each) and the visible light registered on the
+    // sensor (3 × f32) per pixel, nothing else.
     for coated in [false, true] {
         let scene = lens_scene(None, coated);
         let engine = Engine::new(&scene, common::settings(&scene, Method::Pbpm, 1));
         assert_eq!(engine.sums().aux.layout().offset(GHOST_LAYER), Some(0));
-        let expected = bytes_per_pixel_without_auxiliary_layers(&scene) + 3.0 * (8.0 + 4.0 + 4.0);
+        let expected = bytes_per_pixel_without_auxiliary_layers(&scene) + 3.0 * (8.0 + 4.0 + 4.0 + 4.0);
         println!("lens (coated: {coated}): {:.1} bytes per pixel", engine.bytes_per_pixel());
         assert_eq!(engine.bytes_per_pixel(), expected, "lens (coated: {coated})");
     }

@@ -1,8 +1,9 @@
 //! The forward pass's last step in the worker: adding gathered light into an `AtomicGatherBuffer` through its
 //! sink (three f32 compare-and-swap loops per add), at random pixels of a 256×256 mask. One thread; two threads
 //! into one shared buffer, as groups gathering into the same open map do; two threads into two separate buffers,
-//! the same work without sharing; and, as the baseline, plain non-atomic f32 adds on one thread as the
-//! single-threaded engine does them.
+//! the same work without sharing; one thread through the sole-writer sink (a load and a store per value), as the
+//! one foreign thread of two one-thread groups adds; and, as the baseline, plain non-atomic f32 adds on one
+//! thread as the single-threaded engine does them.
 //!
 //! With random pixels over a 1.5 MB buffer two threads rarely hit the same pixel at once: the shared-buffer
 //! cost is mostly cache lines moving between the cores, not retried compare-and-swaps.
@@ -63,6 +64,14 @@ fn atomic_accumulation(c: &mut Criterion) {
         })
     });
     group.bench_function("single_thread_atomic", |bench| bench.iter(|| add_all(&shared, &a)));
+    group.bench_function("single_thread_sole_writer", |bench| {
+        bench.iter(|| {
+            let mut sink = shared.sole_writer_sink();
+            for &(pixel, layer, value) in &a {
+                sink.add(black_box(pixel), layer, false, value);
+            }
+        })
+    });
 
     group.throughput(Throughput::Elements(2 * ADDS as u64));
     // The calling thread is the second adder, so each iteration spawns one thread.

@@ -28,6 +28,21 @@ fn fill_lit_lens() -> Scene {
     Scene::from_toml(&text, Path::new("lens.toml"), &scenes_dir()).unwrap()
 }
 
+/// The uncoated lens at 72 × 48 pixels with its bright light and without its glasses' dispersion: most of its
+/// ghost layer is the light's chains through the lens, which light paths register on the sensor
+/// (docs/estimator.md, "The ghost layer"), and an RGB scene lets two-level groups share their maps.
+fn lamp_lit_lens() -> Scene {
+    let text = std::fs::read_to_string(scenes_dir().join("lens.toml")).unwrap();
+    assert!(text.contains("width = 360\n") && text.contains("height = 240\n") && text.contains("\nabbe = "));
+    let text = text.replace("width = 360\n", "width = 72\n").replace("height = 240\n", "height = 48\n");
+    let text: String = text
+        .lines()
+        .filter(|l| !l.starts_with("abbe = ") && !l.starts_with("ext_abbe = "))
+        .map(|l| l.to_owned() + "\n")
+        .collect();
+    Scene::from_toml(&text, Path::new("lens.toml"), &scenes_dir()).unwrap()
+}
+
 /// Σ over pixels of the luminance of the ghost layer's sums and of the total's sums.
 fn image_sums(sums: &Accumulator) -> (f64, f64) {
     sums.ghost_luminance_sums().expect("the scene has a ghost layer")
@@ -115,6 +130,13 @@ fn two_level_and_async_give_the_single_threaded_ghost_fraction_of_the_uncoated_l
 }
 
 #[test]
+fn ghost_chains_registered_on_the_sensor_by_other_groups_light_paths_give_the_single_threaded_ghost_fraction() {
+    // With 16-pixel tiles a light path registers its ghost on whichever group's mask holds the pixel, its own
+    // or, through that group's open map, the other's; async groups register on their own whole image.
+    check(&lamp_lit_lens(), 100, 16, "lens lit by its bright light");
+}
+
+#[test]
 fn ghost_light_gathered_also_into_other_groups_maps_gives_the_single_threaded_ghost_fraction() {
     // Most of this room's ghost reaches the camera paths through their photons (scenes/ghost-room.toml); with
     // 4-pixel tiles every group's light paths gather into the other group's open map as well.
@@ -130,10 +152,10 @@ fn gather_buffers(config: &EngineConfig) -> usize {
 
 /// `EngineConfig::bytes_per_pixel` as it was before auxiliary layers: the merged sums, and per pixel a group
 /// covers its phase values, sums, mask and phase count entries, gathered light, and its photons (held twice,
-/// eight grid entries each in buffers with room to double, half a hash bucket).
+/// eight grid entries each in buffers with room to double, half a hash bucket, a u32 of its place in grid order).
 fn estimate_without_auxiliary_layers(config: &EngineConfig, backward_diffuse_depth: u32) -> f64 {
     let coverage = if config.masks { 1 } else { config.groups };
-    let photon = 2 * std::mem::size_of::<photonfarm::pbpm::BackwardPhoton>() + 2 * 8 * (4 + 8) + 2;
+    let photon = 2 * std::mem::size_of::<photonfarm::pbpm::BackwardPhoton>() + 2 * 8 * (4 + 8) + 2 + 4;
     // The camera pass's values and replicate, the sums, the mask and the phases before the deal.
     let per_pixel = std::mem::size_of::<photonfarm::integrator::LayerValues>()
         + 1
@@ -156,11 +178,13 @@ fn the_memory_estimate_adds_exactly_the_ghost_planes_and_covers_what_an_engine_w
         // No ghost planes: the estimate is what it was.
         assert_eq!(config.bytes_per_pixel(bdd, &AuxLayout::for_scene(&cornell, 0)), before, "{method:?}");
         // Ghost planes: 3 f64 sums in the merged image, and per pixel a group covers 3 f64 sums and f32 buffers
-        // of the camera pass and of each buffer of gathered light.
+        // of the camera pass and of each buffer of gathered light, twice there (the ghost layer and the visible
+        // light registered on the sensor); a group with a mask holds a u32 per image pixel for the sensor.
         let coverage = if config.masks { 1 } else { config.groups } as f64;
         let estimate = config.bytes_per_pixel(bdd, &AuxLayout::for_scene(&lens, 0));
-        let gathered = 4.0 * gather_buffers(&config) as f64;
-        assert_eq!(estimate, before + 3.0 * (8.0 + coverage * (8.0 + 4.0 + gathered)), "{method:?}");
+        let gathered = 2.0 * 4.0 * gather_buffers(&config) as f64;
+        let tables = if config.masks { 4.0 * config.groups as f64 } else { 0.0 };
+        assert_eq!(estimate, before + tables + 3.0 * (8.0 + coverage * (8.0 + 4.0 + gathered)), "{method:?}");
         let mut engine = ParallelEngine::new(&lens, settings, config).unwrap();
         engine.run_round(&AtomicBool::new(false), None);
         let held = engine.capacity_bytes() as f64 / (72.0 * 48.0);

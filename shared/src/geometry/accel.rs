@@ -1,7 +1,7 @@
 //! The scene's acceleration structure: a BVH over all triangles, built by obvhs (a compressed-wide BVH, the
 //! default) or, with the `embree` feature, by Embree; the analytic surfaces are few and tested directly.
 
-use super::{analytic::Analytic, hit::SurfaceHit, mesh::MeshTriangle, ray::Ray};
+use super::{analytic::Analytic, hit::SurfaceHit, mesh::MeshTriangle, ray::Ray, surface_edges::SurfaceEdges};
 use glam::{Vec3, Vec3A};
 use obvhs::{
     cwbvh::{builder::build_cwbvh_from_tris, CwBvh},
@@ -169,6 +169,8 @@ pub struct SceneGeometry {
     accel: TriangleAccel,
     /// Triangles and their objects in the order they were added, for light sampling and shading.
     by_index: Vec<(u32, MeshTriangle)>,
+    /// Which triangle edges end their surface, for the photons' gather discs.
+    edges: SurfaceEdges,
     analytic: Vec<(u32, Analytic)>,
     t_min: f32,
 }
@@ -212,7 +214,15 @@ impl SceneGeometry {
                 Backend::Embree => TriangleAccel::Embree(super::embree::EmbreeTriangles::build(&triangles)?),
             }
         };
-        Ok(SceneGeometry { backend, accel, by_index: triangles, analytic, t_min: RELATIVE_T_MIN * (1.0 + extent) })
+        let edges = SurfaceEdges::find(&triangles);
+        Ok(SceneGeometry {
+            backend,
+            accel,
+            by_index: triangles,
+            edges,
+            analytic,
+            t_min: RELATIVE_T_MIN * (1.0 + extent),
+        })
     }
 
     /// The same surfaces with their BVH built by another backend, to compare backends.
@@ -238,6 +248,13 @@ impl SceneGeometry {
     /// The object a triangle (by the index it was added with) belongs to.
     pub fn object_of_triangle(&self, index: u32) -> u32 {
         self.by_index[index as usize].0
+    }
+
+    /// The edges of a triangle (by the index it was added with) beyond which its surface does not go on: bit i
+    /// for the edge from vertex i to vertex i + 1.
+    #[inline]
+    pub fn surface_edges(&self, index: u32) -> u8 {
+        self.edges.of(index)
     }
 
     /// The closest surface along the ray, if any.

@@ -1,4 +1,4 @@
-//! Geometry: rays, triangle meshes, analytic optical surfaces (spheres, lens surfaces, annuli) and the acceleration structure over all of them.
+//! Geometry: rays, triangle meshes, analytic optical surfaces (spheres, lens surfaces, annuli), the acceleration structure over all of them, and where surfaces end.
 
 pub mod accel;
 pub mod analytic;
@@ -7,9 +7,11 @@ mod embree;
 pub mod hit;
 pub mod mesh;
 pub mod ray;
+pub mod surface_edges;
 
 pub use accel::{AccelError, Backend, ObvhsPreset, SceneGeometry, BACKEND_VARIABLE};
 pub use analytic::{Analytic, Annulus, LensSurface, Sphere};
 pub use hit::SurfaceHit;
 pub use mesh::{Mesh, MeshTriangle};
 pub use ray::Ray;
+pub use surface_edges::{SurfaceEdges, SAME_SURFACE_COS};

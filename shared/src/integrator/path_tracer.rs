@@ -42,23 +42,27 @@ fn layer_of(diffuse_vertices: u32, through_specular: bool) -> Layer {
 /// Estimates the camera ray's weight times the radiance arriving along it (the pixel measurement), split into
 /// layers, with the part of it that is ghost light (`crate::ghost`, as the PBPM backward pass decides it);
 /// `max_depth` counts path segments. `spectrum` holds the wavelength the path takes if it meets dispersion (a
-/// path tracer can draw one per path).
+/// path tracer can draw one per path). With `sensor_ghosts`, emitters seen through the lens after a reflection
+/// in it are left to light paths, as in the PBPM backward pass.
 pub fn trace(
     scene: &Scene,
     max_depth: u32,
+    sensor_ghosts: bool,
     spectrum: &PhaseSpectrum,
     camera_ray: CameraRay,
     sampler: &mut Sampler,
     stats: &mut PathStats,
 ) -> (LayerValues, Rgb) {
-    trace_logged(scene, max_depth, spectrum, camera_ray, sampler, stats, None)
+    trace_logged(scene, max_depth, sensor_ghosts, spectrum, camera_ray, sampler, stats, None)
 }
 
 /// `trace` that also records the path's vertices and events into `log` (a ray map's path) when given one; the
 /// estimate is the same either way.
+#[allow(clippy::too_many_arguments)]
 pub fn trace_logged(
     scene: &Scene,
     max_depth: u32,
+    sensor_ghosts: bool,
     spectrum: &PhaseSpectrum,
     camera_ray: CameraRay,
     sampler: &mut Sampler,
@@ -67,9 +71,9 @@ pub fn trace_logged(
 ) -> (LayerValues, Rgb) {
     // RGB paths run the instantiation without spectral branches: RGB scenes keep their speed.
     if spectrum.wavelengths.is_some() {
-        trace_in::<true>(scene, max_depth, spectrum, camera_ray, sampler, stats, log)
+        trace_in::<true>(scene, max_depth, sensor_ghosts, spectrum, camera_ray, sampler, stats, log)
     } else {
-        trace_in::<false>(scene, max_depth, spectrum, camera_ray, sampler, stats, log)
+        trace_in::<false>(scene, max_depth, sensor_ghosts, spectrum, camera_ray, sampler, stats, log)
     }
 }
 
@@ -77,6 +81,7 @@ pub fn trace_logged(
 fn trace_in<const S: bool>(
     scene: &Scene,
     max_depth: u32,
+    sensor_ghosts: bool,
     spectrum: &PhaseSpectrum,
     camera_ray: CameraRay,
     sampler: &mut Sampler,
@@ -120,6 +125,7 @@ fn trace_in<const S: bool>(
             }
             let le = path.quantity(le);
             match previous {
+                Previous::Specular if diffuse_vertices == 0 && ghost.is_some() && sensor_ghosts => {}
                 Previous::Specular => add_contribution(
                     &mut out,
                     &mut ghost,

@@ -2,6 +2,7 @@
 //! MIS, paper eq. 5) to their pixel and store backward photons at their first `backward_diffuse_depth`
 //! diffuse vertices.
 
+use super::gather_disc::gather_disc_area;
 use super::photon::BackwardPhoton;
 use super::radius::RadiusSchedule;
 use crate::camera::CameraRay;
@@ -25,6 +26,9 @@ pub struct BackwardSettings {
     pub phase: u64,
     /// The phase's wavelengths, for paths that meet dispersion.
     pub spectrum: PhaseSpectrum,
+    /// Light paths bring the ghost chains to the sensor: an emitter seen through the lens after a reflection in
+    /// it is theirs, not this path's.
+    pub sensor_ghosts: bool,
 }
 
 /// Counters of the backward pass.
@@ -135,6 +139,7 @@ fn camera_path<const S: bool>(
             }
             let le = path.quantity(le);
             match (k, from_diffuse) {
+                (0, _) if ghost.is_some() && settings.sensor_ghosts => {}
                 (0, _) => add_contribution(&mut out, &mut ghost, Layer::VisibleLights, path.to_image(beta * le)),
                 (_, Some((p, pdf))) => {
                     let w = power_heuristic(pdf, scene.lights.pdf_incident(p, &hit));
@@ -173,7 +178,9 @@ fn camera_path<const S: bool>(
             if segments + 2 <= settings.max_depth {
                 let r = settings.radius.radius(path_length, settings.phase);
                 let normal = if wo.dot(hit.ng) >= 0.0 { hit.ng } else { -hit.ng };
-                let weight = beta * albedo * (std::f32::consts::FRAC_1_PI / (std::f32::consts::PI * r * r));
+                // eq. 4's τ · f / (π r²), with the disc's area on the surface for π r² (`gather_disc`).
+                let area = gather_disc_area(&scene.geometry, &hit, r);
+                let weight = beta * albedo * (std::f32::consts::FRAC_1_PI / area);
                 if weight.is_finite() && r > 0.0 {
                     stats.photons += 1;
                     store(BackwardPhoton {

@@ -53,8 +53,8 @@ impl<F: FnMut(u32, Layer, bool, Rgb)> Gather for F {
 }
 
 /// Normals of a photon's surface and the gathering surface must agree this well (cos 25°), so that light on
-/// one wall of a corner is not gathered by photons on the other.
-const NORMAL_AGREEMENT: f32 = 0.9;
+/// one wall of a corner is not gathered by photons on the other; the surface's edges are found by the same rule.
+const NORMAL_AGREEMENT: f32 = crate::geometry::SAME_SURFACE_COS;
 
 /// A diffuse light-path vertex y_m (m ≥ 2) where backward photons may gather light.
 #[derive(Clone, Copy, Debug)]
@@ -75,18 +75,51 @@ pub struct LightVertex<'a> {
     pub phase: &'a PhaseSpectrum,
 }
 
-/// Traces light path number `index` of a phase and hands every diffuse vertex with m ≥ 2 to `visit`, which
-/// gathers it into one or more photon maps. The index deals the path its wavelength class.
+/// A light path reaching a sensor camera after an all-specular chain with a reflection at a dielectric: the
+/// ghost chains the light side owns (`crate::ghost`). It registers on its pixel like a gather.
+#[derive(Clone, Copy, Debug)]
+pub struct SensorHit<'a> {
+    /// The image pixel it crosses the sensor in.
+    pub pixel: u32,
+    /// ΔΦ times the pixel's importance (`Camera::sensor_pixel`): the path's value for the pixel before the
+    /// division by the phase's light paths, in the path's colour terms.
+    pub value: Rgb,
+    /// As `LightVertex::spectrum`.
+    pub spectrum: u8,
+    /// The phase's wavelengths.
+    pub phase: &'a PhaseSpectrum,
+}
+
+/// What a light path hands its phase: a diffuse vertex to gather into photon maps, or a ghost reaching the
+/// sensor.
+#[derive(Clone, Copy, Debug)]
+pub enum LightEvent<'a> {
+    Vertex(LightVertex<'a>),
+    Sensor(SensorHit<'a>),
+}
+
+/// What shapes a light path besides the scene: the longest path, and which events it looks for.
+#[derive(Clone, Copy, Debug)]
+pub struct LightSettings {
+    pub max_depth: u32,
+    /// Look for ghost chains reaching the sensor (`SensorHit`).
+    pub sensor: bool,
+    /// Hand diffuse vertices to the visitor; without them a path ends at its first diffuse vertex.
+    pub vertices: bool,
+}
+
+/// Traces light path number `index` of a phase and hands every diffuse vertex with m ≥ 2 and every sensor hit
+/// to `visit`, which gathers them into one or more phases. The index deals the path its wavelength class.
 pub fn trace_light_path(
     scene: &Scene,
-    max_depth: u32,
+    settings: LightSettings,
     spectrum: &PhaseSpectrum,
     index: u64,
     sampler: &mut Sampler,
     stats: &mut ForwardStats,
-    visit: &mut impl FnMut(&LightVertex),
+    visit: &mut impl FnMut(&LightEvent),
 ) {
-    trace_light_path_logged(scene, max_depth, spectrum, index, sampler, stats, visit, None)
+    trace_light_path_logged(scene, settings, spectrum, index, sampler, stats, visit, None)
 }
 
 /// `trace_light_path` that also records the path's vertices and events into `log` (a ray map's path) when
@@ -94,19 +127,19 @@ pub fn trace_light_path(
 #[allow(clippy::too_many_arguments)]
 pub fn trace_light_path_logged(
     scene: &Scene,
-    max_depth: u32,
+    settings: LightSettings,
     spectrum: &PhaseSpectrum,
     index: u64,
     sampler: &mut Sampler,
     stats: &mut ForwardStats,
-    visit: &mut impl FnMut(&LightVertex),
+    visit: &mut impl FnMut(&LightEvent),
     log: Option<&mut RecordedPath>,
 ) {
     // An RGB phase runs the instantiation without spectral branches: RGB scenes keep their speed.
     if spectrum.wavelengths.is_some() {
-        light_path::<true>(scene, max_depth, spectrum, index, sampler, stats, visit, log)
+        light_path::<true>(scene, settings, spectrum, index, sampler, stats, visit, log)
     } else {
-        light_path::<false>(scene, max_depth, spectrum, index, sampler, stats, visit, log)
+        light_path::<false>(scene, settings, spectrum, index, sampler, stats, visit, log)
     }
 }
 
@@ -114,14 +147,15 @@ pub fn trace_light_path_logged(
 #[allow(clippy::too_many_arguments)]
 fn light_path<const S: bool>(
     scene: &Scene,
-    max_depth: u32,
+    settings: LightSettings,
     spectrum: &PhaseSpectrum,
     index: u64,
     sampler: &mut Sampler,
     stats: &mut ForwardStats,
-    visit: &mut impl FnMut(&LightVertex),
+    visit: &mut impl FnMut(&LightEvent),
     mut log: Option<&mut RecordedPath>,
 ) {
+    let max_depth = settings.max_depth;
     stats.light_paths += 1;
     let u_select = sampler.next_f32();
     let (u_pos, u_dir) = (sampler.next_2d(), sampler.next_2d());
@@ -132,6 +166,11 @@ fn light_path<const S: bool>(
     let mut path = PathSpectrum::<S>::start(spectrum, PhaseSpectrum::class_of(index), &mut beta);
     let beta0 = beta.max_element();
     let mut all_specular = true;
+    // Set once the all-specular chain so far took a reflection at a dielectric: from then on, until a diffuse
+    // vertex, a segment that crosses the sensor is a ghost the light side owns.
+    let mut ghost_chain = false;
+    // What the path registered on the sensor, for its recording.
+    let mut registered = Rgb::ZERO;
     let mut m = 0u32;
     if let Some(l) = log.as_deref_mut() {
         l.source = crate::ray_map::emitter_of(scene, e.light);
@@ -139,7 +178,25 @@ fn light_path<const S: bool>(
     }
     loop {
         stats.rays += 1;
-        let Some(hit) = scene.geometry.intersect(&ray) else {
+        let hit = scene.geometry.intersect(&ray);
+        // Segment m + 1 reaches the sensor within max_depth segments, as a camera path's emitter hit does.
+        if ghost_chain && all_specular && m < max_depth {
+            let t_max = hit.as_ref().map_or(f32::INFINITY, |h| h.t);
+            if let Some((pixel, importance)) = scene.camera.sensor_pixel(ray.origin, ray.direction, t_max) {
+                let value = beta * importance;
+                if value != Rgb::ZERO {
+                    visit(&LightEvent::Sensor(SensorHit { pixel, value, spectrum: path.tag(), phase: spectrum }));
+                    if let Some(l) = log.as_deref_mut() {
+                        let cam = &scene.camera;
+                        let t = (cam.position - ray.origin).dot(cam.forward()) / ray.direction.dot(cam.forward());
+                        l.sensor(ray.origin + ray.direction * t, pixel);
+                        // In image terms, as a pixel whose camera paths start in RGB reads it.
+                        registered += join(Rgb::ONE, 0, value, path.tag(), spectrum);
+                    }
+                }
+            }
+        }
+        let Some(hit) = hit else {
             if let Some(l) = log.as_deref_mut() {
                 l.escape(ray.direction);
             }
@@ -152,8 +209,11 @@ fn light_path<const S: bool>(
         let material = path.material(scene.material(&hit), &mut beta);
         let wi = -ray.direction;
         if material.diffuse_albedo().is_some() {
-            if m >= 2 {
-                visit(&LightVertex {
+            if !settings.vertices {
+                break;
+            }
+            if m >= 2 && m < max_depth {
+                visit(&LightEvent::Vertex(LightVertex {
                     hit: &hit,
                     wi,
                     flux: beta,
@@ -161,12 +221,14 @@ fn light_path<const S: bool>(
                     all_specular,
                     spectrum: path.tag(),
                     phase: spectrum,
-                });
+                }));
             }
             all_specular = false;
         }
-        // The next vertex y_{m+1} can still merge only with a photon one segment from the eye.
-        if m + 2 > max_depth {
+        // The next vertex y_{m+1} can still merge only with a photon one segment from the eye; a ghost chain
+        // may still reach the sensor on segment m + 1.
+        let sensor_next = settings.sensor && all_specular && m < max_depth;
+        if m + 2 > max_depth && !sensor_next {
             if beta != Rgb::ZERO {
                 stats.capped += 1;
             }
@@ -180,6 +242,9 @@ fn light_path<const S: bool>(
         };
         if let Some(l) = log.as_deref_mut() {
             l.event(scatter_event(&material, &hit, wi, s.wi, s.delta));
+        }
+        if settings.sensor && all_specular && crate::ghost::is_dielectric_reflection(&material, &hit, wi, s.wi) {
+            ghost_chain = true;
         }
         beta *= s.weight;
         if m >= 3 {
@@ -195,7 +260,8 @@ fn light_path<const S: bool>(
         ray = Ray::new(offset_origin(hit.p, hit.ng, s.wi), s.wi);
     }
     if let Some(l) = log {
-        l.finish(e.beta, path.wavelength_nm());
+        let weight = if registered == Rgb::ZERO { e.beta } else { registered };
+        l.finish(weight, path.wavelength_nm());
     }
 }
 

@@ -1,5 +1,6 @@
 //! Where the forward pass's gathered light waits for the phase to close: f32 (indirect, caustic) RGB per local
-//! pixel of the phase, then the pixel's auxiliary channels (the ghost layer's gathered light). A plain buffer
+//! pixel of the phase, then the pixel's auxiliary channels (the ghost layer's gathered light), then, in an image
+//! with a ghost layer, the visible light that ghost chains brought to the sensor. A plain buffer
 //! takes the adds of one thread; an atomic one takes adds from any thread, for light paths of other groups
 //! gathering into an open map (paper §4.2) and for groups whose threads share their own map.
 
@@ -14,24 +15,37 @@ use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 /// Values per pixel before the auxiliary channels: (indirect, caustic) × RGB.
 const FIXED: usize = 6;
 
-/// How a pixel's values are laid out: their count, and where the ghost layer's channels start.
+/// How a pixel's values are laid out: their count, where the ghost layer's channels start, and where the
+/// visible light of ghost chains registered on the sensor goes (an image without a ghost layer has none).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 struct Stride {
     values: usize,
     ghost: Option<usize>,
+    visible: Option<usize>,
 }
 
 impl Stride {
     fn of(aux: &AuxLayout) -> Self {
-        Stride { values: FIXED + aux.channels(), ghost: aux.offset(GHOST_LAYER).map(|o| FIXED + o) }
+        let ghost = aux.offset(GHOST_LAYER).map(|o| FIXED + o);
+        let visible = ghost.map(|_| FIXED + aux.channels());
+        Stride { values: FIXED + aux.channels() + if visible.is_some() { 3 } else { 0 }, ghost, visible }
     }
 
     /// The value indices an add of `value` to `layer` (and to the ghost layer, for ghost light) touches, with
     /// the channel each takes.
     #[inline]
     fn targets(&self, pixel: u32, layer: Layer, ghost: bool) -> (usize, Option<usize>) {
+        debug_assert!(
+            layer != Layer::VisibleLights || self.visible.is_some(),
+            "visible light gathered without a ghost layer"
+        );
         let base = pixel as usize * self.values;
-        let usual = base + if layer == Layer::Caustic { 3 } else { 0 };
+        let usual = base
+            + match (layer, self.visible) {
+                (Layer::Caustic, _) => 3,
+                (Layer::VisibleLights, Some(v)) => v,
+                _ => 0,
+            };
         (usual, self.ghost.filter(|_| ghost).map(|g| base + g))
     }
 }
@@ -56,9 +70,14 @@ impl GatherBuffer {
         self.values.resize(pixels * stride.values, 0.0);
     }
 
-    /// Values per pixel: 6, plus the auxiliary channels.
+    /// Values per pixel: 6, plus the auxiliary channels, plus 3 with a ghost layer.
     pub fn stride(&self) -> usize {
         self.stride.values
+    }
+
+    /// Where a pixel's visible light from the sensor starts among its values, in an image with a ghost layer.
+    pub fn visible_offset(&self) -> Option<usize> {
+        self.stride.visible
     }
 
     /// Every pixel's values, pixel after pixel.
@@ -175,7 +194,15 @@ impl AtomicGatherBuffer {
 
     /// A sink that adds into this buffer from any thread.
     pub fn sink(&self) -> AtomicSink<'_> {
-        AtomicSink { buffer: self }
+        AtomicSink { buffer: self, sole: false }
+    }
+
+    /// A sink for the one thread that adds into this buffer while its map is open (two groups of one thread
+    /// each: the other group's thread is the only foreign adder). Each add is then a load and a store, as cheap
+    /// as a plain add, instead of a compare-and-swap loop; a second thread adding at the same time would lose
+    /// adds, so the caller must know it is alone.
+    pub fn sole_writer_sink(&self) -> AtomicSink<'_> {
+        AtomicSink { buffer: self, sole: true }
     }
 
     /// Bytes held.
@@ -187,20 +214,31 @@ impl AtomicGatherBuffer {
 /// Adds gathered light into an `AtomicGatherBuffer`.
 pub struct AtomicSink<'a> {
     buffer: &'a AtomicGatherBuffer,
+    /// No other thread adds into the buffer meanwhile (`sole_writer_sink`).
+    sole: bool,
+}
+
+impl AtomicSink<'_> {
+    #[inline]
+    fn add_rgb(&self, first: usize, value: Rgb) {
+        let values = &self.buffer.values[first..first + 3];
+        for (a, c) in values.iter().zip([value.x, value.y, value.z]) {
+            if self.sole {
+                a.store((f32::from_bits(a.load(Ordering::Relaxed)) + c).to_bits(), Ordering::Relaxed);
+            } else {
+                add_f32(a, c);
+            }
+        }
+    }
 }
 
 impl Gather for AtomicSink<'_> {
     #[inline]
     fn add(&mut self, pixel: u32, layer: Layer, ghost: bool, value: Rgb) {
         let (usual, ghost) = self.buffer.stride.targets(pixel, layer, ghost);
-        let values = &self.buffer.values;
-        for (k, c) in [value.x, value.y, value.z].into_iter().enumerate() {
-            add_f32(&values[usual + k], c);
-        }
+        self.add_rgb(usual, value);
         if let Some(g) = ghost {
-            for (k, c) in [value.x, value.y, value.z].into_iter().enumerate() {
-                add_f32(&values[g + k], c);
-            }
+            self.add_rgb(g, value);
         }
     }
 }
@@ -236,6 +274,33 @@ mod tests {
         assert_eq!(b.get(0), [Rgb::ZERO; 2]);
         assert_eq!(b.merges(), 40_000);
         assert_eq!(b.capacity_bytes(), 2 * 6 * 4, "no ghost channels without a ghost layer");
+    }
+
+    #[test]
+    fn a_sole_writer_adds_what_compare_and_swap_adds() {
+        let (mut cas, mut sole) = (AtomicGatherBuffer::default(), AtomicGatherBuffer::default());
+        cas.reset(3, &ghost_layout());
+        sole.reset(3, &ghost_layout());
+        // The sole writer is another thread than the owner that reads the buffer afterwards.
+        std::thread::scope(|s| {
+            s.spawn(|| {
+                let (mut a, mut b) = (cas.sink(), sole.sole_writer_sink());
+                for i in 0..1000u32 {
+                    let (pixel, layer, ghost) =
+                        (i % 3, if i % 2 == 0 { Layer::Indirect } else { Layer::Caustic }, i % 5 == 0);
+                    let value = Rgb::new(i as f32, 0.5, 1.0 / (1 + i) as f32);
+                    a.add(pixel, layer, ghost, value);
+                    b.add(pixel, layer, ghost, value);
+                }
+            });
+        });
+        for p in 0..3 {
+            assert_eq!(sole.get(p), cas.get(p));
+            for c in 0..4 {
+                assert_eq!(sole.get_aux(p, c).to_bits(), cas.get_aux(p, c).to_bits());
+            }
+        }
+        assert_ne!(sole.get(1), [Rgb::ZERO; 2]);
     }
 
     #[test]
@@ -317,7 +382,7 @@ mod tests {
         plain.reset(2, &AuxLayout::default());
         plain.add(1, Layer::Caustic, false, Rgb::ONE);
         plain.reset(3, &ghost_layout());
-        assert_eq!(plain.stride(), 10);
+        assert_eq!(plain.stride(), 13, "6 + the 4 auxiliary channels + the sensor's visible light");
         assert!((0..3).all(|p| plain.get(p) == [Rgb::ZERO; 2]));
     }
 }

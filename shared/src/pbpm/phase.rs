@@ -12,7 +12,9 @@
 
 use super::backward_pass::{trace_camera_path_logged, BackwardSettings, BackwardStats};
 use super::executor::Executor;
-use super::forward_pass::{gather, trace_light_path, trace_light_path_logged, ForwardStats, Gather, LightVertex};
+use super::forward_pass::{
+    gather, trace_light_path_logged, ForwardStats, Gather, LightEvent, LightSettings, SensorHit,
+};
 use super::gather_buffer::GatherBuffer;
 use super::photon::BackwardPhoton;
 use super::photon_map::PhotonMap;
@@ -23,7 +25,7 @@ use crate::integrator::{Layer, LayerValues};
 use crate::ray_map::{PathKind, RecordedPath, Recorder};
 use crate::sampling::{replicate_of, Sampler};
 use crate::scene::Scene;
-use crate::spectrum::{band_values, PhaseSpectrum, Wavelength};
+use crate::spectrum::{band_values, join, PhaseSpectrum, Wavelength};
 use rayon::iter::Either;
 use rayon::prelude::*;
 
@@ -44,21 +46,97 @@ pub struct Phase<'a> {
     pub radius: RadiusSchedule,
     /// The phase's wavelengths: its camera and light paths share them, so their joins are at one wavelength.
     pub spectrum: PhaseSpectrum,
+    /// Light paths register ghost chains on the sensor and camera paths leave those chains to them
+    /// (`crate::ghost::sensor_ghosts`).
+    pub sensor_ghosts: bool,
+}
+
+/// Which local pixel of a phase an image pixel is, for light that registers on the sensor: the identity when
+/// the phase renders the whole image, a table over the image when it renders a mask.
+#[derive(Clone, Debug, Default)]
+pub enum LocalPixels {
+    #[default]
+    Image,
+    /// Local index of every image pixel, `u32::MAX` outside the mask.
+    Mask(Vec<u32>),
+}
+
+impl LocalPixels {
+    /// The lookup for a phase over `mask` (image pixels) in an image of `pixels` pixels; `needed` is false when
+    /// no light will register on the sensor, which keeps the table out of memory.
+    pub fn of_mask(mask: &[u32], pixels: usize, needed: bool) -> Self {
+        if !needed || (mask.len() == pixels && mask.iter().enumerate().all(|(i, &p)| p as usize == i)) {
+            return LocalPixels::Image;
+        }
+        let mut table = vec![u32::MAX; pixels];
+        for (local, &p) in mask.iter().enumerate() {
+            table[p as usize] = local as u32;
+        }
+        LocalPixels::Mask(table)
+    }
+
+    /// The local pixel of image pixel `pixel`, if the phase renders it.
+    #[inline]
+    pub fn local(&self, pixel: u32) -> Option<u32> {
+        match self {
+            LocalPixels::Image => Some(pixel),
+            LocalPixels::Mask(t) => t.get(pixel as usize).copied().filter(|&l| l != u32::MAX),
+        }
+    }
+
+    /// Bytes held.
+    pub fn capacity_bytes(&self) -> usize {
+        match self {
+            LocalPixels::Image => 0,
+            LocalPixels::Mask(t) => t.capacity() * 4,
+        }
+    }
 }
 
 impl Phase<'_> {
     /// Traces light path number `index` of the phase and hands each vertex that may gather (DESIGN §1 step 3)
-    /// to `visit`.
+    /// and each ghost chain that reaches the sensor to `visit`.
     #[inline]
-    pub fn trace_light_path(&self, index: u64, stats: &mut ForwardStats, visit: &mut impl FnMut(&LightVertex)) {
-        let mut s = Sampler::light(self.seed, self.key, index);
-        trace_light_path(self.scene, self.max_depth, &self.spectrum, index, &mut s, stats, visit);
+    pub fn trace_light_path(&self, index: u64, stats: &mut ForwardStats, visit: &mut impl FnMut(&LightEvent)) {
+        self.trace_light_path_logged(index, stats, visit, None);
     }
 
-    /// Gathers a light vertex into `map`, adding to `sink` (paper eq. 4); returns the merges.
+    /// `trace_light_path` that also records the path into `log` (a ray map's path) when given one.
     #[inline]
-    pub fn gather(&self, map: &PhotonMap, v: &LightVertex, sink: &mut impl Gather) -> u64 {
-        gather(map, v, self.max_depth, self.backward_diffuse_depth, sink)
+    pub fn trace_light_path_logged(
+        &self,
+        index: u64,
+        stats: &mut ForwardStats,
+        visit: &mut impl FnMut(&LightEvent),
+        log: Option<&mut RecordedPath>,
+    ) {
+        let mut s = Sampler::light(self.seed, self.key, index);
+        let settings = LightSettings { max_depth: self.max_depth, sensor: self.sensor_ghosts, vertices: true };
+        trace_light_path_logged(self.scene, settings, &self.spectrum, index, &mut s, stats, visit, log);
+    }
+
+    /// Gathers what a light path hands over into one phase's target, adding to `sink`: a vertex into the photon
+    /// `map` (paper eq. 4), a sensor hit into its pixel if `pixels` has it. Returns the merges.
+    #[inline]
+    pub fn gather(&self, map: &PhotonMap, pixels: &LocalPixels, e: &LightEvent, sink: &mut impl Gather) -> u64 {
+        match e {
+            LightEvent::Vertex(v) => gather(map, v, self.max_depth, self.backward_diffuse_depth, sink),
+            LightEvent::Sensor(hit) => {
+                self.register(pixels, hit, sink);
+                0
+            }
+        }
+    }
+
+    /// Adds a ghost chain's light to its pixel's visible lights and ghost layer, if the phase renders the pixel.
+    #[inline]
+    pub fn register(&self, pixels: &LocalPixels, hit: &SensorHit, sink: &mut impl Gather) {
+        let Some(local) = pixels.local(hit.pixel) else { return };
+        // A pixel whose camera paths are spectral from their first vertex (spectral output) takes the light of
+        // its own wavelength class only, as a photon does.
+        let tag = if self.spectrum.from_start { PhaseSpectrum::class_of(local as u64) + 1 } else { 0 };
+        let value = join(Rgb::ONE, tag, hit.value, hit.spectrum, &self.spectrum);
+        sink.add(local, Layer::VisibleLights, true, value);
     }
 
     /// Traces light paths `indices` into one map and its buffer: the forward pass of a map nobody shares.
@@ -82,24 +160,13 @@ impl Phase<'_> {
         let (mut stats, mut merges) = (ForwardStats::default(), 0);
         let mut log = RecordedPath::new(PathKind::Light, 0, 0, 0);
         for index in indices {
-            let mut visit = |v: &LightVertex| merges += self.gather(map, v, gathered);
+            let mut visit = |e: &LightEvent| merges += self.gather(map, &LocalPixels::Image, e, gathered);
             let Some((rec, number)) = recorder.filter(|(r, n)| r.keeps(PathKind::Light, *n, index)) else {
                 self.trace_light_path(index, &mut stats, &mut visit);
                 continue;
             };
             (log.phase, log.item) = (number as u32, index as u32);
-            let mut s = Sampler::light(self.seed, self.key, index);
-            let (scene, spectrum) = (self.scene, &self.spectrum);
-            trace_light_path_logged(
-                scene,
-                self.max_depth,
-                spectrum,
-                index,
-                &mut s,
-                &mut stats,
-                &mut visit,
-                Some(&mut log),
-            );
+            self.trace_light_path_logged(index, &mut stats, &mut visit, Some(&mut log));
             rec.record(&log);
         }
         stats.merges = merges;
@@ -245,6 +312,7 @@ impl PhaseBuffers {
                         radius: phase.radius,
                         phase: j,
                         spectrum: phase.spectrum,
+                        sensor_ghosts: phase.sensor_ghosts,
                     };
                     let (x, y) = (pixel % cam.width, pixel / cam.width);
                     let mut s = Sampler::camera(phase.seed, phase.key, pixel as u64, j);
@@ -296,9 +364,11 @@ impl PhaseBuffers {
         aux_sums: &mut AuxSums,
     ) {
         let pixels = self.camera.len();
-        assert_eq!((sums.len(), gathered.stride()), (pixels, 6 + self.aux.channels()), "closing other pixels");
+        let visible = gathered.visible_offset();
+        let expected = 6 + self.aux.channels() + if visible.is_some() { 3 } else { 0 };
+        assert_eq!((sums.len(), gathered.stride()), (pixels, expected), "closing other pixels");
         let stride = gathered.stride();
-        let closing = Closing { inv_n: 1.0 / light_paths.max(1) as f32, bands: self.aux.bands() };
+        let closing = Closing { inv_n: 1.0 / light_paths.max(1) as f32, bands: self.aux.bands(), visible };
         let channels = self.aux.channels();
         let chunk_len = self.chunk;
         let chunks = self
@@ -339,6 +409,8 @@ pub struct Closing {
     pub inv_n: f32,
     /// Where the spectral-output bands lie among the auxiliary channels, and how many there are.
     pub bands: Option<(usize, usize)>,
+    /// Where the visible light registered on the sensor lies among a pixel's gathered values, if anywhere.
+    pub visible: Option<usize>,
 }
 
 impl Closing {
@@ -361,7 +433,10 @@ impl Closing {
         if let Some(g) = gathered.as_deref() {
             v[Layer::Indirect as usize] += Rgb::new(g[0], g[1], g[2]) * self.inv_n;
             v[Layer::Caustic as usize] += Rgb::new(g[3], g[4], g[5]) * self.inv_n;
-            gathered_aux = &g[6..];
+            if let Some(o) = self.visible {
+                v[Layer::VisibleLights as usize] += Rgb::new(g[o], g[o + 1], g[o + 2]) * self.inv_n;
+            }
+            gathered_aux = &g[6..self.visible.unwrap_or(g.len())];
         }
         sums.add_phase(&v, 1, replicate);
         if let (Some((aux, wavelength)), Some(aux_sums)) = (aux, aux_sums) {

@@ -30,7 +30,8 @@ pub struct Vertex {
     pub normal: u32,
     /// The scene object (index into the map's object names), or `NO_OBJECT`.
     pub object: u16,
-    /// The triangle index, `u32::MAX` for analytic surfaces and off surfaces.
+    /// The triangle index, `u32::MAX` for analytic surfaces and off surfaces; the image pixel a light path's
+    /// `SENSOR` vertex registered on.
     pub primitive: u32,
     pub events: Events,
 }
@@ -60,7 +61,9 @@ pub struct RecordedPath {
     pub item: u32,
     /// The wavelength the path was carried at once it met dispersion; 0 for an RGB path.
     pub wavelength_nm: f32,
-    /// A camera path's contribution to its pixel in its phase (before gathered light); a light path's flux.
+    /// A camera path's contribution to its pixel in its phase (before gathered light); a light path's flux, or,
+    /// when it registered on the sensor, the value it registered there in image terms (ΔΦ times the pixel's
+    /// importance, before the division by the phase's light paths).
     pub weight: [f32; 3],
     pub vertices: Vec<Vertex>,
 }
@@ -95,6 +98,13 @@ impl RecordedPath {
         if let Some(v) = self.vertices.last_mut() {
             v.events |= events;
         }
+    }
+
+    /// Adds the vertex where a light path crossed the sensor at `point` and registered on image pixel `pixel`,
+    /// which the vertex keeps as its primitive.
+    #[inline]
+    pub fn sensor(&mut self, point: Vec3, pixel: u32) {
+        self.push(point, Vec3::ZERO, NO_OBJECT, pixel, Events::SENSOR);
     }
 
     /// Adds the vertex of a path that left the scene in `direction`.

@@ -5,8 +5,9 @@ use super::settings::RenderSettings;
 use super::totals::{PhaseReport, RayTotals};
 use crate::accumulation::{Accumulator, AuxLayout};
 use crate::integrator::path_tracer;
-use crate::pbpm::phase::{start_aux, Closing};
-use crate::pbpm::{Executor, GatherBuffer, PhaseBuffers, PhotonMap};
+use crate::pbpm::forward_pass::{trace_light_path_logged, LightEvent, LightSettings};
+use crate::pbpm::phase::{start_aux, Closing, LocalPixels};
+use crate::pbpm::{Executor, ForwardStats, GatherBuffer, PhaseBuffers, PhotonMap};
 use crate::ray_map::{PathKind, RecordedPath, Recorder};
 use crate::sampling::{replicate_of, Sampler};
 use crate::scene::Scene;
@@ -105,7 +106,17 @@ impl<'s> Engine<'s> {
         let spectral = self.settings.is_spectral(scene);
         let aux = self.sums.aux.layout().clone();
         let (channels, ghost_offset) = (aux.channels(), aux.offset(crate::ghost::GHOST_LAYER));
-        let closing = Closing { inv_n: 0.0, bands: aux.bands() };
+        // Ghost chains come from light paths, as in PBPM. Spectral output reads a pixel's bands at its camera
+        // path's own wavelength, which light paths of other wavelengths would not match: with it the camera
+        // paths keep the ghost chains.
+        let sensor_ghosts = crate::ghost::sensor_ghosts(scene) && self.settings.spectral_bands == 0;
+        let light = if sensor_ghosts { self.sensor_light_paths(phase) } else { ForwardStats::default() };
+        let closing = Closing {
+            inv_n: 1.0 / light.light_paths.max(1) as f32,
+            bands: aux.bands(),
+            visible: self.gathered.visible_offset(),
+        };
+        let stride = self.gathered.stride();
         let mut aux_phase = vec![0.0; channels];
         let (replicate, _) = replicate_of(phase);
         let mut log = RecordedPath::new(PathKind::Camera, 0, 0, 0);
@@ -125,21 +136,58 @@ impl<'s> Engine<'s> {
             }
             let max_depth = self.settings.max_depth;
             let logged = kept.is_some().then_some(&mut log);
-            let (v, ghost) = path_tracer::trace_logged(scene, max_depth, &spectrum, ray, &mut s, &mut stats, logged);
+            let (v, ghost) =
+                path_tracer::trace_logged(scene, max_depth, sensor_ghosts, &spectrum, ray, &mut s, &mut stats, logged);
             if let Some(r) = kept {
                 r.record(&log);
             }
             start_aux(&mut aux_phase, ghost_offset, ghost);
-            // Nothing is gathered.
+            // Only the light paths' sensor hits are gathered.
+            let gathered = sensor_ghosts.then(|| &mut self.gathered.values_mut()[pixel * stride..(pixel + 1) * stride]);
             let aux_sums = &mut self.sums.aux.values_mut()[pixel * channels..(pixel + 1) * channels];
             let (aux, aux_sums) = if channels == 0 {
                 (None, None)
             } else {
                 (Some((&mut aux_phase[..], spectrum.wavelength(0))), Some(aux_sums))
             };
-            closing.close_pixel(&v, replicate, None, aux, &mut self.sums.pixels[pixel], aux_sums);
+            closing.close_pixel(&v, replicate, gathered, aux, &mut self.sums.pixels[pixel], aux_sums);
         }
-        PhaseReport { phase, backward_rays: stats.rays, ..Default::default() }
+        PhaseReport {
+            phase,
+            backward_rays: stats.rays,
+            forward_rays: light.rays,
+            light_paths: light.light_paths,
+            ..Default::default()
+        }
+    }
+
+    /// The path tracer's light paths: they only bring the ghost chains to the sensor, so each ends at its first
+    /// diffuse vertex; their light waits in the gather buffer for the phase's pixels.
+    fn sensor_light_paths(&mut self, phase: u64) -> ForwardStats {
+        let scene = self.scene;
+        // The camera paths' wavelength keys are phase << 32 | pixel; this one is no pixel's.
+        let mut p = self.settings.phase(scene, phase);
+        p.spectrum = self.settings.phase_spectrum(scene, phase << 32 | u32::MAX as u64);
+        let light = LightSettings { max_depth: self.settings.max_depth, sensor: true, vertices: false };
+        let mut stats = ForwardStats::default();
+        let gathered = &mut self.gathered;
+        let mut log = RecordedPath::new(PathKind::Light, phase as u32, 0, 0);
+        for index in 0..self.settings.light_paths_per_phase(scene.camera.pixel_count()) {
+            let mut s = Sampler::light(self.settings.seed, p.key, index);
+            let kept = self.recorder.as_deref().filter(|r| r.keeps(PathKind::Light, phase, index));
+            log.item = index as u32;
+            let logged = kept.is_some().then_some(&mut log);
+            let mut visit = |e: &LightEvent| {
+                if let LightEvent::Sensor(hit) = e {
+                    p.register(&LocalPixels::Image, hit, gathered);
+                }
+            };
+            trace_light_path_logged(scene, light, &p.spectrum, index, &mut s, &mut stats, &mut visit, logged);
+            if let Some(r) = kept {
+                r.record(&log);
+            }
+        }
+        stats
     }
 
     fn pbpm_phase(&mut self) -> PhaseReport {

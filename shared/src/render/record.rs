@@ -43,6 +43,12 @@ pub struct TrueError {
     pub reference_delta_all: Option<f64>,
     #[serde(default)]
     pub reference_delta_unlit: Option<f64>,
+    /// The image's mean luminance relative to the reference's, minus one, over all pixels and over pixels that
+    /// do not see a light: the systematic part of the error.
+    #[serde(default)]
+    pub mean_difference_all: Option<f64>,
+    #[serde(default)]
+    pub mean_difference_unlit: Option<f64>,
 }
 
 /// Thread-seconds spent in each stage of the phases, summed over threads: where a parallel engine's time goes.

@@ -31,7 +31,7 @@ pub struct RenderSettings {
 impl RenderSettings {
     /// The scene's own settings for a run of `method` (its estimator) with the given seed.
     pub fn for_scene(scene: &Scene, method: Method, seed: u64) -> Self {
-        let SceneRenderSettings { max_depth, backward_diffuse_depth, radius_scale, light_paths_per_pixel } =
+        let SceneRenderSettings { max_depth, backward_diffuse_depth, radius_scale, light_paths_per_pixel, .. } =
             scene.render;
         RenderSettings {
             estimator: method.estimator(),
@@ -74,6 +74,7 @@ impl RenderSettings {
             backward_diffuse_depth: self.backward_diffuse_depth,
             radius: self.radius_schedule(scene),
             spectrum: self.phase_spectrum(scene, key),
+            sensor_ghosts: crate::ghost::sensor_ghosts(scene),
         }
     }
 

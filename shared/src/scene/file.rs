@@ -27,6 +27,7 @@ pub struct RenderSection {
     pub backward_diffuse_depth: Option<Spanned<u32>>,
     pub radius_scale: Option<Spanned<f32>>,
     pub light_paths_per_pixel: Option<Spanned<f32>>,
+    pub ghost_light_paths: Option<bool>,
 }
 
 /// The camera.

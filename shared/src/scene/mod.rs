@@ -38,11 +38,20 @@ pub struct SceneRenderSettings {
     pub radius_scale: f32,
     /// Light paths per phase, per pixel of the image.
     pub light_paths_per_pixel: f32,
+    /// For a lens that can make ghosts: whether light paths bring the all-specular ghost chains to the sensor
+    /// (the default), or camera paths alone find them, as they find everything else.
+    pub ghost_light_paths: bool,
 }
 
 impl Default for SceneRenderSettings {
     fn default() -> Self {
-        SceneRenderSettings { max_depth: 12, backward_diffuse_depth: 2, radius_scale: 3.0, light_paths_per_pixel: 1.0 }
+        SceneRenderSettings {
+            max_depth: 12,
+            backward_diffuse_depth: 2,
+            radius_scale: 3.0,
+            light_paths_per_pixel: 1.0,
+            ghost_light_paths: true,
+        }
     }
 }
 

@@ -96,12 +96,16 @@ impl EngineConfig {
         // A photon is held twice (the backward pass's list, then the map's copy), and the grid enters it in at
         // most eight cells (its sphere spans at most two cells of three mean radii per axis), each entry a u32
         // plus the build's u64 (cell, photon) pair, in buffers that grow by doubling as the count varies from
-        // phase to phase, with a table of half a bucket per photon.
-        let photon = 2 * std::mem::size_of::<photonfarm::pbpm::BackwardPhoton>() + 2 * 8 * (4 + 8) + 2;
+        // phase to phase, with a table of half a bucket per photon and the u32 of its place in grid order.
+        let photon = 2 * std::mem::size_of::<photonfarm::pbpm::BackwardPhoton>() + 2 * 8 * (4 + 8) + 2 + 4;
         // Gathered light: the group's plain buffer, and the map's atomic one where other groups or several
-        // threads add into it; each holds (indirect, caustic) RGB in f32 and the auxiliary channels.
+        // threads add into it; each holds (indirect, caustic) RGB in f32 and the auxiliary channels, and with a
+        // ghost layer the visible light registered on the sensor. A group with a mask then also holds the
+        // sensor's image-pixel-to-mask table.
+        let sensor = aux.offset(photonfarm::ghost::GHOST_LAYER).is_some();
         let gather_buffers = 1 + (self.shared_maps || self.threads_per_group > 1) as usize;
-        let gathered = gather_buffers * (6 * 4 + aux.phase_bytes_per_pixel());
+        let gathered = gather_buffers * (6 * 4 + aux.phase_bytes_per_pixel() + if sensor { 12 } else { 0 });
+        let sensor_tables = if sensor && self.masks { self.groups * 4 } else { 0 };
         // The camera pass's values and replicate, and the sums; the mask and the phases before the deal take 8
         // bytes.
         let per_pixel = std::mem::size_of::<LayerValues>()
@@ -112,7 +116,7 @@ impl EngineConfig {
             + backward_diffuse_depth as usize * photon
             + aux.phase_bytes_per_pixel()
             + aux.sum_bytes_per_pixel();
-        (Accumulator::bytes_per_pixel(aux) + coverage * per_pixel) as f64
+        (Accumulator::bytes_per_pixel(aux) + sensor_tables + coverage * per_pixel) as f64
     }
 
     /// The layout in words, e.g. "2 groups × 1 thread, 32-pixel tile masks, shared maps".
@@ -233,6 +237,7 @@ impl<'s> ParallelEngine<'s> {
             settings: &self.settings,
             slots: &self.slots,
             shared_maps: self.config.shared_maps,
+            sole_foreign_writer: self.config.groups == 2 && self.config.threads_per_group == 1,
             stop: &stop,
             deal: self.deals,
             numbering: PhaseNumbering {

@@ -7,8 +7,8 @@ use photonfarm::accumulation::{AuxSums, PixelSums};
 use photonfarm::color::Rgb;
 use photonfarm::integrator::Layer;
 use photonfarm::pbpm::{
-    AtomicGatherBuffer, AtomicSink, Executor, ForwardStats, Gather, GatherBuffer, Phase, PhaseBuffers, PhaseNumbering,
-    PhotonMap,
+    AtomicGatherBuffer, AtomicSink, Executor, ForwardStats, Gather, GatherBuffer, LocalPixels, Phase, PhaseBuffers,
+    PhaseNumbering, PhotonMap,
 };
 use photonfarm::render::RenderSettings;
 use photonfarm::scene::Scene;
@@ -34,6 +34,8 @@ pub struct GroupMap {
     /// Light gathered by other groups' paths, and by the group's own paths when it has several threads; the
     /// owner's paths of a one-thread group add into its plain buffer instead, without atomics.
     pub shared: AtomicGatherBuffer,
+    /// Which local pixel of the owner's phase an image pixel is, for light paths registering on the sensor.
+    pub pixels: LocalPixels,
     /// Light paths the phase needs counted against the map, the owner's and other groups' together.
     quota: u64,
     /// Light-path indices the owning group has handed to its threads this phase.
@@ -131,6 +133,9 @@ pub struct RoundContext<'a> {
     pub settings: &'a RenderSettings,
     pub slots: &'a [MapSlot<GroupMap>],
     pub shared_maps: bool,
+    /// Two groups of one thread each: the other group's thread is the only one adding into a group's open map,
+    /// so it adds without compare-and-swap.
+    pub sole_foreign_writer: bool,
     pub stop: &'a AtomicBool,
     pub deal: u64,
     /// The processes rendering the same pixels and the phases before this run, for the radius schedule (each
@@ -174,6 +179,8 @@ pub struct Group {
     /// Groups that render the same pixels in a deal (all of them without masks): the radius schedule counts
     /// their phases too, so that j tracks the pixel's total phase count as in a single-threaded run.
     groups_per_pixel: u32,
+    /// The mask changed since the map's `pixels` lookup was made.
+    new_mask: bool,
     pub stats: GroupStats,
 }
 
@@ -196,6 +203,9 @@ impl Group {
                 }
             })
             .build()?;
+        // A thread runs its start handler before any work: once every thread has run one task, the pinned count
+        // is final, and the run record does not report threads as unpinned that were only not started yet.
+        pool.broadcast(|_| ());
         Ok(Group {
             index,
             pool: Arc::new(pool),
@@ -209,6 +219,7 @@ impl Group {
             aux_sums: AuxSums::new(aux, 0),
             phases_this_deal: 0,
             groups_per_pixel: 1,
+            new_mask: true,
             stats: GroupStats::default(),
         })
     }
@@ -243,7 +254,7 @@ impl Group {
             + self.aux_sums.capacity_bytes();
         // Asked between rounds, when every map is closed.
         let data = slot.data_mut(&mut self.token);
-        own + data.photons.capacity_bytes() + data.shared.capacity_bytes()
+        own + data.photons.capacity_bytes() + data.shared.capacity_bytes() + data.pixels.capacity_bytes()
     }
 
     /// Takes a new mask for the next deal; `phases_before[i]` is how many phases mask pixel i already had.
@@ -257,6 +268,7 @@ impl Group {
         self.mask = mask;
         self.phases_before = phases_before;
         self.phases_this_deal = 0;
+        self.new_mask = true;
     }
 
     /// Runs phases until the round's stop flag is set; reports on `done` when it has finished
@@ -317,6 +329,9 @@ impl Group {
         let uses_shared = ctx.shared_maps || !one_thread;
         {
             let data = slot.data_mut(&mut self.token);
+            if std::mem::take(&mut self.new_mask) {
+                data.pixels = LocalPixels::of_mask(&self.mask, ctx.scene.camera.pixel_count(), phase.sensor_ghosts);
+            }
             self.buffers.build_map(exec, &mut data.photons);
             if uses_shared {
                 data.shared.reset(self.mask.len(), self.buffers.aux());
@@ -390,9 +405,11 @@ impl Group {
                     break;
                 }
                 phase.trace_light_path(index, &mut tally.stats, &mut |v| {
-                    merges[0] += phase.gather(&own.photons, v, sink);
+                    merges[0] += phase.gather(&own.photons, &own.pixels, v, sink);
                     for (g, m) in guards.iter().zip(merges[1..].iter_mut()) {
-                        *m += phase.gather(&g.data().photons, v, &mut g.data().shared.sink());
+                        let shared = &g.data().shared;
+                        let mut sink = if ctx.sole_foreign_writer { shared.sole_writer_sink() } else { shared.sink() };
+                        *m += phase.gather(&g.data().photons, &g.data().pixels, v, &mut sink);
                     }
                 });
                 done += 1;
@@ -494,5 +511,19 @@ mod tests {
         map.start_phase(50);
         assert_eq!(map.claim_towards_quota(16, 60), None);
         assert_eq!(map.claim_towards_quota(16, 40), Some((0, 10)));
+    }
+
+    #[test]
+    fn a_new_groups_pinned_count_is_final_when_it_is_returned() {
+        let cores: Vec<usize> = core_affinity::get_core_ids().unwrap_or_default().iter().map(|c| c.id).collect();
+        // Whether this machine lets a thread pin itself at all, asked the same way the group's threads ask.
+        let can_pin =
+            std::thread::spawn(|| core_affinity::set_for_current(core_affinity::CoreId { id: 0 })).join().unwrap();
+        let threads = cores.len().clamp(1, 2);
+        for _ in 0..20 {
+            let slot = MapSlot::new(GroupMap::default());
+            let group = Group::new(0, vec![0; threads], slot.take_owner(), AuxLayout::default()).unwrap();
+            assert_eq!(group.pinned_threads(), if can_pin { threads } else { 0 });
+        }
     }
 }

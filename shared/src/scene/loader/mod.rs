@@ -71,7 +71,12 @@ impl Loader<'_> {
         lights.extend(self.lights(&parsed.lights)?);
         // After the objects: a sensor camera refers to one of them.
         let camera = self.camera(&parsed.camera, &parts.lens_surfaces)?;
-        self.assemble(render, camera, materials, parts, lights)
+        let front = crate::ghost::front_element(&camera, parts.lens_surfaces.values().copied());
+        let mut scene = self.assemble(render, camera, materials, parts, lights)?;
+        if let Some(front) = front.filter(|_| crate::ghost::sensor_ghosts(&scene)) {
+            scene.lights.aim_at(front);
+        }
+        Ok(scene)
     }
 
     /// The file's TOML structure; a syntax or schema error names the line and, where the line has one, its key.
@@ -163,6 +168,9 @@ impl Loader<'_> {
                 |v| v > 0.0 && v <= 1000.0,
                 "in (0, 1000]",
             )?;
+        }
+        if let Some(b) = r.ghost_light_paths {
+            s.ghost_light_paths = b;
         }
         Ok(s)
     }

@@ -1,0 +1,234 @@
+//! The split of a lens's ghosts between light and camera paths (docs/estimator.md, "The ghost layer"): with
+//! light paths registering the all-specular ghost chains on the sensor and camera paths leaving those chains to
+//! them, both PBPM and the path tracer converge per pixel to the image of camera paths alone, ghost layer
+//! included, on a scene where both halves of the ghost layer carry light.
+
+mod common;
+
+use photonfarm::accumulation::Accumulator;
+use photonfarm::color::luminance_f64;
+use photonfarm::ghost::GHOST_LAYER;
+use photonfarm::pbpm::{trace_light_path, ForwardStats, LightEvent, LightSettings};
+use photonfarm::render::{Engine, Method};
+use photonfarm::sampling::Sampler;
+use photonfarm::scene::Scene;
+use photonfarm::spectrum::PhaseSpectrum;
+
+/// A 16 × 12 sensor behind a flat window of high-index glass (n = 3: each face reflects a quarter of the light
+/// at normal incidence, so ghost chains are frequent from both sides), in a closed grey room lit by a ceiling
+/// light, with a small bright lamp in the middle of the field facing the window. The lamp's light reflected
+/// twice inside the window reaches the sensor through specular surfaces only: the light side's half of the
+/// ghost layer. The room seen in the window's reflections, behind the sensor, is the camera side's half.
+fn scene(ghost_light_paths: bool) -> Scene {
+    // The lamp's chains reach the sensor from about one light path in 500: enough paths per phase that most
+    // pixels get some in every batch of phases, so that their standard errors can be estimated.
+    let light_paths = if ghost_light_paths { 16 } else { 1 };
+    common::scene(&format!(
+        r#"
+[render]
+max_depth = 16
+light_paths_per_pixel = {light_paths}
+ghost_light_paths = {ghost_light_paths}
+
+[camera]
+type = "sensor"
+position = [0.0, 0.0, -0.05]
+look_at = [0.0, 0.0, 0.0]
+sensor_width = 0.012
+rear_element = "window back"
+width = 16
+height = 12
+
+[materials.white]
+type = "diffuse"
+albedo = [0.5, 0.5, 0.5]
+
+[materials.black]
+type = "diffuse"
+albedo = [0.0, 0.0, 0.0]
+
+[materials.air_to_glass]
+type = "dielectric"
+ior = 3.0
+
+[materials.glass_to_air]
+type = "dielectric"
+ext_ior = 3.0
+ior = 1.0
+
+[[objects]]
+name = "window front"
+material = "air_to_glass"
+lens_surface = {{ vertex = [0.0, 0.0, 0.0], axis = [0.0, 0.0, -1.0], curvature_radius = 0.0, aperture_radius = 0.01 }}
+
+[[objects]]
+name = "window back"
+material = "glass_to_air"
+lens_surface = {{ vertex = [0.0, 0.0, -0.004], axis = [0.0, 0.0, -1.0], curvature_radius = 0.0, aperture_radius = 0.01 }}
+
+[[objects]]
+name = "room"
+material = "white"
+box = {{ min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] }}
+
+[[objects]]
+name = "ceiling light"
+material = "black"
+emission = [10.0, 10.0, 10.0]
+quad = {{ corner = [-0.2, 0.98, -0.2], edge1 = [0.4, 0.0, 0.0], edge2 = [0.0, 0.0, 0.4] }}
+
+[[objects]]
+name = "lamp"
+material = "black"
+emission = [200.0, 175.0, 125.0]
+quad = {{ corner = [-0.02, -0.02, 0.3], edge1 = [0.0, 0.04, 0.0], edge2 = [0.04, 0.0, 0.0] }}
+"#
+    ))
+}
+
+/// Per pixel, the mean and standard error of the total's and the ghost layer's luminance.
+struct PixelEstimates {
+    total: Vec<(f64, f64)>,
+    ghost: Vec<(f64, f64)>,
+}
+
+/// Luminance sums over phases of every pixel's total and ghost layer.
+fn luminance_sums(sums: &Accumulator) -> (Vec<f64>, Vec<f64>) {
+    (0..sums.pixels.len())
+        .map(|p| {
+            let s = &sums.pixels[p];
+            let total: f64 = s.sum.iter().map(|l| luminance_f64(*l)).sum();
+            let g = &sums.aux.pixel(p)[sums.aux.layout().offset(GHOST_LAYER).unwrap()..];
+            (total, luminance_f64([g[0], g[1], g[2]]))
+        })
+        .unzip()
+}
+
+/// Renders `batches` × `per_batch` phases and estimates each pixel's mean with its standard error from the
+/// spread of the batches' means: the batches are independent, unlike the quasi-random phases of one pixel.
+fn render(scene: &Scene, method: Method, seed: u64, batches: usize, per_batch: usize) -> PixelEstimates {
+    let mut engine = Engine::new(scene, common::settings(scene, method, seed));
+    let pixels = scene.camera.pixel_count();
+    let (mut before_t, mut before_g) = (vec![0.0; pixels], vec![0.0; pixels]);
+    let (mut means_t, mut means_g) = (vec![Vec::new(); pixels], vec![Vec::new(); pixels]);
+    for _ in 0..batches {
+        for _ in 0..per_batch {
+            engine.run_phase();
+        }
+        let (t, g) = luminance_sums(engine.sums());
+        for p in 0..pixels {
+            means_t[p].push((t[p] - before_t[p]) / per_batch as f64);
+            means_g[p].push((g[p] - before_g[p]) / per_batch as f64);
+        }
+        (before_t, before_g) = (t, g);
+    }
+    PixelEstimates {
+        total: means_t.iter().map(|m| common::mean_sem(m)).collect(),
+        ghost: means_g.iter().map(|m| common::mean_sem(m)).collect(),
+    }
+}
+
+/// Mean over pixels of z² = (a − b)² / (SEM_a² + SEM_b²), over the pixels where either side has an error.
+fn mean_z2(a: &[(f64, f64)], b: &[(f64, f64)]) -> (f64, usize) {
+    let z2: Vec<f64> = a
+        .iter()
+        .zip(b)
+        .filter(|(x, y)| x.1 > 0.0 || y.1 > 0.0)
+        .map(|(x, y)| (x.0 - y.0).powi(2) / (x.1 * x.1 + y.1 * y.1))
+        .collect();
+    (z2.iter().sum::<f64>() / z2.len() as f64, z2.len())
+}
+
+/// Σ over pixels of the means, with its standard error (pixels taken as independent).
+fn image_sum(estimates: &[(f64, f64)]) -> (f64, f64) {
+    let sum = estimates.iter().map(|e| e.0).sum();
+    (sum, estimates.iter().map(|e| e.1 * e.1).sum::<f64>().sqrt())
+}
+
+/// The light side's half of the ghost layer over the image: the luminance the light paths alone register on
+/// the sensor, per phase, summed over pixels.
+fn light_half(scene: &Scene, paths: u64) -> f64 {
+    let settings = LightSettings { max_depth: scene.render.max_depth, sensor: true, vertices: false };
+    let (mut stats, mut sum) = (ForwardStats::default(), 0.0);
+    for index in 0..paths {
+        let mut s = Sampler::light(5, 1, index);
+        trace_light_path(scene, settings, &PhaseSpectrum::RGB, index, &mut s, &mut stats, &mut |e| {
+            if let LightEvent::Sensor(hit) = e {
+                sum += luminance_f64([hit.value.x as f64, hit.value.y as f64, hit.value.z as f64]);
+            }
+        });
+    }
+    sum / paths as f64
+}
+
+#[test]
+fn ghosts_from_light_and_camera_paths_converge_per_pixel_to_the_camera_only_image_with_both_methods() {
+    let (split, camera_only) = (scene(true), scene(false));
+    // Both halves of the ghost layer carry light: the lamp's chains (light side) and the room in the window's
+    // reflections (camera side).
+    let reference = render(&camera_only, Method::Pbpm, 1, 40, 100);
+    let ghost: f64 = reference.ghost.iter().map(|g| g.0).sum();
+    let light = light_half(&split, 200_000);
+    println!("ghost layer over the image {ghost:.4e}, of which the lamp's chains from light paths {light:.4e}");
+    assert!(light > 0.05 * ghost && light < 0.95 * ghost, "one half of the ghost layer is empty: {light} of {ghost}");
+    // Over n pixels, a mean z² within 4 standard deviations of its expectation 1 (z² has variance 2).
+    let n = reference.total.len() as f64;
+    let bound = 1.0 + 4.0 * (2.0 / n).sqrt();
+    for (method, seed) in [(Method::Pbpm, 2), (Method::Path, 3)] {
+        let estimate = render(&split, method, seed, 40, 25);
+        for (what, a, b) in [("total", &estimate.total, &reference.total), ("ghost", &estimate.ghost, &reference.ghost)]
+        {
+            let (z2, pixels) = mean_z2(a, b);
+            let (sum_a, sum_b) = (image_sum(a), image_sum(b));
+            println!(
+                "{method:?}, {what}: image {:.3} ± {:.3}, camera-only {:.3} ± {:.3}",
+                sum_a.0, sum_a.1, sum_b.0, sum_b.1
+            );
+            let image_bound = 4.0 * (sum_a.1.powi(2) + sum_b.1.powi(2)).sqrt();
+            assert!((sum_a.0 - sum_b.0).abs() < image_bound, "{method:?}, {what}: the image sums differ");
+            println!("{method:?}, {what}: mean z² {z2:.3} over {pixels} pixels (bound {bound:.3})");
+            assert!(pixels as f64 > 0.9 * n, "{method:?}, {what}: only {pixels} pixels have light");
+            assert!(z2 < bound, "{method:?}, {what}: mean z² {z2} against the camera-only image exceeds {bound}");
+        }
+    }
+}
+
+/// Mean and standard error over `n` emitted light paths of their flux, and of their flux leaving toward the
+/// front element's disc.
+fn emitted_flux(scene: &Scene, n: u64) -> [(f64, f64); 2] {
+    let disc = scene.lights.aim().unwrap_or(photonfarm::camera::RearElement {
+        center: glam::Vec3::ZERO,
+        axis: -glam::Vec3::Z,
+        radius: 0.01,
+    });
+    let (mut all, mut toward) = (Vec::with_capacity(n as usize), Vec::with_capacity(n as usize));
+    for i in 0..n {
+        let mut s = Sampler::light(9, 2, i);
+        let (u_select, u_pos, u_dir) = (s.next_f32(), s.next_2d(), s.next_2d());
+        let (flux, hits) = match scene.lights.sample_emission(&scene.geometry, u_select, u_pos, u_dir) {
+            Some(e) => {
+                let along = e.direction.dot(disc.axis);
+                let t = (disc.center - e.origin).dot(disc.axis) / along;
+                let p = e.origin + e.direction * t;
+                (luminance_f64(e.beta.to_array().map(f64::from)), t > 0.0 && (p - disc.center).length() <= disc.radius)
+            }
+            None => (0.0, false),
+        };
+        all.push(flux);
+        toward.push(if hits { flux } else { 0.0 });
+    }
+    [common::mean_sem(&all), common::mean_sem(&toward)]
+}
+
+#[test]
+fn light_paths_aimed_at_the_front_element_carry_the_same_flux_overall_and_toward_it() {
+    let (aimed, plain) = (scene(true), scene(false));
+    assert!(aimed.lights.aim().is_some() && plain.lights.aim().is_none());
+    let (a, p) = (emitted_flux(&aimed, 400_000), emitted_flux(&plain, 400_000));
+    for (what, a, p) in [("all", a[0], p[0]), ("toward the window", a[1], p[1])] {
+        println!("{what}: aimed {:.5e} ± {:.1e}, by the cosine {:.5e} ± {:.1e}", a.0, a.1, p.0, p.1);
+        assert!((a.0 - p.0).abs() < 4.0 * (a.1 * a.1 + p.1 * p.1).sqrt(), "{what}: the flux differs");
+    }
+    // Aiming is the point: the estimate of the flux toward the window is much better.
+    assert!(a[1].1 < 0.2 * p[1].1, "aiming did not help: {} against {}", a[1].1, p[1].1);
+}
