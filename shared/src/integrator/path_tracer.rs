@@ -78,6 +78,7 @@ pub fn trace_logged(
 }
 
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn trace_in<const S: bool>(
     scene: &Scene,
     max_depth: u32,
