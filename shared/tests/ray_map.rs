@@ -69,6 +69,38 @@ fn recording_every_path_leaves_a_one_thread_runs_sums_bit_identical() {
     }
 }
 
+/// The shipped lens at 36 × 24 pixels (the sensor keeps its size): light paths register ghost chains on its
+/// sensor.
+fn small_lens() -> Scene {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/lens.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(text.contains("width = 360\n") && text.contains("height = 240\n"));
+    let text = text.replace("width = 360\n", "width = 36\n").replace("height = 240\n", "height = 24\n");
+    Scene::from_toml(&text, &path, path.parent().unwrap()).unwrap_or_else(|e| panic!("{e}"))
+}
+
+#[test]
+fn light_paths_reaching_the_lens_sensor_are_recorded_with_their_pixel_and_leave_the_sums_bit_identical() {
+    let sc = small_lens();
+    for method in [Method::Pbpm, Method::Path] {
+        let dir = scratch(&format!("lens-{}", method.name()));
+        let (plain, recorded) = std::thread::scope(|s| {
+            let a = s.spawn(|| sum_bits(&render(&sc, method, 2, None)));
+            let b = s.spawn(|| sum_bits(&render(&sc, method, 2, Some((&dir, 1.0)))));
+            (a.join().unwrap(), b.join().unwrap())
+        });
+        assert!(plain == recorded, "{method:?}: recording changed the sums");
+        let (_, paths, _) = read_all(&dir).unwrap();
+        let on_sensor: Vec<&Vertex> = paths
+            .iter()
+            .filter(|p| p.kind == PathKind::Light)
+            .flat_map(|p| p.vertices.iter().skip(1).filter(|v| v.events.contains(Events::SENSOR)))
+            .collect();
+        assert!(!on_sensor.is_empty(), "{method:?}: no recorded light path reached the sensor");
+        assert!(on_sensor.iter().all(|v| v.primitive < 36 * 24), "{method:?}: a sensor vertex names no pixel");
+    }
+}
+
 #[test]
 fn a_fraction_records_about_that_share_of_the_paths_and_the_same_ones_every_run() {
     let sc = scene(MIRROR_SCENE);
