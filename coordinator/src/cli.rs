@@ -26,6 +26,64 @@ pub enum Command {
     /// Keys for encrypted links to remote workers.
     #[command(subcommand)]
     Keys(KeysCommand),
+    /// Ray maps recorded by `render --ray-map`: select paths by their optical events and show them.
+    #[command(subcommand)]
+    Rays(RaysCommand),
+}
+
+#[derive(Subcommand, Debug)]
+pub enum RaysCommand {
+    /// Select the recorded paths that satisfy an expression of optical events, and write an overlay PNG over
+    /// the render's preview, the paths as OBJ polylines, and a report (JSON and a table).
+    Select(RaysSelectArgs),
+    /// For a scene with a lens in front of a sensor: rank the pairs of lens surfaces at which ghost camera
+    /// paths took their first two reflections, by their share of the recorded ghost light, with footprints.
+    Ghosts(RaysGhostsArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct RaysGhostsArgs {
+    /// The map: a render's output folder, its raymap/ folder, or one stream file.
+    pub map: PathBuf,
+    /// How many pairs to list (with a footprint PNG each).
+    #[arg(long, default_value_t = 10, value_name = "N")]
+    pub top: usize,
+    /// Output folder (default: ghosts/ next to the map's raymap/ folder).
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+}
+
+/// How `rays select` colours the paths it draws.
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PathColour {
+    /// The path's own colour: its wavelength, or the colour of its weight.
+    Natural,
+    /// Each segment by the event at its end (reflect red, refract cyan, diffuse green, emission yellow, …).
+    Event,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct RaysSelectArgs {
+    /// The map: a render's output folder, its raymap/ folder, or one stream file.
+    pub map: PathBuf,
+    /// The selection, e.g. "reflect(s3) >= 1 and reflect(s5) and not hits(mount2)" (docs/ray-maps.md).
+    #[arg(long = "where", value_name = "EXPR")]
+    pub expr: String,
+    /// Keep at most N selected paths for the overlay, the OBJ file and the report (all are counted).
+    #[arg(long, default_value_t = 1000, value_name = "N")]
+    pub limit: usize,
+    /// Output folder (default: selection/ next to the map's raymap/ folder).
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// How the overlay colours the paths.
+    #[arg(long, value_enum, default_value = "natural")]
+    pub colour: PathColour,
+    /// Threads that decompress and test portions (default: every core).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
 }
 
 #[derive(Subcommand, Debug)]
@@ -256,6 +314,13 @@ pub struct RenderArgs {
     /// threads, runs with fewer threads to fit; the other methods refuse to start. The record flags either.
     #[arg(long, value_name = "SIZE", value_parser = parse_size)]
     pub memory_limit: Option<u64>,
+    /// Record a fraction of the camera and light paths of every phase into raymap/ in the output folder, for
+    /// `coordinator rays select` (methods pbpm and path).
+    #[arg(long)]
+    pub ray_map: bool,
+    /// The fraction of paths --ray-map records, in (0, 1]: chosen by a hash of the seed and the path's numbers.
+    #[arg(long, value_name = "F", default_value_t = 0.01, requires = "ray_map")]
+    pub ray_map_fraction: f64,
 }
 
 /// Where `--display` sends the layers.

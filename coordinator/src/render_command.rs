@@ -11,6 +11,7 @@ use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use photonfarm::accumulation::{Accumulator, LitMask};
 use photonfarm::protocol::Secret;
+use photonfarm::ray_map::{self, Recorder};
 use photonfarm::render::checkpoint::Checkpoint;
 use photonfarm::render::forecast::Forecast;
 use photonfarm::render::method::{Images, Processes};
@@ -54,7 +55,9 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let bar = progress_bar(args.quiet);
 
     let mut notes = Vec::new();
-    let (mut engine, layout) = start_engine(&args, &scene, settings, &dir, checkpoint.as_ref(), &mut notes)?;
+    let recorder = start_ray_map(&args, &scene, &settings, &dir)?;
+    let (mut engine, layout) =
+        start_engine(&args, &scene, settings, &dir, checkpoint.as_ref(), recorder.clone(), &mut notes)?;
     let mut live =
         LiveSession::start(live_options(&args, &scene, &layout, &dir, engine.as_ref(), &interrupted, &lit)?)?;
     if let Some(url) = live.as_ref().and_then(|l| l.url.as_ref()) {
@@ -85,6 +88,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     }
     finish(engine.as_mut(), &outputs, &mut history, &mut forecast);
     bar.finish_and_clear();
+    let ray_map = recorder.map(|r| r.finish().map(|s| (r.path().to_path_buf(), s)));
     let reason = run.context("writing the periodic results failed; the run was stopped")?;
     if reason == StopReason::NoWorkers && engine.sums().pixels.iter().all(|p| p.phases == 0) {
         let why: Vec<String> =
@@ -96,6 +100,18 @@ pub fn run(args: RenderArgs) -> Result<()> {
         f.finished(engine.as_ref(), &record);
     }
     print_summary(&record, reason, &dir);
+    if let Some(m) = ray_map {
+        let (file, s) = m.context("the ray map is incomplete (the image and record were written)")?;
+        println!(
+            "ray map: {} paths, {} segments, {:.1} MB ({:.1} bytes per segment before compression, {:.1} after) in {}",
+            s.paths,
+            s.segments,
+            s.file_bytes as f64 / 1e6,
+            s.raw_bytes as f64 / s.segments.max(1) as f64,
+            s.file_bytes as f64 / s.segments.max(1) as f64,
+            file.display()
+        );
+    }
     if live.as_ref().is_some_and(|l| l.url.is_some()) {
         std::thread::sleep(Duration::from_secs_f64(args.serve_linger));
     }
@@ -305,6 +321,37 @@ fn progress_bar(quiet: bool) -> ProgressBar {
     bar
 }
 
+/// The ray map recorder `--ray-map` asks for, writing into raymap/ of the output folder; refused for the
+/// methods whose paths it cannot reach yet.
+fn start_ray_map(
+    args: &RenderArgs,
+    scene: &Scene,
+    settings: &RenderSettings,
+    dir: &Path,
+) -> Result<Option<Arc<Recorder>>> {
+    if !args.ray_map {
+        return Ok(None);
+    }
+    // A path has at most max_depth segments and one origin.
+    if settings.max_depth as usize >= ray_map::format::MAX_VERTICES {
+        bail!(
+            "--ray-map stores paths of fewer than {} segments; max_depth is {}",
+            ray_map::format::MAX_VERTICES,
+            settings.max_depth
+        );
+    }
+    if args.method != Method::Pbpm && args.method != Method::Path {
+        bail!(
+            "--ray-map records the single-threaded methods (--method pbpm or path) so far; --method {} traces its \
+             paths on worker threads or processes it does not reach yet",
+            args.method
+        );
+    }
+    let header = ray_map::header_for(scene, args.method.name(), args.seed, args.ray_map_fraction, 0);
+    let recorder = Recorder::create(&dir.join("raymap"), &header)?;
+    Ok(Some(Arc::new(recorder)))
+}
+
 /// Starts the method's engine, as its table row says: worker processes, the single-threaded engine, or a
 /// parallel engine in this process. Returns it with its layout in words.
 fn start_engine<'s>(
@@ -313,6 +360,7 @@ fn start_engine<'s>(
     settings: RenderSettings,
     dir: &Path,
     checkpoint: Option<&Checkpoint>,
+    recorder: Option<Arc<Recorder>>,
     notes: &mut Vec<String>,
 ) -> Result<(Box<dyn Progressive + 's>, String)> {
     let layout = args.method.layout();
@@ -329,7 +377,11 @@ fn start_engine<'s>(
             let (cluster, layout) = launch::launch(&launch_options(args), scene, settings, dir, resume)?;
             Ok((Box::new(cluster), layout))
         }
-        (Processes::One, None) => Ok((Box::new(Engine::new(scene, settings)), "1 thread".to_string())),
+        (Processes::One, None) => {
+            let mut engine = Engine::new(scene, settings);
+            engine.set_recorder(recorder);
+            Ok((Box::new(engine), "1 thread".to_string()))
+        }
         (Processes::One, Some(method)) => {
             let cores = match &args.cores {
                 Some(list) => machine::parse_cores(list).map_err(|e| anyhow::anyhow!("--cores: {e}"))?,

@@ -150,6 +150,37 @@ impl Camera {
         CameraRay { ray: Ray::new(origin, dir), weight: if weight.is_finite() { weight } else { 0.0 } }
     }
 
+    /// Where a world point appears on the image, in pixels (x right, y down), or None behind the camera. A
+    /// sensor camera projects through the rear element's centre onto the sensor, as a pinhole there would: the
+    /// lens's image to first order, which is what an overlay of paths needs, not an exact trace through it.
+    pub fn project(&self, p: Vec3) -> Option<Vec2> {
+        let (w, h) = (self.width as f32, self.height as f32);
+        match self.lens {
+            Lens::Pinhole | Lens::Thin { .. } => {
+                let d = p - self.position;
+                let z = d.dot(self.forward);
+                if z <= 0.0 {
+                    return None;
+                }
+                let sx = d.dot(self.right) / (z * self.tan_half_fov_y * w / h);
+                let sy = d.dot(self.up) / (z * self.tan_half_fov_y);
+                Some(Vec2::new((sx + 1.0) * 0.5 * w, (1.0 - sy) * 0.5 * h))
+            }
+            Lens::Sensor { width, rear } => {
+                let d = p - rear.center;
+                let along = d.dot(self.forward);
+                let distance = (rear.center - self.position).dot(self.forward);
+                if along <= 0.0 || distance <= 0.0 {
+                    return None;
+                }
+                let s = rear.center - d * (distance / along) - self.position;
+                let height = width * h / w;
+                let (u, v) = (-s.dot(self.right) / width, s.dot(self.up) / height);
+                Some(Vec2::new((u + 0.5) * w, (v + 0.5) * h))
+            }
+        }
+    }
+
     /// Where a light ray registers on a sensor camera: the pixel its segment from `origin` along the unit
     /// `direction` crosses the sensor in (before `t_max`), with the pixel's importance, 1 over the pixel's area.
     /// None for other cameras, for a ray arriving from behind the sensor, and for one whose line back from the
@@ -211,6 +242,17 @@ mod tests {
             256,
             Lens::Pinhole,
         )
+    }
+
+    #[test]
+    fn a_pinhole_projects_points_on_its_rays_back_to_their_pixels() {
+        let cam = cornell_camera();
+        for (x, y) in [(0, 0), (128, 128), (255, 3), (17, 200)] {
+            let r = cam.generate_ray(x, y, Vec2::splat(0.5), Vec2::ZERO).ray;
+            let p = cam.project(r.origin + r.direction * 1.7).unwrap();
+            assert!((p - Vec2::new(x as f32 + 0.5, y as f32 + 0.5)).length() < 1e-2, "{x} {y} → {p}");
+        }
+        assert_eq!(cam.project(Vec3::new(0.278, 0.273, -2.0)), None);
     }
 
     #[test]

@@ -53,6 +53,7 @@ pub mod light;
 pub mod material;
 pub mod pbpm;
 pub mod protocol;
+pub mod ray_map;
 pub mod render;
 pub mod sampling;
 pub mod scene;

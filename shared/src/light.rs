@@ -198,6 +198,11 @@ impl Lights {
         }
     }
 
+    /// Every light, area lights (one per emitting triangle) first, then the `[[lights]]` entries in order.
+    pub fn all(&self) -> &[Light] {
+        &self.lights
+    }
+
     /// Makes area lights aim `AIMED_FRACTION` of their light paths at `disc` (those that have it in front of
     /// them), with the pdf of the mixture of the two ways of leaving, so that estimates keep their expectation.
     pub fn aim_at(&mut self, disc: RearElement) {

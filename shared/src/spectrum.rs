@@ -285,6 +285,12 @@ impl<const S: bool> PathSpectrum<S> {
         S && ENABLED && self.spectral
     }
 
+    /// The wavelength the path is carried at, once it is spectral.
+    #[inline]
+    pub fn wavelength_nm(&self) -> Option<f32> {
+        self.wavelength.filter(|_| self.is_spectral()).map(|w| w.nm)
+    }
+
     /// What a stored vertex records of the path's colour: 0 for RGB, 1 + class once spectral (see `join`).
     #[inline]
     pub fn tag(&self) -> u8 {

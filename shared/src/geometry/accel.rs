@@ -245,6 +245,11 @@ impl SceneGeometry {
         &self.by_index[index as usize].1
     }
 
+    /// The object a triangle (by the index it was added with) belongs to.
+    pub fn object_of_triangle(&self, index: u32) -> u32 {
+        self.by_index[index as usize].0
+    }
+
     /// The edges of a triangle (by the index it was added with) beyond which its surface does not go on: bit i
     /// for the edge from vertex i to vertex i + 1.
     #[inline]

@@ -6,6 +6,7 @@ use crate::camera::CameraRay;
 use crate::color::Rgb;
 use crate::geometry::{ray::offset_origin, Ray};
 use crate::material::Transport;
+use crate::ray_map::{events::scatter_event, Events, RecordedPath};
 use crate::sampling::{power_heuristic, Sampler};
 use crate::scene::Scene;
 use crate::spectrum::{PathSpectrum, PhaseSpectrum};
@@ -52,15 +53,32 @@ pub fn trace(
     sampler: &mut Sampler,
     stats: &mut PathStats,
 ) -> (LayerValues, Rgb) {
+    trace_logged(scene, max_depth, sensor_ghosts, spectrum, camera_ray, sampler, stats, None)
+}
+
+/// `trace` that also records the path's vertices and events into `log` (a ray map's path) when given one; the
+/// estimate is the same either way.
+#[allow(clippy::too_many_arguments)]
+pub fn trace_logged(
+    scene: &Scene,
+    max_depth: u32,
+    sensor_ghosts: bool,
+    spectrum: &PhaseSpectrum,
+    camera_ray: CameraRay,
+    sampler: &mut Sampler,
+    stats: &mut PathStats,
+    log: Option<&mut RecordedPath>,
+) -> (LayerValues, Rgb) {
     // RGB paths run the instantiation without spectral branches: RGB scenes keep their speed.
     if spectrum.wavelengths.is_some() {
-        trace_in::<true>(scene, max_depth, sensor_ghosts, spectrum, camera_ray, sampler, stats)
+        trace_in::<true>(scene, max_depth, sensor_ghosts, spectrum, camera_ray, sampler, stats, log)
     } else {
-        trace_in::<false>(scene, max_depth, sensor_ghosts, spectrum, camera_ray, sampler, stats)
+        trace_in::<false>(scene, max_depth, sensor_ghosts, spectrum, camera_ray, sampler, stats, log)
     }
 }
 
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn trace_in<const S: bool>(
     scene: &Scene,
     max_depth: u32,
@@ -69,6 +87,7 @@ fn trace_in<const S: bool>(
     camera_ray: CameraRay,
     sampler: &mut Sampler,
     stats: &mut PathStats,
+    mut log: Option<&mut RecordedPath>,
 ) -> (LayerValues, Rgb) {
     let mut out: LayerValues = [Rgb::ZERO; 4];
     // Some(light so far) once the path is a ghost path.
@@ -85,12 +104,26 @@ fn trace_in<const S: bool>(
     let mut previous = Previous::Specular;
     let mut diffuse_vertices = 0u32;
     let mut segments = 0u32;
+    if let Some(l) = log.as_deref_mut() {
+        l.begin(ray.origin, Vec3::ZERO);
+    }
     loop {
         stats.rays += 1;
-        let Some(hit) = scene.geometry.intersect(&ray) else { break };
+        let Some(hit) = scene.geometry.intersect(&ray) else {
+            if let Some(l) = log.as_deref_mut() {
+                l.escape(ray.direction);
+            }
+            break;
+        };
         segments += 1;
+        if let Some(l) = log.as_deref_mut() {
+            l.hit(&hit);
+        }
         let le = scene.lights.emitted(&hit, ray.direction);
         if le != Rgb::ZERO {
+            if let Some(l) = log.as_deref_mut() {
+                l.event(Events::EMISSION);
+            }
             let le = path.quantity(le);
             match previous {
                 Previous::Specular if diffuse_vertices == 0 && ghost.is_some() && sensor_ghosts => {}
@@ -129,7 +162,15 @@ fn trace_in<const S: bool>(
                 );
             }
         }
-        let Some(s) = material.sample(&hit, wo, sampler.next_2d(), Transport::Radiance) else { break };
+        let Some(s) = material.sample(&hit, wo, sampler.next_2d(), Transport::Radiance) else {
+            if let Some(l) = log.as_deref_mut() {
+                l.event(Events::ABSORB);
+            }
+            break;
+        };
+        if let Some(l) = log.as_deref_mut() {
+            l.event(scatter_event(&material, &hit, wo, s.wi, s.delta));
+        }
         if diffuse_vertices == 0 && ghost.is_none() && crate::ghost::is_dielectric_reflection(&material, &hit, wo, s.wi)
         {
             ghost = Some(Rgb::ZERO);
@@ -142,11 +183,17 @@ fn trace_in<const S: bool>(
             // measurement rather than losses.
             let q = (beta.max_element() / roulette_unit).min(1.0);
             if sampler.next_f32() >= q {
+                if let Some(l) = log.as_deref_mut() {
+                    l.event(Events::ABSORB);
+                }
                 break;
             }
             beta /= q;
         }
         ray = Ray::new(offset_origin(hit.p, hit.ng, s.wi), s.wi);
+    }
+    if let Some(l) = log {
+        l.finish(out.iter().copied().sum(), path.wavelength_nm());
     }
     (out, ghost.unwrap_or(Rgb::ZERO))
 }

@@ -10,6 +10,7 @@ use crate::color::Rgb;
 use crate::geometry::{ray::offset_origin, Ray};
 use crate::integrator::{add_contribution, sample_direct, Layer, LayerValues};
 use crate::material::Transport;
+use crate::ray_map::{events::scatter_event, Events, RecordedPath};
 use crate::sampling::{power_heuristic, Sampler};
 use crate::scene::Scene;
 use crate::spectrum::{PathSpectrum, PhaseSpectrum};
@@ -61,15 +62,32 @@ pub fn trace_camera_path(
     stats: &mut BackwardStats,
     store: &mut impl FnMut(BackwardPhoton),
 ) -> (LayerValues, Rgb) {
+    trace_camera_path_logged(scene, settings, pixel, camera_ray, sampler, stats, store, None)
+}
+
+/// `trace_camera_path` that also records the path's vertices and events into `log` (a ray map's path) when
+/// given one; the image is the same either way.
+#[allow(clippy::too_many_arguments)]
+pub fn trace_camera_path_logged(
+    scene: &Scene,
+    settings: &BackwardSettings,
+    pixel: u32,
+    camera_ray: CameraRay,
+    sampler: &mut Sampler,
+    stats: &mut BackwardStats,
+    store: &mut impl FnMut(BackwardPhoton),
+    log: Option<&mut RecordedPath>,
+) -> (LayerValues, Rgb) {
     // An RGB phase runs the instantiation without spectral branches: RGB scenes keep their speed.
     if settings.spectrum.wavelengths.is_some() {
-        camera_path::<true>(scene, settings, pixel, camera_ray, sampler, stats, store)
+        camera_path::<true>(scene, settings, pixel, camera_ray, sampler, stats, store, log)
     } else {
-        camera_path::<false>(scene, settings, pixel, camera_ray, sampler, stats, store)
+        camera_path::<false>(scene, settings, pixel, camera_ray, sampler, stats, store, log)
     }
 }
 
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn camera_path<const S: bool>(
     scene: &Scene,
     settings: &BackwardSettings,
@@ -78,6 +96,7 @@ fn camera_path<const S: bool>(
     sampler: &mut Sampler,
     stats: &mut BackwardStats,
     store: &mut impl FnMut(BackwardPhoton),
+    mut log: Option<&mut RecordedPath>,
 ) -> (LayerValues, Rgb) {
     let mut out: LayerValues = [Rgb::ZERO; 4];
     // Some(light so far) once the path is a ghost path.
@@ -97,13 +116,27 @@ fn camera_path<const S: bool>(
     // Set when the previous vertex was diffuse vertex D_k at `p` with BSDF pdf `pdf`: an emitter hit now is
     // D_k's direct light, weighted against its next-event estimate.
     let mut from_diffuse: Option<(Vec3, f32)> = None;
+    if let Some(l) = log.as_deref_mut() {
+        l.begin(ray.origin, Vec3::ZERO);
+    }
     loop {
         stats.rays += 1;
-        let Some(hit) = scene.geometry.intersect(&ray) else { break };
+        let Some(hit) = scene.geometry.intersect(&ray) else {
+            if let Some(l) = log.as_deref_mut() {
+                l.escape(ray.direction);
+            }
+            break;
+        };
         segments += 1;
         path_length += hit.t;
+        if let Some(l) = log.as_deref_mut() {
+            l.hit(&hit);
+        }
         let le = scene.lights.emitted(&hit, ray.direction);
         if le != Rgb::ZERO {
+            if let Some(l) = log.as_deref_mut() {
+                l.event(Events::EMISSION);
+            }
             let le = path.quantity(le);
             match (k, from_diffuse) {
                 (0, _) if ghost.is_some() && settings.sensor_ghosts => {}
@@ -125,7 +158,13 @@ fn camera_path<const S: bool>(
         let continues;
         if let Some(albedo) = material.diffuse_albedo() {
             if albedo == Rgb::ZERO {
+                if let Some(l) = log.as_deref_mut() {
+                    l.event(Events::ABSORB);
+                }
                 break;
+            }
+            if let Some(l) = log.as_deref_mut() {
+                l.event(Events::DIFFUSE);
             }
             k += 1;
             continues = k < settings.backward_diffuse_depth;
@@ -161,7 +200,15 @@ fn camera_path<const S: bool>(
                 break;
             }
         }
-        let Some(s) = material.sample(&hit, wo, sampler.next_2d(), Transport::Radiance) else { break };
+        let Some(s) = material.sample(&hit, wo, sampler.next_2d(), Transport::Radiance) else {
+            if let Some(l) = log.as_deref_mut() {
+                l.event(Events::ABSORB);
+            }
+            break;
+        };
+        if let Some(l) = log.as_deref_mut() {
+            l.event(scatter_event(&material, &hit, wo, s.wi, s.delta));
+        }
         if k == 0 && ghost.is_none() && crate::ghost::is_dielectric_reflection(&material, &hit, wo, s.wi) {
             ghost = Some(Rgb::ZERO);
         }
@@ -175,11 +222,17 @@ fn camera_path<const S: bool>(
             // glass would otherwise kill most paths inside it.
             let q = (beta.max_element() / roulette_unit).min(1.0);
             if sampler.next_f32() >= q {
+                if let Some(l) = log.as_deref_mut() {
+                    l.event(Events::ABSORB);
+                }
                 break;
             }
             beta /= q;
         }
         ray = Ray::new(offset_origin(hit.p, hit.ng, s.wi), s.wi);
+    }
+    if let Some(l) = log {
+        l.finish(out.iter().copied().sum(), path.wavelength_nm());
     }
     (out, ghost.unwrap_or(Rgb::ZERO))
 }

@@ -6,6 +6,7 @@ use crate::color::Rgb;
 use crate::geometry::{ray::offset_origin, Ray, SurfaceHit};
 use crate::integrator::Layer;
 use crate::material::Transport;
+use crate::ray_map::{events::scatter_event, Events, RecordedPath};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::spectrum::{join, PathSpectrum, PhaseSpectrum};
@@ -118,15 +119,32 @@ pub fn trace_light_path(
     stats: &mut ForwardStats,
     visit: &mut impl FnMut(&LightEvent),
 ) {
+    trace_light_path_logged(scene, settings, spectrum, index, sampler, stats, visit, None)
+}
+
+/// `trace_light_path` that also records the path's vertices and events into `log` (a ray map's path) when
+/// given one, its source being the light's emitter (`ray_map::emitter_of`); the image is the same either way.
+#[allow(clippy::too_many_arguments)]
+pub fn trace_light_path_logged(
+    scene: &Scene,
+    settings: LightSettings,
+    spectrum: &PhaseSpectrum,
+    index: u64,
+    sampler: &mut Sampler,
+    stats: &mut ForwardStats,
+    visit: &mut impl FnMut(&LightEvent),
+    log: Option<&mut RecordedPath>,
+) {
     // An RGB phase runs the instantiation without spectral branches: RGB scenes keep their speed.
     if spectrum.wavelengths.is_some() {
-        light_path::<true>(scene, settings, spectrum, index, sampler, stats, visit)
+        light_path::<true>(scene, settings, spectrum, index, sampler, stats, visit, log)
     } else {
-        light_path::<false>(scene, settings, spectrum, index, sampler, stats, visit)
+        light_path::<false>(scene, settings, spectrum, index, sampler, stats, visit, log)
     }
 }
 
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn light_path<const S: bool>(
     scene: &Scene,
     settings: LightSettings,
@@ -135,6 +153,7 @@ fn light_path<const S: bool>(
     sampler: &mut Sampler,
     stats: &mut ForwardStats,
     visit: &mut impl FnMut(&LightEvent),
+    mut log: Option<&mut RecordedPath>,
 ) {
     let max_depth = settings.max_depth;
     stats.light_paths += 1;
@@ -150,7 +169,13 @@ fn light_path<const S: bool>(
     // Set once the all-specular chain so far took a reflection at a dielectric: from then on, until a diffuse
     // vertex, a segment that crosses the sensor is a ghost the light side owns.
     let mut ghost_chain = false;
+    // What the path registered on the sensor, for its recording.
+    let mut registered = Rgb::ZERO;
     let mut m = 0u32;
+    if let Some(l) = log.as_deref_mut() {
+        l.source = crate::ray_map::emitter_of(scene, e.light);
+        l.begin(e.origin, e.normal);
+    }
     loop {
         stats.rays += 1;
         let hit = scene.geometry.intersect(&ray);
@@ -161,11 +186,26 @@ fn light_path<const S: bool>(
                 let value = beta * importance;
                 if value != Rgb::ZERO {
                     visit(&LightEvent::Sensor(SensorHit { pixel, value, spectrum: path.tag(), phase: spectrum }));
+                    if let Some(l) = log.as_deref_mut() {
+                        let cam = &scene.camera;
+                        let t = (cam.position - ray.origin).dot(cam.forward()) / ray.direction.dot(cam.forward());
+                        l.sensor(ray.origin + ray.direction * t, pixel);
+                        // In image terms, as a pixel whose camera paths start in RGB reads it.
+                        registered += join(Rgb::ONE, 0, value, path.tag(), spectrum);
+                    }
                 }
             }
         }
-        let Some(hit) = hit else { break };
+        let Some(hit) = hit else {
+            if let Some(l) = log.as_deref_mut() {
+                l.escape(ray.direction);
+            }
+            break;
+        };
         m += 1;
+        if let Some(l) = log.as_deref_mut() {
+            l.hit(&hit);
+        }
         let material = path.material(scene.material(&hit), &mut beta);
         let wi = -ray.direction;
         if material.diffuse_albedo().is_some() {
@@ -194,7 +234,15 @@ fn light_path<const S: bool>(
             }
             break;
         }
-        let Some(s) = material.sample(&hit, wi, sampler.next_2d(), Transport::Importance) else { break };
+        let Some(s) = material.sample(&hit, wi, sampler.next_2d(), Transport::Importance) else {
+            if let Some(l) = log.as_deref_mut() {
+                l.event(Events::ABSORB);
+            }
+            break;
+        };
+        if let Some(l) = log.as_deref_mut() {
+            l.event(scatter_event(&material, &hit, wi, s.wi, s.delta));
+        }
         if settings.sensor && all_specular && crate::ghost::is_dielectric_reflection(&material, &hit, wi, s.wi) {
             ghost_chain = true;
         }
@@ -202,11 +250,18 @@ fn light_path<const S: bool>(
         if m >= 3 {
             let q = (beta.max_element() / beta0).min(1.0);
             if sampler.next_f32() >= q {
+                if let Some(l) = log.as_deref_mut() {
+                    l.event(Events::ABSORB);
+                }
                 break;
             }
             beta /= q;
         }
         ray = Ray::new(offset_origin(hit.p, hit.ng, s.wi), s.wi);
+    }
+    if let Some(l) = log {
+        let weight = if registered == Rgb::ZERO { e.beta } else { registered };
+        l.finish(weight, path.wavelength_nm());
     }
 }
 

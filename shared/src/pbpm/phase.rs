@@ -10,9 +10,11 @@
 //! synchronous group runs them over its tile mask on its pinned threads and drives step 3 itself (its light-path
 //! quota, the other groups' maps, the stop). Both reach the same image: the stages are this file's, once.
 
-use super::backward_pass::{trace_camera_path, BackwardSettings, BackwardStats};
+use super::backward_pass::{trace_camera_path_logged, BackwardSettings, BackwardStats};
 use super::executor::Executor;
-use super::forward_pass::{gather, trace_light_path, ForwardStats, Gather, LightEvent, LightSettings, SensorHit};
+use super::forward_pass::{
+    gather, trace_light_path_logged, ForwardStats, Gather, LightEvent, LightSettings, SensorHit,
+};
 use super::gather_buffer::GatherBuffer;
 use super::photon::BackwardPhoton;
 use super::photon_map::PhotonMap;
@@ -20,6 +22,7 @@ use super::radius::RadiusSchedule;
 use crate::accumulation::{auxiliary::add_phase_to, AuxLayout, AuxSums, PixelSums};
 use crate::color::Rgb;
 use crate::integrator::{Layer, LayerValues};
+use crate::ray_map::{PathKind, RecordedPath, Recorder};
 use crate::sampling::{replicate_of, Sampler};
 use crate::scene::Scene;
 use crate::spectrum::{band_values, join, PhaseSpectrum, Wavelength};
@@ -95,9 +98,21 @@ impl Phase<'_> {
     /// and each ghost chain that reaches the sensor to `visit`.
     #[inline]
     pub fn trace_light_path(&self, index: u64, stats: &mut ForwardStats, visit: &mut impl FnMut(&LightEvent)) {
+        self.trace_light_path_logged(index, stats, visit, None);
+    }
+
+    /// `trace_light_path` that also records the path into `log` (a ray map's path) when given one.
+    #[inline]
+    pub fn trace_light_path_logged(
+        &self,
+        index: u64,
+        stats: &mut ForwardStats,
+        visit: &mut impl FnMut(&LightEvent),
+        log: Option<&mut RecordedPath>,
+    ) {
         let mut s = Sampler::light(self.seed, self.key, index);
         let settings = LightSettings { max_depth: self.max_depth, sensor: self.sensor_ghosts, vertices: true };
-        trace_light_path(self.scene, settings, &self.spectrum, index, &mut s, stats, visit);
+        trace_light_path_logged(self.scene, settings, &self.spectrum, index, &mut s, stats, visit, log);
     }
 
     /// Gathers what a light path hands over into one phase's target, adding to `sink`: a vertex into the photon
@@ -131,11 +146,28 @@ impl Phase<'_> {
         map: &PhotonMap,
         gathered: &mut GatherBuffer,
     ) -> ForwardStats {
+        self.forward_pass_recorded(indices, map, gathered, None)
+    }
+
+    /// `forward_pass` that hands the paths `recorder` keeps of phase `number` to it.
+    pub fn forward_pass_recorded(
+        &self,
+        indices: std::ops::Range<u64>,
+        map: &PhotonMap,
+        gathered: &mut GatherBuffer,
+        recorder: Option<(&Recorder, u64)>,
+    ) -> ForwardStats {
         let (mut stats, mut merges) = (ForwardStats::default(), 0);
+        let mut log = RecordedPath::new(PathKind::Light, 0, 0, 0);
         for index in indices {
-            self.trace_light_path(index, &mut stats, &mut |e| {
-                merges += self.gather(map, &LocalPixels::Image, e, gathered)
-            });
+            let mut visit = |e: &LightEvent| merges += self.gather(map, &LocalPixels::Image, e, gathered);
+            let Some((rec, number)) = recorder.filter(|(r, n)| r.keeps(PathKind::Light, *n, index)) else {
+                self.trace_light_path(index, &mut stats, &mut visit);
+                continue;
+            };
+            (log.phase, log.item) = (number as u32, index as u32);
+            self.trace_light_path_logged(index, &mut stats, &mut visit, Some(&mut log));
+            rec.record(&log);
         }
         stats.merges = merges;
         stats
@@ -167,6 +199,8 @@ pub struct PhaseBuffers {
     /// the single-threaded engine holds its photons once.
     chunk: usize,
     single_list: bool,
+    /// Records the kept camera paths into a ray map.
+    recorder: Option<std::sync::Arc<Recorder>>,
 }
 
 /// One chunk's auxiliary values, or None for every chunk when there are no auxiliary channels, so that an image
@@ -196,7 +230,13 @@ impl PhaseBuffers {
             photon_lists: Vec::new(),
             chunk: PIXEL_CHUNK,
             single_list: exec == Executor::CallingThread,
+            recorder: None,
         }
+    }
+
+    /// Records the camera paths `recorder` keeps from the next camera pass on.
+    pub fn set_recorder(&mut self, recorder: Option<std::sync::Arc<Recorder>>) {
+        self.recorder = recorder;
     }
 
     /// The auxiliary layers.
@@ -245,6 +285,7 @@ impl PhaseBuffers {
         let cam = &phase.scene.camera;
         let (channels, ghost_offset) = (self.aux.channels(), self.ghost);
         let bdd = phase.backward_diffuse_depth;
+        let recorder = self.recorder.as_deref();
         let chunks = self
             .camera
             .par_chunks_mut(chunk_len)
@@ -259,6 +300,7 @@ impl PhaseBuffers {
                 // from the first phase, a list never grows, and holds what `--memory-limit` assumed.
                 photons.reserve_exact(values.len() * bdd as usize);
                 let mut stats = BackwardStats::default();
+                let mut log = RecordedPath::new(PathKind::Camera, 0, 0, 0);
                 for (i, out) in values.iter_mut().enumerate() {
                     let local = chunk * chunk_len + i;
                     let pixel = pixels.map_or(local as u32, |p| p[local]);
@@ -275,10 +317,23 @@ impl PhaseBuffers {
                     let (x, y) = (pixel % cam.width, pixel / cam.width);
                     let mut s = Sampler::camera(phase.seed, phase.key, pixel as u64, j);
                     let ray = cam.generate_ray(x, y, s.next_2d(), s.next_2d());
-                    let (v, ghost) =
-                        trace_camera_path(phase.scene, &bs, local as u32, ray, &mut s, &mut stats, &mut |b| {
-                            photons.push(b)
-                        });
+                    let kept = recorder.filter(|r| r.keeps(PathKind::Camera, j, pixel as u64));
+                    if kept.is_some() {
+                        (log.phase, log.item, log.source) = (j as u32, pixel, pixel);
+                    }
+                    let (v, ghost) = trace_camera_path_logged(
+                        phase.scene,
+                        &bs,
+                        local as u32,
+                        ray,
+                        &mut s,
+                        &mut stats,
+                        &mut |b| photons.push(b),
+                        kept.is_some().then_some(&mut log),
+                    );
+                    if let Some(r) = kept {
+                        r.record(&log);
+                    }
                     *out = v;
                     if let Some(aux) = aux.as_deref_mut() {
                         start_aux(&mut aux[i * channels..(i + 1) * channels], ghost_offset, ghost);

@@ -5,12 +5,14 @@ use super::settings::RenderSettings;
 use super::totals::{PhaseReport, RayTotals};
 use crate::accumulation::{Accumulator, AuxLayout};
 use crate::integrator::path_tracer;
-use crate::pbpm::forward_pass::{trace_light_path, LightEvent, LightSettings};
+use crate::pbpm::forward_pass::{trace_light_path_logged, LightEvent, LightSettings};
 use crate::pbpm::phase::{start_aux, Closing, LocalPixels};
 use crate::pbpm::{Executor, ForwardStats, GatherBuffer, PhaseBuffers, PhotonMap};
+use crate::ray_map::{PathKind, RecordedPath, Recorder};
 use crate::sampling::{replicate_of, Sampler};
 use crate::scene::Scene;
 use crate::spectrum::PhaseSpectrum;
+use std::sync::Arc;
 
 /// Runs phases over the whole image on the calling thread and keeps the running sums: one group of one thread
 /// whose map nobody shares, running the stages of `pbpm::phase`.
@@ -22,6 +24,8 @@ pub struct Engine<'s> {
     map: PhotonMap,
     gathered: GatherBuffer,
     totals: RayTotals,
+    /// Records the kept camera and light paths into a ray map.
+    recorder: Option<Arc<Recorder>>,
 }
 
 impl<'s> Engine<'s> {
@@ -44,7 +48,15 @@ impl<'s> Engine<'s> {
             map,
             gathered,
             totals: RayTotals::default(),
+            recorder: None,
         }
+    }
+
+    /// Records the paths `recorder` keeps (a ray map) from the next phase on; recording does not change the
+    /// image.
+    pub fn set_recorder(&mut self, recorder: Option<Arc<Recorder>>) {
+        self.buffers.set_recorder(recorder.clone());
+        self.recorder = recorder;
     }
 
     /// The running sums.
@@ -107,6 +119,7 @@ impl<'s> Engine<'s> {
         let stride = self.gathered.stride();
         let mut aux_phase = vec![0.0; channels];
         let (replicate, _) = replicate_of(phase);
+        let mut log = RecordedPath::new(PathKind::Camera, 0, 0, 0);
         for pixel in 0..cam.pixel_count() {
             let (x, y) = ((pixel % cam.width as usize) as u32, (pixel / cam.width as usize) as u32);
             let mut s = Sampler::path(self.settings.seed, pixel as u64, phase);
@@ -117,8 +130,17 @@ impl<'s> Engine<'s> {
             } else {
                 PhaseSpectrum::RGB
             };
+            let kept = self.recorder.as_deref().filter(|r| r.keeps(PathKind::Camera, phase, pixel as u64));
+            if kept.is_some() {
+                (log.phase, log.item, log.source) = (phase as u32, pixel as u32, pixel as u32);
+            }
+            let max_depth = self.settings.max_depth;
+            let logged = kept.is_some().then_some(&mut log);
             let (v, ghost) =
-                path_tracer::trace(scene, self.settings.max_depth, sensor_ghosts, &spectrum, ray, &mut s, &mut stats);
+                path_tracer::trace_logged(scene, max_depth, sensor_ghosts, &spectrum, ray, &mut s, &mut stats, logged);
+            if let Some(r) = kept {
+                r.record(&log);
+            }
             start_aux(&mut aux_phase, ghost_offset, ghost);
             // Only the light paths' sensor hits are gathered.
             let gathered = sensor_ghosts.then(|| &mut self.gathered.values_mut()[pixel * stride..(pixel + 1) * stride]);
@@ -149,13 +171,21 @@ impl<'s> Engine<'s> {
         let light = LightSettings { max_depth: self.settings.max_depth, sensor: true, vertices: false };
         let mut stats = ForwardStats::default();
         let gathered = &mut self.gathered;
+        let mut log = RecordedPath::new(PathKind::Light, phase as u32, 0, 0);
         for index in 0..self.settings.light_paths_per_phase(scene.camera.pixel_count()) {
             let mut s = Sampler::light(self.settings.seed, p.key, index);
-            trace_light_path(scene, light, &p.spectrum, index, &mut s, &mut stats, &mut |e| {
+            let kept = self.recorder.as_deref().filter(|r| r.keeps(PathKind::Light, phase, index));
+            log.item = index as u32;
+            let logged = kept.is_some().then_some(&mut log);
+            let mut visit = |e: &LightEvent| {
                 if let LightEvent::Sensor(hit) = e {
                     p.register(&LocalPixels::Image, hit, gathered);
                 }
-            });
+            };
+            trace_light_path_logged(scene, light, &p.spectrum, index, &mut s, &mut stats, &mut visit, logged);
+            if let Some(r) = kept {
+                r.record(&log);
+            }
         }
         stats
     }
@@ -168,7 +198,8 @@ impl<'s> Engine<'s> {
         let backward = self.buffers.camera_pass(exec, &phase, None, |_| number, &mut self.map);
         self.buffers.build_map(exec, &mut self.map);
         let n = self.settings.light_paths_per_phase(self.scene.camera.pixel_count());
-        let forward = phase.forward_pass(0..n, &self.map, &mut self.gathered);
+        let recorder = self.recorder.as_deref().map(|r| (r, number));
+        let forward = phase.forward_pass_recorded(0..n, &self.map, &mut self.gathered, recorder);
         self.buffers.close(exec, &phase, &mut self.gathered, n, &mut self.sums.pixels, &mut self.sums.aux);
         self.totals.backward_photons += backward.photons;
         self.totals.capped_light_paths += forward.capped;

@@ -1,0 +1,215 @@
+//! `coordinator rays ghosts`: ranks the pairs of lens surfaces at which ghost paths took their first two
+//! reflections (camera paths, and light paths whose ghost chain registered on the sensor), by their share of the ghost light the recorded paths carry, with each pair's footprint on the
+//! image, and compares the recorded ghost light with the render's ghost layer.
+
+use crate::cli::RaysGhostsArgs;
+use crate::rays_command::render_folder;
+use anyhow::{bail, Context, Result};
+use photonfarm::color::luminance;
+use photonfarm::material::Material;
+use photonfarm::ray_map::reader::open_streams;
+use photonfarm::ray_map::{Events, PathKind, RecordedPath, Vertex};
+use photonfarm::scene::Scene;
+use rayon::prelude::*;
+use std::collections::HashMap;
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// The two surfaces of a ghost: the object indices of its first and second dielectric reflections (the second
+/// None for a path that reflected once).
+type Pair = (u16, Option<u16>);
+
+/// What one pair carries.
+#[derive(Clone, Default)]
+struct PairTotals {
+    energy: f64,
+    paths: u64,
+    /// Luminance per pixel of the image.
+    footprint: Vec<f32>,
+}
+
+/// The ghost pair of a recorded path and the pixel its ghost light lands on, or None for a path that carries
+/// no ghost light. A camera path's pair is its dielectric reflections before its first diffuse vertex (the ghost
+/// layer's rule); a light path's, one that registered on the sensor (a ghost chain the light side owns), is its
+/// dielectric reflections before the sensor taken from the sensor's side, so that both name a ghost alike.
+fn ghost_pair(path: &RecordedPath, dielectric: &[bool]) -> Option<(Pair, u32)> {
+    let is_reflection =
+        |v: &&Vertex| v.events.contains(Events::REFLECT) && dielectric.get(v.object as usize).copied().unwrap_or(false);
+    match path.kind {
+        PathKind::Camera => {
+            let mut reflections = path
+                .vertices
+                .iter()
+                .take_while(|v| !v.events.contains(Events::DIFFUSE))
+                .filter(is_reflection)
+                .map(|v| v.object);
+            let first = reflections.next()?;
+            Some(((first, reflections.next()), path.source))
+        }
+        PathKind::Light => {
+            let sensor = path.vertices.iter().skip(1).position(|v| v.events.contains(Events::SENSOR))? + 1;
+            let mut reflections = path.vertices[..sensor].iter().rev().filter(is_reflection).map(|v| v.object);
+            let first = reflections.next()?;
+            Some(((first, reflections.next()), path.vertices[sensor].primitive))
+        }
+    }
+}
+
+/// Runs `rays ghosts`.
+pub fn ghosts(args: RaysGhostsArgs) -> Result<()> {
+    let mut streams = open_streams(&args.map)?;
+    let header = streams[0].header().clone();
+    let scene = Scene::load(Path::new(&header.scene))
+        .with_context(|| format!("the map's scene {} is needed for its lens surfaces", header.scene))?;
+    let dielectric: Vec<bool> = scene
+        .objects
+        .iter()
+        .map(|o| matches!(scene.materials[o.material as usize], Material::Dielectric { .. }))
+        .collect();
+    if !dielectric.iter().any(|&d| d) {
+        bail!("{} has no dielectric surface, so no ghosts", header.scene);
+    }
+    let (w, h) = (header.width as usize, header.height as usize);
+    let mut pairs: HashMap<Pair, PairTotals> = HashMap::new();
+    let mut total = 0.0f64;
+    let mut portions = Vec::new();
+    for s in &mut streams {
+        while let Some(p) = s.next_portion()? {
+            portions.push(p);
+        }
+        if let Some(bytes) = s.truncated_bytes() {
+            eprintln!("note: {} ends inside a portion; its last {bytes} bytes were left", s.path().display());
+        }
+    }
+    // A light path's weight is what it registered before the division by its phase's light paths; the record
+    // of the render says how many each phase traced, once a light path is found that needs it.
+    let light_paths_per_phase = std::sync::OnceLock::new();
+    let per_portion: Vec<Vec<(Pair, f64, u32)>> = portions
+        .par_iter()
+        .map(|p| -> Result<_> {
+            p.decode()?
+                .iter()
+                .filter_map(|path| {
+                    let (pair, pixel) = ghost_pair(path, &dielectric)?;
+                    let energy = luminance(glam::Vec3::from_array(path.weight)) as f64;
+                    Some(match path.kind {
+                        PathKind::Camera => Ok((pair, energy, pixel)),
+                        PathKind::Light => {
+                            match light_paths_per_phase.get_or_init(|| light_paths_per_phase_of(&args.map)) {
+                                Ok(n) => Ok((pair, energy / *n, pixel)),
+                                Err(e) => Err(anyhow::anyhow!("{e}")),
+                            }
+                        }
+                    })
+                })
+                .collect()
+        })
+        .collect::<Result<_>>()?;
+    for (pair, energy, pixel) in per_portion.into_iter().flatten() {
+        let t = pairs.entry(pair).or_insert_with(|| PairTotals { footprint: vec![0.0; w * h], ..Default::default() });
+        t.energy += energy;
+        t.paths += 1;
+        if let Some(f) = t.footprint.get_mut(pixel as usize) {
+            *f += energy as f32;
+        }
+        total += energy;
+    }
+    let mut ranked: Vec<(Pair, PairTotals)> = pairs.into_iter().collect();
+    ranked.sort_by(|a, b| b.1.energy.total_cmp(&a.1.energy));
+
+    let out = args.out.clone().unwrap_or_else(|| render_folder(&args.map).join("ghosts"));
+    std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
+    let name = |o: u16| header.objects.get(o as usize).cloned().unwrap_or_else(|| format!("object {o}"));
+    let mut table = String::new();
+    let _ = writeln!(table, "{:>4}  {:<14} {:<14} {:>9} {:>8}  footprint", "rank", "first", "second", "share", "paths");
+    let mut json = Vec::new();
+    for (rank, ((a, b), t)) in ranked.iter().take(args.top).enumerate() {
+        let second = b.map_or_else(|| "(once)".to_string(), name);
+        let png = out.join(format!("pair-{}.png", rank + 1));
+        write_footprint(&png, &t.footprint, w, h)?;
+        let share = t.energy / total.max(f64::MIN_POSITIVE);
+        let _ = writeln!(
+            table,
+            "{:>4}  {:<14} {:<14} {:>8.2}% {:>8}  {}",
+            rank + 1,
+            name(*a),
+            second,
+            100.0 * share,
+            t.paths,
+            png.display()
+        );
+        json.push(serde_json::json!({
+            "rank": rank + 1, "first": name(*a), "second": b.map(name), "share": share,
+            "paths": t.paths, "energy": t.energy, "footprint": png.display().to_string(),
+        }));
+    }
+    print!("{table}");
+    let layer = ghost_layer_total(&args.map);
+    match &layer {
+        Ok((image_total, phases)) => println!(
+            "recorded ghost light / fraction: {:.4e}; the ghost layer of image.exr over {phases} phases: {:.4e} ({:.1}%)",
+            total / header.fraction,
+            image_total,
+            100.0 * total / header.fraction / image_total.max(f64::MIN_POSITIVE)
+        ),
+        Err(e) => eprintln!("note: no comparison with the ghost layer: {e:#}"),
+    }
+    std::fs::write(out.join("ghosts.txt"), &table).context("cannot write ghosts.txt")?;
+    let report = serde_json::json!({
+        "scene": header.scene, "ghost_light": total, "fraction": header.fraction, "pairs": json,
+        "ghost_layer": layer.ok().map(|(t, p)| serde_json::json!({"total": t, "phases": p})),
+    });
+    std::fs::write(out.join("ghosts.json"), serde_json::to_string_pretty(&report).expect("plain JSON"))
+        .context("cannot write ghosts.json")?;
+    println!("wrote {}", out.display());
+    Ok(())
+}
+
+/// The render's ghost layer summed over pixels and phases (luminance): what the recorded ghost light, over
+/// the recorded fraction, estimates. Needs a single-process render (every pixel with the record's phases).
+fn ghost_layer_total(map: &Path) -> Result<(f64, u64)> {
+    let dir = render_folder(map);
+    let record: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("run.json")).with_context(|| format!("no run.json in {}", dir.display()))?,
+    )?;
+    let phases = record["totals"]["phases"].as_u64().context("run.json has no totals.phases")?;
+    let exr = dir.join("image.exr");
+    let layers = photonfarm::image_io::exr_file::read_exr(&exr)?;
+    let ghost = photonfarm::image_io::exr_file::find_layer(&layers, &exr, photonfarm::ghost::GHOST_LAYER)?;
+    let sum: f64 = ghost.rgb.iter().map(|p| luminance(glam::Vec3::from_array(*p)) as f64).sum();
+    Ok((sum * phases as f64, phases))
+}
+
+/// The light paths each phase of the map's render traced, from its run.json: what a light path's registered
+/// value is divided by in the image. Errors are kept as text so that every thread can report the one error.
+fn light_paths_per_phase_of(map: &Path) -> std::result::Result<f64, String> {
+    let dir = render_folder(map);
+    let read = || -> Result<f64> {
+        let record: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(dir.join("run.json"))
+                .with_context(|| format!("no run.json in {}", dir.display()))?,
+        )?;
+        let phases = record["totals"]["phases"].as_u64().context("run.json has no totals.phases")?;
+        let light_paths = record["totals"]["light_paths"].as_u64().context("run.json has no totals.light_paths")?;
+        if phases == 0 || light_paths == 0 {
+            bail!("run.json records {light_paths} light paths over {phases} phases");
+        }
+        Ok(light_paths as f64 / phases as f64)
+    };
+    read().map_err(|e| {
+        format!("light paths reached the sensor, but their share needs the render's light paths per phase: {e:#}")
+    })
+}
+
+/// A footprint as a grey PNG, the brightest pixel white.
+fn write_footprint(path: &Path, footprint: &[f32], w: usize, h: usize) -> Result<()> {
+    let max = footprint.iter().cloned().fold(0.0f32, f32::max);
+    let grey: Vec<u8> =
+        footprint.iter().map(|&v| if max > 0.0 { (255.0 * (v / max).sqrt()) as u8 } else { 0 }).collect();
+    let file = std::fs::File::create(path).with_context(|| format!("cannot write {}", path.display()))?;
+    let mut encoder = png::Encoder::new(std::io::BufWriter::new(file), w as u32, h as u32);
+    encoder.set_color(png::ColorType::Grayscale);
+    encoder.set_depth(png::BitDepth::Eight);
+    encoder.write_header()?.write_image_data(&grey)?;
+    Ok(())
+}

@@ -1,0 +1,182 @@
+//! Reading a map: its stream files, their headers, and their portions one at a time. A stream that ends inside
+//! a portion (a killed run) reads up to its last whole portion and says how many bytes it left; a portion that
+//! is damaged is an error that names the file and the byte.
+
+use super::format::{decode_paths, MapHeader, PortionHeader, MAGIC, MAX_BLOCK_BYTES, PORTION_HEADER_BYTES, VERSION};
+use super::path::RecordedPath;
+use super::RayMapError;
+use std::fs::File;
+use std::io::{BufReader, Read};
+use std::path::{Path, PathBuf};
+
+/// A portion as it lies in the file, not yet decompressed (decompression is the part worth parallelising).
+#[derive(Clone, Debug)]
+pub struct RawPortion {
+    pub header: PortionHeader,
+    pub frame: Vec<u8>,
+    /// The stream file and the byte the portion starts at, for errors.
+    pub file: PathBuf,
+    pub offset: u64,
+}
+
+impl RawPortion {
+    /// Decompresses and decodes the portion's paths.
+    pub fn decode(&self) -> Result<Vec<RecordedPath>, RayMapError> {
+        let corrupt = |reason: String| RayMapError::Corrupt {
+            path: self.file.display().to_string(),
+            offset: self.offset,
+            reason,
+        };
+        let raw = zstd::bulk::decompress(&self.frame, self.header.raw as usize)
+            .map_err(|e| corrupt(format!("its compressed data does not decompress ({e})")))?;
+        if raw.len() != self.header.raw as usize {
+            return Err(corrupt(format!("it holds {} bytes, its header says {}", raw.len(), self.header.raw)));
+        }
+        decode_paths(&raw, self.header.paths as usize).map_err(corrupt)
+    }
+}
+
+/// One stream file, read portion by portion.
+pub struct StreamReader {
+    path: PathBuf,
+    file: BufReader<File>,
+    header: MapHeader,
+    offset: u64,
+    length: u64,
+    truncated: Option<u64>,
+}
+
+impl StreamReader {
+    /// Opens a stream and reads its header; a file of another format or version is refused here.
+    pub fn open(path: &Path) -> Result<Self, RayMapError> {
+        let name = path.display().to_string();
+        let io = |source| RayMapError::Io { path: name.clone(), source };
+        let file = File::open(path).map_err(io)?;
+        let length = file.metadata().map_err(io)?.len();
+        let mut file = BufReader::with_capacity(1 << 20, file);
+        let mut start = [0u8; 16];
+        if length < 16 {
+            return Err(RayMapError::NotAMap(name));
+        }
+        file.read_exact(&mut start).map_err(io)?;
+        if &start[..8] != MAGIC {
+            return Err(RayMapError::NotAMap(name));
+        }
+        let version = u32::from_le_bytes(start[8..12].try_into().expect("4 bytes"));
+        if version != VERSION {
+            return Err(RayMapError::Version { path: name, found: version, supported: VERSION });
+        }
+        let json_len = u32::from_le_bytes(start[12..16].try_into().expect("4 bytes")) as u64;
+        if json_len > MAX_BLOCK_BYTES as u64 || 16 + json_len > length {
+            return Err(RayMapError::Header { path: name, reason: "the file ends inside its header".into() });
+        }
+        let mut json = vec![0u8; json_len as usize];
+        file.read_exact(&mut json).map_err(io)?;
+        let header: MapHeader = serde_json::from_slice(&json)
+            .map_err(|e| RayMapError::Header { path: name.clone(), reason: e.to_string() })?;
+        Ok(StreamReader { path: path.to_path_buf(), file, header, offset: 16 + json_len, length, truncated: None })
+    }
+
+    /// The stream file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The stream's header.
+    pub fn header(&self) -> &MapHeader {
+        &self.header
+    }
+
+    /// Bytes after the last whole portion, once the reader has reached a stream cut inside a portion.
+    pub fn truncated_bytes(&self) -> Option<u64> {
+        self.truncated
+    }
+
+    /// The stream's size in bytes.
+    pub fn len(&self) -> u64 {
+        self.length
+    }
+
+    /// True for a stream of no bytes (which `open` refuses, so never).
+    pub fn is_empty(&self) -> bool {
+        self.length == 0
+    }
+
+    /// The next whole portion, None at the end (or at a cut, which `truncated_bytes` then reports).
+    pub fn next_portion(&mut self) -> Result<Option<RawPortion>, RayMapError> {
+        let left = self.length - self.offset;
+        if left == 0 {
+            return Ok(None);
+        }
+        let corrupt = |offset, reason| RayMapError::Corrupt { path: self.path.display().to_string(), offset, reason };
+        let io = |source| RayMapError::Io { path: self.path.display().to_string(), source };
+        if left < PORTION_HEADER_BYTES as u64 {
+            self.truncated = Some(left);
+            return Ok(None);
+        }
+        let mut head = [0u8; PORTION_HEADER_BYTES];
+        self.file.read_exact(&mut head).map_err(io)?;
+        let header = PortionHeader::from_bytes(&head).map_err(|r| corrupt(self.offset, r))?;
+        if left < (PORTION_HEADER_BYTES + header.compressed as usize) as u64 {
+            self.truncated = Some(left);
+            return Ok(None);
+        }
+        let mut frame = vec![0u8; header.compressed as usize];
+        self.file.read_exact(&mut frame).map_err(io)?;
+        let portion = RawPortion { header, frame, file: self.path.clone(), offset: self.offset };
+        self.offset += (PORTION_HEADER_BYTES + header.compressed as usize) as u64;
+        Ok(Some(portion))
+    }
+}
+
+/// The stream files of a map: `path` is a stream file, a map folder (`raymap/` of a render), or a render's
+/// output folder that holds one. Sorted by name; an error when there is none.
+pub fn stream_files(path: &Path) -> Result<Vec<PathBuf>, RayMapError> {
+    let name = path.display().to_string();
+    if path.is_file() {
+        return Ok(vec![path.to_path_buf()]);
+    }
+    let dir = if path.join("raymap").is_dir() { path.join("raymap") } else { path.to_path_buf() };
+    let entries = std::fs::read_dir(&dir).map_err(|source| RayMapError::Io { path: name.clone(), source })?;
+    let mut files: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "pfrm"))
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        return Err(RayMapError::NoStreams(dir.display().to_string()));
+    }
+    Ok(files)
+}
+
+/// Opens every stream of a map and checks that they come from one render (the same scene and names).
+pub fn open_streams(path: &Path) -> Result<Vec<StreamReader>, RayMapError> {
+    let readers: Vec<StreamReader> =
+        stream_files(path)?.iter().map(|f| StreamReader::open(f)).collect::<Result<_, _>>()?;
+    let first = &readers[0].header;
+    for r in &readers[1..] {
+        let h = &r.header;
+        if h.scene_hash != first.scene_hash || h.objects != first.objects || h.emitters != first.emitters {
+            return Err(RayMapError::Mixed {
+                first: readers[0].path.display().to_string(),
+                other: r.path.display().to_string(),
+            });
+        }
+    }
+    Ok(readers)
+}
+
+/// Every path of a map, in stream and file order, with the bytes cut from truncated streams: for tests and
+/// small maps (selection streams portions instead).
+pub fn read_all(path: &Path) -> Result<(MapHeader, Vec<RecordedPath>, u64), RayMapError> {
+    let mut readers = open_streams(path)?;
+    let header = readers[0].header.clone();
+    let (mut paths, mut cut) = (Vec::new(), 0);
+    for r in &mut readers {
+        while let Some(p) = r.next_portion()? {
+            paths.extend(p.decode()?);
+        }
+        cut += r.truncated_bytes().unwrap_or(0);
+    }
+    Ok((header, paths, cut))
+}

@@ -1,0 +1,122 @@
+//! Ray maps through the real program: `render --ray-map` writes a map that `rays select` reads, selects from
+//! and shows (overlay, OBJ polylines, report); bad expressions and methods the recorder cannot reach are
+//! refused with clear errors.
+
+use end_to_end::{binary, cornell_at, render_output, repo_root, scratch_dir};
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn rays(args: &[&str]) -> Output {
+    Command::new(binary("coordinator")).arg("rays").args(args).current_dir(repo_root()).output().unwrap()
+}
+
+fn text(o: &Output) -> String {
+    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+}
+
+#[test]
+fn a_recorded_render_is_selected_by_events_and_shown_as_overlay_polylines_and_report() {
+    let dir = scratch_dir("ray-maps");
+    let scene = cornell_at(&dir, 32);
+    let run = dir.join("run");
+    let o =
+        render_output(&scene, &run, &["--method", "pbpm", "--phases", "3", "--ray-map", "--ray-map-fraction", "0.5"]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("bytes per segment"), "{}", text(&o));
+    assert!(run.join("raymap/stream-0.pfrm").is_file());
+
+    let map = run.to_str().unwrap();
+    let o =
+        rays(&["select", map, "--where", "lightpath and light(light) and diffuse(*) >= 2", "--limit", "50", "--quiet"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let sel = run.join("selection");
+    for f in ["overlay.png", "paths.obj", "report.json", "report.txt"] {
+        assert!(sel.join(f).is_file(), "{f} missing: {}", text(&o));
+    }
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(sel.join("report.json")).unwrap()).unwrap();
+    let matched = report["matched_paths"].as_u64().unwrap();
+    let listed = report["paths"].as_array().unwrap();
+    assert!(matched > 50 && listed.len() == 50, "{matched} matched, {} listed", listed.len());
+    for p in listed {
+        assert_eq!(p["kind"], "light");
+        assert_eq!(p["source"], "light");
+        let diffuse =
+            p["vertices"].as_array().unwrap().iter().filter(|v| v["events"].as_str().unwrap().contains("diffuse"));
+        assert!(diffuse.count() >= 2, "{p}");
+    }
+    let obj = std::fs::read_to_string(sel.join("paths.obj")).unwrap();
+    assert_eq!(obj.lines().filter(|l| l.starts_with("l ")).count(), 50);
+    let overlay = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(sel.join("overlay.png")).unwrap()));
+    let info = overlay.read_info().unwrap();
+    assert_eq!((info.info().width, info.info().height), (32, 32));
+
+    // A name the scene does not have is pointed at.
+    let o = rays(&["select", map, "--where", "reflect(tallbox) and hits(lamp)", "--quiet"]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("no object is called 'lamp'") && text(&o).contains("^^^^"), "{}", text(&o));
+}
+
+#[test]
+fn ray_maps_are_refused_for_methods_the_recorder_does_not_reach_and_for_bad_fractions() {
+    let dir = scratch_dir("ray-maps-refused");
+    let scene = cornell_at(&dir, 16);
+    let o = render_output(&scene, &dir.join("sync"), &["--method", "sync", "--phases", "1", "--ray-map"]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("--method pbpm or path"), "{}", text(&o));
+    let o = render_output(
+        &scene,
+        &dir.join("zero"),
+        &["--method", "pbpm", "--phases", "1", "--ray-map", "--ray-map-fraction", "0"],
+    );
+    assert!(!o.status.success());
+    assert!(text(&o).contains("--ray-map-fraction must be in (0, 1]"), "{}", text(&o));
+    let o = rays(&["select", Path::new(&dir).join("nothing").to_str().unwrap(), "--where", "camera"]);
+    assert!(!o.status.success(), "{}", text(&o));
+}
+
+/// The shipped lens scene at 72 × 48 pixels in `dir`, its last surface (s10) coated against reflection when
+/// `coat_s10`.
+fn lens_at(dir: &Path, coat_s10: bool) -> std::path::PathBuf {
+    let mut text = std::fs::read_to_string(repo_root().join("scenes/lens.toml")).unwrap();
+    assert!(text.contains("width = 360\n") && text.contains("[materials.n1717_to_air]\ntype = \"dielectric\"\n"));
+    text = text.replace("width = 360\n", "width = 72\n").replace("height = 240\n", "height = 48\n");
+    if coat_s10 {
+        text = text.replace(
+            "[materials.n1717_to_air]\ntype = \"dielectric\"\n",
+            "[materials.n1717_to_air]\ntype = \"dielectric\"\nanti_reflection = true\n",
+        );
+    }
+    let path = dir.join(if coat_s10 { "lens-coated.toml" } else { "lens.toml" });
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// `rays ghosts` on a path-traced lens whose every path was recorded: its report.
+fn ghosts(dir: &Path, coat_s10: bool) -> serde_json::Value {
+    let scene = lens_at(dir, coat_s10);
+    let run = dir.join(if coat_s10 { "coated" } else { "uncoated" });
+    let o = render_output(&scene, &run, &["--method", "path", "--phases", "3", "--ray-map", "--ray-map-fraction", "1"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let o = rays(&["ghosts", run.to_str().unwrap(), "--top", "1000"]);
+    assert!(o.status.success(), "{}", text(&o));
+    serde_json::from_str(&std::fs::read_to_string(run.join("ghosts/ghosts.json")).unwrap()).unwrap()
+}
+
+#[test]
+fn ghost_pairs_carry_the_ghost_layers_light_and_a_coated_surface_is_in_none() {
+    let dir = scratch_dir("ray-maps-ghosts");
+    let uncoated = ghosts(&dir, false);
+    // Every path recorded: the pairs' light is the ghost layer's, up to f32 sums.
+    let recorded = uncoated["ghost_light"].as_f64().unwrap();
+    let layer = uncoated["ghost_layer"]["total"].as_f64().unwrap();
+    assert!(layer > 0.0 && (recorded / layer - 1.0).abs() < 1e-3, "pairs {recorded}, ghost layer {layer}");
+    let pairs = uncoated["pairs"].as_array().unwrap();
+    let shares: f64 = pairs.iter().map(|p| p["share"].as_f64().unwrap()).sum();
+    assert!((shares - 1.0).abs() < 1e-6, "shares add up to {shares}");
+    let has_s10 = |p: &serde_json::Value| p["first"] == "s10" || p["second"] == "s10";
+    assert!(pairs.iter().any(has_s10), "no pair involves s10 on the uncoated lens");
+    let coated = ghosts(&dir, true);
+    let pairs = coated["pairs"].as_array().unwrap();
+    assert!(!pairs.is_empty() && !pairs.iter().any(has_s10), "{coated}");
+}
