@@ -311,7 +311,7 @@ pub fn run(mut args: BenchArgs) -> Result<()> {
             };
             let labels = plan.iter().map(|(s, m, t, r)| label(s, *m, *t, *r)).collect();
             let page = BenchLive::start(addr, secret, labels, dir.join("charts"))?;
-            println!("live page: {}  (results in {})", page.url, dir.display());
+            say!("live page: {}  (results in {})", page.url, dir.display());
             Some(page)
         }
         None => None,
@@ -322,12 +322,12 @@ pub fn run(mut args: BenchArgs) -> Result<()> {
     }
     let runs = result?;
     let report = report(&runs, &args, &threads);
-    println!("{report}");
+    say!("{report}");
     let path = dir.join("report.md");
     std::fs::write(&path, &report).with_context(|| format!("cannot write {}", path.display()))?;
     let charts = crate::charts::write_charts(&dir)?;
-    println!("{} charts in {}", charts.len(), dir.join("charts").display());
-    println!("wrote {}", dir.display());
+    say!("{} charts in {}", charts.len(), dir.join("charts").display());
+    say!("wrote {}", dir.display());
     if page.is_some() {
         std::thread::sleep(PAGE_LINGER);
     }

@@ -51,7 +51,7 @@ const GUIDE: RGBColor = RGBColor(90, 90, 90);
 /// `coordinator charts DIR`: draws the charts and prints the files written.
 pub fn run(args: ChartsArgs) -> Result<()> {
     for path in write_charts(&args.dir)? {
-        println!("wrote {}", path.display());
+        say!("wrote {}", path.display());
     }
     Ok(())
 }

@@ -1,6 +1,15 @@
 //! `coordinator`: photonfarm's main program. It loads a scene, renders it until a time, phase or error target,
 //! and writes the image, its layers and the run record.
 
+/// `println!` that never panics: a reader that closed stdout early (`| head`) must not stop the program
+/// before it has written its files, so a failed write to stdout is ignored.
+macro_rules! say {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout().lock(), $($arg)*);
+    }};
+}
+
 mod bench_command;
 mod bench_tables;
 mod charts;
@@ -40,9 +49,9 @@ fn main() -> std::process::ExitCode {
 fn keys_init(dir: &std::path::Path) -> anyhow::Result<()> {
     let files = photonfarm::protocol::tls::init_keys(dir)?;
     for f in &files {
-        println!("wrote {}", f.display());
+        say!("wrote {}", f.display());
     }
-    println!(
+    say!(
         "the coordinator takes --tls-dir {0}; copy ca.pem, worker.pem, worker.key and secret to a folder on each \
          worker machine and give `worker join|serve` --tls-dir with it. coordinator.key stays here; the CA's own \
          key was not kept, so a new job CA needs a new folder",

@@ -54,7 +54,7 @@ pub fn select(args: RaysSelectArgs) -> Result<()> {
             file.display()
         );
     }
-    println!(
+    say!(
         "{} of {} paths match ({} of {} segments) in {:.2} s ({:.1} M segments/s on {threads} threads)",
         selection.matched_paths,
         selection.total_paths,
@@ -70,7 +70,7 @@ pub fn select(args: RaysSelectArgs) -> Result<()> {
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
     let written = rays_outputs::write_all(&out, &args.map, &header, &selection, &args.expr, args.colour)?;
     for (what, file) in written {
-        println!("{what}: {}", file.display());
+        say!("{what}: {}", file.display());
     }
     Ok(())
 }

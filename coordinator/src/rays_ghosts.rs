@@ -143,10 +143,10 @@ pub fn ghosts(args: RaysGhostsArgs) -> Result<()> {
             "paths": t.paths, "energy": t.energy, "footprint": png.display().to_string(),
         }));
     }
-    print!("{table}");
+    say!("{}", table.trim_end_matches('\n'));
     let layer = ghost_layer_total(&args.map);
     match &layer {
-        Ok((image_total, phases)) => println!(
+        Ok((image_total, phases)) => say!(
             "recorded ghost light / fraction: {:.4e}; the ghost layer of image.exr over {phases} phases: {:.4e} ({:.1}%)",
             total / header.fraction,
             image_total,
@@ -161,7 +161,7 @@ pub fn ghosts(args: RaysGhostsArgs) -> Result<()> {
     });
     std::fs::write(out.join("ghosts.json"), serde_json::to_string_pretty(&report).expect("plain JSON"))
         .context("cannot write ghosts.json")?;
-    println!("wrote {}", out.display());
+    say!("wrote {}", out.display());
     Ok(())
 }
 

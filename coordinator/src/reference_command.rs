@@ -60,7 +60,7 @@ pub fn run(args: ReferenceArgs) -> Result<()> {
     std::fs::copy(run_dir.join("image.exr"), &exr).with_context(|| format!("cannot write {}", exr.display()))?;
     std::fs::write(&json, serde_json::to_vec_pretty(&record)?)
         .with_context(|| format!("cannot write {}", json.display()))?;
-    println!(
+    say!(
         "wrote {} and {} (δ {:.2}% over pixels that do not see a light directly)",
         exr.display(),
         json.display(),

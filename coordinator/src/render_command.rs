@@ -61,7 +61,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let mut live =
         LiveSession::start(live_options(&args, &scene, &layout, &dir, engine.as_ref(), &interrupted, &lit)?)?;
     if let Some(url) = live.as_ref().and_then(|l| l.url.as_ref()) {
-        println!("live page: {url}  (results in {})", dir.display());
+        say!("live page: {url}  (results in {})", dir.display());
     }
     let outputs = Outputs {
         args: &args,
@@ -102,7 +102,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     print_summary(&record, reason, &dir);
     if let Some(m) = ray_map {
         let (file, s) = m.context("the ray map is incomplete (the image and record were written)")?;
-        println!(
+        say!(
             "ray map: {} paths, {} segments, {:.1} MB ({:.1} bytes per segment before compression, {:.1} after) in {}",
             s.paths,
             s.segments,
@@ -636,7 +636,7 @@ fn finish(engine: &mut dyn Progressive, outputs: &Outputs, history: &mut Vec<His
 
 fn print_summary(record: &RunRecord, reason: StopReason, dir: &Path) {
     let e = record.error;
-    println!(
+    say!(
         "{} phases in {:.1} s ({}), {:.2} M backward + {:.2} M forward rays, δ {:.2}% (unlit pixels) / {:.2}% (all pixels)",
         record.totals.phases,
         record.wall_time_s,
@@ -650,14 +650,14 @@ fn print_summary(record: &RunRecord, reason: StopReason, dir: &Path) {
         eprintln!("note: {flag}");
     }
     if let Some(t) = &record.true_error {
-        println!(
+        say!(
             "true relative RMSE against {}: {:.2}% (unlit pixels) / {:.2}% (all pixels)",
             t.reference,
             100.0 * t.rmse_unlit,
             100.0 * t.rmse_all
         );
         if let (Some(unlit), Some(all)) = (t.mean_difference_unlit, t.mean_difference_all) {
-            println!(
+            say!(
                 "mean against the reference: {:+.3}% (unlit pixels) / {:+.3}% (all pixels)",
                 100.0 * unlit,
                 100.0 * all
@@ -665,9 +665,9 @@ fn print_summary(record: &RunRecord, reason: StopReason, dir: &Path) {
         }
     }
     if reason == StopReason::Interrupted {
-        println!("interrupted: the results of every completed phase were written");
+        say!("interrupted: the results of every completed phase were written");
     }
-    println!("wrote {}", dir.display());
+    say!("wrote {}", dir.display());
 }
 
 /// The threads an in-process method may use under `--memory-limit`, where `need(t)` is the memory a run of `t`

@@ -245,3 +245,23 @@ fn ctrl_c_stops_cleanly_and_writes_every_completed_phase() {
     assert!(r["totals"]["phases"].as_u64().unwrap() >= 1);
     assert!(out.join("image.exr").exists());
 }
+
+#[test]
+fn a_reader_that_closes_stdout_early_neither_fails_the_render_nor_loses_its_files() {
+    // As `coordinator render ... | head -0`: every line the render prints meets a closed pipe.
+    let out = scratch_dir("closed-stdout");
+    let mut child = Command::new(binary("coordinator"))
+        .args(["render", "scenes/cornell.toml", "--method", "pbpm", "--phases", "2", "--ray-map", "--quiet", "--out"])
+        .arg(&out)
+        .current_dir(repo_root())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let result = child.wait_with_output().unwrap();
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    assert_eq!(record(&out)["totals"]["phases"], 2);
+    assert!(out.join("image.exr").exists());
+    assert!(std::fs::read_dir(out.join("raymap")).unwrap().next().is_some(), "no ray map written");
+}
