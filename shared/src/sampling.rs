@@ -91,7 +91,8 @@ impl Sampler {
 
     fn pixel(seed: u64, pass: Pass, key: u64, pixel: u64, j: u64) -> Self {
         let (replicate, index) = replicate_of(j);
-        let sequence = splitmix64(seed ^ splitmix64(pixel ^ (pass as u64) << 56) ^ replicate as u64);
+        // The replicate goes into the hash: XORed onto the seed, seeds 0–3 would share their four scramblings.
+        let sequence = splitmix64(seed ^ splitmix64(pixel ^ (pass as u64) << 56 ^ (replicate as u64) << 48));
         Self::new(seed, pass, key, pixel).with_sobol(sequence, index)
     }
 

@@ -50,6 +50,25 @@ fn streams_repeat_for_the_same_pixel_and_phase_and_differ_between_pixels() {
 }
 
 #[test]
+fn runs_with_neighbouring_seeds_share_no_scrambling() {
+    // A run's repeats take seeds s, s + 1, ...: each (seed, replicate) must draw its own Sobol points, so the
+    // first jitter of a pixel's first phase in every replicate differs over all of them.
+    let mut firsts: Vec<(u32, u32)> = (0..8u64)
+        .flat_map(|seed| {
+            (0..REPLICATES).map(move |r| {
+                let j = phases_of_replicate(r, 1).next().unwrap();
+                let mut s = Sampler::camera(seed, 1000 + j, 17, j);
+                (s.next_f32().to_bits(), s.next_f32().to_bits())
+            })
+        })
+        .collect();
+    let drawn = firsts.len();
+    firsts.sort_unstable();
+    firsts.dedup();
+    assert_eq!(firsts.len(), drawn, "two (seed, replicate) pairs share a scrambling");
+}
+
+#[test]
 fn replicates_of_a_pixel_are_uncorrelated_scramblings() {
     // The first point of replicates 0 and 1 over many pixels: independent scramblings leave no correlation.
     let pixels = 20_000u64;
