@@ -74,9 +74,17 @@ fn a_pixel_that_sees_the_light_through_glass_is_lit_from_the_start_and_the_mask_
             seen[i] += (p.sum[Layer::VisibleLights as usize][1] > before[i]) as u32;
         }
     }
+    let seen_near = |i: usize| {
+        let (x, y) = (i % w, i / w);
+        (y.saturating_sub(1)..(y + 2).min(h))
+            .any(|ny| (x.saturating_sub(1)..(x + 2).min(w)).any(|nx| seen[ny * w + nx] > 0))
+    };
     for (i, &seen) in seen.iter().enumerate() {
         if mask.is_lit(i) {
-            assert!(seen > 0, "pixel {i} is in the mask but never saw the light in {phases} phases");
+            assert!(
+                seen_near(i),
+                "pixel {i} is in the mask but neither it nor a neighbour saw the light in {phases} phases"
+            );
         }
         if seen > phases / 2 {
             assert!(mask.is_lit(i), "pixel {i} saw the light in {seen} of {phases} phases but is not in the mask");
@@ -96,27 +104,64 @@ fn the_mask_depends_on_the_scene_alone() {
     assert!(direct_only.lit_count() < a.lit_count());
 }
 
-/// Lit pixels of the mask, of the shipped path-traced reference's `visible_lights` layer, and of both.
-fn against_reference(scene_file: &str, reference_file: &str) -> (usize, usize, usize) {
+/// How the mask compares with the pixels where the shipped path-traced reference's `visible_lights` layer holds
+/// light.
+struct Comparison {
+    /// Lit pixels of the mask.
+    mask: usize,
+    /// The reference's lit pixels, and how many of them the mask holds.
+    reference: usize,
+    found: usize,
+    /// The reference's lit pixels with their neighbours (as the mask grows its own), and how many of the mask's
+    /// pixels lie among them.
+    grown: usize,
+    mask_in_grown: usize,
+}
+
+fn against_reference(scene_file: &str, reference_file: &str) -> Comparison {
     let sc = common::shipped(scene_file);
     let mask = LitMask::of_scene(&sc, settings(&sc, Method::Pbpm, 1).max_depth);
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/references").join(reference_file);
     let layers = read_exr(&path).unwrap();
     let visible = find_layer(&layers, &path, "visible_lights").unwrap();
     let seen: Vec<bool> = visible.rgb.iter().map(|p| p.iter().any(|&c| c > 0.0)).collect();
-    let both = (0..seen.len()).filter(|&i| seen[i] && mask.is_lit(i)).count();
-    let reference = seen.iter().filter(|&&s| s).count();
-    eprintln!("{scene_file}: {} lit in the mask, {reference} in the reference, {both} in both", mask.lit_count());
-    (mask.lit_count() as usize, reference, both)
+    let seen = LitMask::from_flags(sc.camera.width, sc.camera.height, seen, 0);
+    let grown = seen.clone().with_neighbours_lit();
+    let n = seen.len();
+    let c = Comparison {
+        mask: mask.lit_count() as usize,
+        reference: seen.lit_count() as usize,
+        found: (0..n).filter(|&i| seen.is_lit(i) && mask.is_lit(i)).count(),
+        grown: grown.lit_count() as usize,
+        mask_in_grown: (0..n).filter(|&i| grown.is_lit(i) && mask.is_lit(i)).count(),
+    };
+    eprintln!(
+        "{scene_file}: {} lit in the mask; the reference's {} lit pixels: {} found; grown, {} of which {} in the mask",
+        c.mask, c.reference, c.found, c.grown, c.mask_in_grown
+    );
+    c
 }
 
 #[test]
 fn the_mask_finds_the_pixels_where_the_path_traced_reference_sees_a_light_on_cornell_and_through_the_caustic_sphere() {
     // The reference traced thousands of samples per pixel: every pixel that sees the light has its light.
-    let (mask, reference, both) = against_reference("cornell.toml", "cornell-path.exr");
-    assert_eq!((mask, both), (reference, reference), "the Cornell box's light, seen directly");
+    let c = against_reference("cornell.toml", "cornell-path.exr");
+    assert_eq!(
+        (c.found, c.mask, c.mask_in_grown),
+        (c.reference, c.grown, c.grown),
+        "the Cornell box's light, seen directly"
+    );
     // Through the glass sphere of `caustic`, some pixels see the light only after internal reflections.
-    let (mask, reference, both) = against_reference("caustic.toml", "caustic-path.exr");
-    assert!(both as f64 >= 0.9 * reference as f64, "{both} of the reference's {reference} lit pixels found");
-    assert!(mask - both <= reference / 10, "{} lit pixels the reference never saw lit", mask - both);
+    let c = against_reference("caustic.toml", "caustic-path.exr");
+    assert!(
+        c.found as f64 >= 0.9 * c.reference as f64,
+        "{} of the reference's {} lit pixels found",
+        c.found,
+        c.reference
+    );
+    assert!(
+        c.mask - c.mask_in_grown <= c.reference / 10,
+        "{} lit pixels far from any the reference saw lit",
+        c.mask - c.mask_in_grown
+    );
 }

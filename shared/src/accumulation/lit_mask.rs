@@ -44,6 +44,21 @@ impl LitMask {
         LitMask { width, height, lit, samples_per_pixel }
     }
 
+    /// The mask with every pixel next to a lit one (of its eight neighbours) lit too: a light's edge or corner
+    /// may cover a sliver of such a pixel that a few rays per pixel miss, and the sliver's rare, bright samples
+    /// would then hold most of δ unlit.
+    pub fn with_neighbours_lit(self) -> Self {
+        let (w, h) = (self.width as usize, self.height as usize);
+        let lit = (0..w * h)
+            .map(|i| {
+                let (x, y) = (i % w, i / w);
+                (y.saturating_sub(1)..(y + 2).min(h))
+                    .any(|ny| (x.saturating_sub(1)..(x + 2).min(w)).any(|nx| self.lit[ny * w + nx]))
+            })
+            .collect();
+        LitMask { lit, ..self }
+    }
+
     /// A mask in which no pixel is lit: δ unlit is then δ over every pixel.
     pub fn none(width: u32, height: u32) -> Self {
         LitMask::from_flags(width, height, vec![false; width as usize * height as usize], 0)
@@ -80,5 +95,27 @@ impl LitMask {
             exr_layer: LIT_LAYER.to_string(),
             seconds,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_lit_pixel_lights_its_eight_neighbours_and_no_pixel_further_away() {
+        // 6 × 4 pixels, lit at a corner (0, 0) and inside (4, 2).
+        let (w, h) = (6usize, 4usize);
+        let mut flags = vec![false; w * h];
+        flags[0] = true;
+        flags[2 * w + 4] = true;
+        let grown = LitMask::from_flags(w as u32, h as u32, flags, 16).with_neighbours_lit();
+        let expected = |x: usize, y: usize| (x <= 1 && y <= 1) || ((3..=5).contains(&x) && (1..=3).contains(&y));
+        for y in 0..h {
+            for x in 0..w {
+                assert_eq!(grown.is_lit(y * w + x), expected(x, y), "pixel ({x}, {y})");
+            }
+        }
+        assert_eq!(grown.samples_per_pixel, 16);
     }
 }

@@ -27,7 +27,7 @@ impl LitMask {
     /// `max_depth` segments: `LIT_MASK_SAMPLES` primary rays per pixel, their pixel positions and aperture
     /// points the first four coordinates of a scrambled Sobol sequence (stratified in both), each followed
     /// into every reflection and transmission of the delta surfaces it meets, likeliest branch first, up to
-    /// `PIXEL_BUDGET` segments per pixel.
+    /// `PIXEL_BUDGET` segments per pixel; the pixels next to those are lit too (`with_neighbours_lit`).
     pub fn of_scene(scene: &Scene, max_depth: u32) -> LitMask {
         let camera = &scene.camera;
         let w = camera.width as usize;
@@ -44,7 +44,7 @@ impl LitMask {
                 sees_emitter(scene, rays, max_depth)
             })
             .collect();
-        LitMask::from_flags(camera.width, camera.height, lit, LIT_MASK_SAMPLES)
+        LitMask::from_flags(camera.width, camera.height, lit, LIT_MASK_SAMPLES).with_neighbours_lit()
     }
 }
 
