@@ -63,7 +63,7 @@ fn check(sc: &Scene, name: &str, reference: &Accumulator, config: EngineConfig, 
     let sums = engine.sums();
     let rmse = relative_rmse(&total_image(sums), &total_image(reference), |_| true);
     let mean_z2 = mean_z2(sums, reference);
-    let variance_ratio = variance_ratio(sums, reference, &LitMask::of_scene(sc, engine.settings().max_depth));
+    let ratio = variance_ratio(sums, reference, &LitMask::of_scene(sc, engine.settings().max_depth));
     let a = blocks(sums, sums.width / 4);
     let b = blocks(reference, sums.width / 4);
     let mut worst: f64 = 0.0;
@@ -78,10 +78,12 @@ fn check(sc: &Scene, name: &str, reference: &Accumulator, config: EngineConfig, 
         / fb.iter().map(|(b, _)| b * b).sum::<f64>())
     .sqrt();
     eprintln!(
-        "{label}: {} phases/pixel, RMSE {:.2}% (8×8 blocks {:.2}%), mean z² {mean_z2:.2}, difference² / SEM² {variance_ratio:.2}, worst quarter-image block {:.2}% (3 × combined δ = {:.2}%)",
+        "{label}: {} phases/pixel, RMSE {:.2}% (8×8 blocks {:.2}%), mean z² {mean_z2:.2}, difference² / SEM² {:.3} ± {:.3}, worst quarter-image block {:.2}% (3 × combined δ = {:.2}%)",
         sums.min_phases(),
         100.0 * rmse,
         100.0 * block_rmse,
+        ratio.value,
+        ratio.standard_error,
         100.0 * worst,
         300.0 * combined
     );
@@ -89,7 +91,8 @@ fn check(sc: &Scene, name: &str, reference: &Accumulator, config: EngineConfig, 
     // the replicate SEMs, summed over pixels, must account for all of it (`sum_ratio`).
     assert!(mean_z2 <= 1.4, "{label}: mean z² = {mean_z2:.2}");
     if sum_ratio {
-        assert!((0.6..=1.4).contains(&variance_ratio), "{label}: difference² / SEM² = {variance_ratio:.2}");
+        let (r, se) = (ratio.value, ratio.standard_error);
+        assert!((r - 1.0).abs() <= 4.0 * se, "{label}: difference² / SEM² = {r:.3} ± {se:.3}, not 1 within 4 SE");
     }
     assert!(worst <= 3.0 * combined, "{label}: a quarter-image block differs by {:.2}%", 100.0 * worst);
     assert!(block_rmse < 0.02, "{label}: relative RMSE of 8×8 blocks {:.2}%", 100.0 * block_rmse);

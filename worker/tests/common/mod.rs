@@ -35,16 +35,32 @@ pub fn mean_z2(a: &Accumulator, b: &Accumulator) -> f64 {
         / n as f64
 }
 
-/// Σ (a − b)² / Σ (SEM_a² + SEM_b²) of the total luminance over the pixels `lit` leaves unlit,
-/// with the replicate SEMs that δ uses: about 1 when both sums estimate the same image and δ is honest. A sum
-/// over pixels has the expectation of its terms however the pixels of one phase are correlated, and it averages
-/// out the few degrees of freedom of each pixel's replicate SEM.
-pub fn variance_ratio(a: &Accumulator, b: &Accumulator, lit: &LitMask) -> f64 {
-    let (mut d2, mut s2) = (0.0, 0.0);
+/// Σ (a − b)² / Σ (SEM_a² + SEM_b²) of the total luminance over the pixels `lit` leaves unlit, with the
+/// replicate SEMs that δ uses, and its standard error: about 1 when both sums estimate the same image and δ is
+/// honest. A sum over pixels has the expectation of its terms however the pixels of one phase are correlated,
+/// and it averages out the few degrees of freedom of each pixel's replicate SEM.
+pub struct VarianceRatio {
+    pub value: f64,
+    /// Delete-one-block jackknife over 8 × 8-pixel blocks, which hold a photon's reach, so their sums are
+    /// nearly independent.
+    pub standard_error: f64,
+}
+
+pub fn variance_ratio(a: &Accumulator, b: &Accumulator, lit: &LitMask) -> VarianceRatio {
+    const BLOCK: u32 = 8;
+    let (bw, bh) = (a.width.div_ceil(BLOCK), a.height.div_ceil(BLOCK));
+    let (mut d2, mut s2) = (vec![0.0; (bw * bh) as usize], vec![0.0; (bw * bh) as usize]);
     for i in (0..a.pixels.len()).filter(|&i| !lit.is_lit(i)) {
+        let (x, y) = (i as u32 % a.width, i as u32 / a.width);
+        let block = ((y / BLOCK) * bw + x / BLOCK) as usize;
         let d = luminance_f64(a.mean_total(i)) - luminance_f64(b.mean_total(i));
-        d2 += d * d;
-        s2 += a.replicate_sem2(i) + b.replicate_sem2(i);
+        d2[block] += d * d;
+        s2[block] += a.replicate_sem2(i) + b.replicate_sem2(i);
     }
-    d2 / s2
+    let (d2_all, s2_all): (f64, f64) = (d2.iter().sum(), s2.iter().sum());
+    let n = d2.len() as f64;
+    let left_out: Vec<f64> = d2.iter().zip(&s2).map(|(d, s)| (d2_all - d) / (s2_all - s)).collect();
+    let mean = left_out.iter().sum::<f64>() / n;
+    let spread = left_out.iter().map(|r| (r - mean) * (r - mean)).sum::<f64>();
+    VarianceRatio { value: d2_all / s2_all, standard_error: ((n - 1.0) / n * spread).sqrt() }
 }
