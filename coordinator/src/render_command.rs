@@ -215,6 +215,7 @@ fn settings_of(args: &RenderArgs, scene: &Scene) -> Result<RenderSettings> {
             bail!("--light-paths-per-pixel must be a positive number");
         }
         settings.light_paths_per_pixel = l;
+        settings.adaptive_light = false;
     }
     if let Some(n) = args.spectral_output {
         if !photonfarm::spectrum::ENABLED {
@@ -478,7 +479,7 @@ impl Outputs<'_> {
             method: self.args.method,
             layout: self.layout.clone(),
             pinned_threads: engine.pinned_threads(),
-            settings: *engine.settings(),
+            settings: engine.settings().as_recorded(),
             radius_at_1m: engine.settings().radius_schedule(scene).radius(1.0, 1),
             threads: engine.threads() as u32,
             stop_reason: reason.to_string(),
@@ -629,6 +630,7 @@ fn finish(engine: &mut dyn Progressive, outputs: &Outputs, history: &mut Vec<His
         delta_unlit: e.delta_unlit,
         backward_rays: t.backward_rays,
         forward_rays: t.forward_rays,
+        light_paths_per_pixel: (!engine.settings().adaptive_light).then_some(engine.settings().light_paths_per_pixel),
         true_all: truth.as_ref().map(|t| t.rmse_all),
         true_unlit: truth.as_ref().map(|t| t.rmse_unlit),
     });

@@ -265,3 +265,29 @@ fn a_reader_that_closes_stdout_early_neither_fails_the_render_nor_loses_its_file
     assert!(out.join("image.exr").exists());
     assert!(std::fs::read_dir(out.join("raymap")).unwrap().next().is_some(), "no ray map written");
 }
+
+#[test]
+fn a_run_chooses_its_light_paths_per_pixel_unless_they_are_fixed() {
+    // On the Cornell box a camera path costs more than the light it would gain from more light paths: starting
+    // from 1, the run moves below it (docs/estimator.md), and says so in every history step.
+    let out = scratch_dir("adaptive-light");
+    render(&["scenes/cornell.toml", "--method", "pbpm", "--phases", "32", "--quiet"], &out);
+    let r = record(&out);
+    assert_eq!(r["settings"]["adaptive_light"], true);
+    let light: Vec<f64> =
+        r["history"].as_array().unwrap().iter().map(|h| h["light_paths_per_pixel"].as_f64().unwrap()).collect();
+    assert_eq!(light.len(), 32);
+    assert!(light[0] > 1.0 && light[1] < 1.0, "the first two steps try above and below 1: {light:?}");
+    // Each fit needs about four phases per pixel of both trials, after four phases that settle the means: two
+    // fits by phase 24.
+    assert!(light[24..].iter().all(|&l| l < 1.0), "still trying 1 or more after 24 phases: {light:?}");
+
+    let fixed = scratch_dir("fixed-light");
+    render(
+        &["scenes/cornell.toml", "--method", "pbpm", "--phases", "4", "--light-paths-per-pixel", "2", "--quiet"],
+        &fixed,
+    );
+    let r = record(&fixed);
+    assert_eq!(r["settings"]["adaptive_light"], false);
+    assert!(r["history"].as_array().unwrap().iter().all(|h| h["light_paths_per_pixel"] == 2.0));
+}

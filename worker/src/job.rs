@@ -7,6 +7,7 @@ use crate::memory_binding::{self, MemoryBinding};
 use crate::parallel::{EngineConfig, ParallelEngine};
 use photonfarm::accumulation::delta::{encode_delta, Compression};
 use photonfarm::protocol::{Job, Snapshot, WorkerInfo};
+use photonfarm::render::light_balance::LightBalance;
 use photonfarm::render::session::Progressive;
 use photonfarm::scene::Scene;
 use std::collections::BTreeMap;
@@ -126,6 +127,11 @@ pub fn run(
     if !emit(JobEvent::Started(info)) {
         return;
     }
+    // Each worker chooses its own light paths per pixel from its own phases, unless the job fixes them.
+    let mut balance = settings.adaptive_light.then(|| LightBalance::new(settings.light_paths_per_pixel));
+    if let Some(b) = &mut balance {
+        b.observe(engine.sums(), engine.totals());
+    }
     // The sums at the previous snapshot, auxiliary layers included.
     let mut base = engine.sums().clone();
     let mut seq = 0;
@@ -134,7 +140,13 @@ pub fn run(
         let stopping = stop.load(Ordering::Acquire);
         if !stopping {
             let round = Instant::now();
+            if let Some(b) = &balance {
+                engine.set_light_paths_per_pixel(b.next());
+            }
             engine.run_round(stop, None);
+            if let Some(b) = &mut balance {
+                b.observe(engine.sums(), engine.totals());
+            }
             // A straggler idles (slowdown − 1) round times after each round, but still answers a stop at once.
             let idle_until = Instant::now() + round.elapsed().mul_f64(slowdown - 1.0);
             while Instant::now() < idle_until && !stop.load(Ordering::Acquire) {

@@ -54,11 +54,27 @@ fn reference(sc: &Scene, phases: u64) -> Accumulator {
 /// that differs between the two budgets (a caustic's focus does: its radius at 400 phases blurs it more than
 /// at 1600, and a sum over pixels is all focus).
 fn check(sc: &Scene, name: &str, reference: &Accumulator, config: EngineConfig, min_phases: u32, sum_ratio: bool) {
+    check_with(sc, name, reference, config, min_phases, sum_ratio, |_, _| ());
+}
+
+/// `check`, with `before_round` called with the engine and the round's number before every round.
+fn check_with(
+    sc: &Scene,
+    name: &str,
+    reference: &Accumulator,
+    config: EngineConfig,
+    min_phases: u32,
+    sum_ratio: bool,
+    mut before_round: impl FnMut(&mut ParallelEngine, u64),
+) {
     let label = format!("{name} {:?} {}×{}", config.method, config.groups, config.threads_per_group);
     let mut engine = ParallelEngine::new(sc, RenderSettings::for_scene(sc, Method::Pbpm, 5), config).unwrap();
     let never = AtomicBool::new(false);
+    let mut round = 0;
     while engine.sums().min_phases() < min_phases {
+        before_round(&mut engine, round);
         engine.run_round(&never, None);
+        round += 1;
     }
     let sums = engine.sums();
     let rmse = relative_rmse(&total_image(sums), &total_image(reference), |_| true);
@@ -130,6 +146,12 @@ fn every_method_and_group_size_converges_to_the_single_thread_image_on_cornell()
     for c in configs(true) {
         check(&sc, "cornell", &reference, c, 300, true);
     }
+    // Each phase is normalised by its own light paths, so rounds at 16 times fewer and 4 times more light paths
+    // per pixel than the reference's 1 (as a run that chooses them while it goes) estimate the same image.
+    let two_level = EngineConfig::for_method(ParallelMethod::TwoLevel, 2, 1, vec![0, 1]).unwrap();
+    check_with(&sc, "cornell, light per pixel 1/16 and 4 in turn,", &reference, two_level, 300, true, |e, round| {
+        e.set_light_paths_per_pixel(if round % 2 == 0 { 1.0 / 16.0 } else { 4.0 });
+    });
 }
 
 #[test]

@@ -205,6 +205,7 @@ mod tests {
             radius_scale: 3.0,
             radius_alpha: 2.0 / 3.0,
             light_paths_per_pixel: 1.0,
+            adaptive_light: true,
             spectral_bands: 0,
         };
         // History with and without a true error: bincode cannot skip a field, so every one must round-trip.

@@ -74,6 +74,11 @@ impl<'s> Engine<'s> {
         &self.settings
     }
 
+    /// Sets the light paths per pixel of the phases to come.
+    pub fn set_light_paths_per_pixel(&mut self, l: f32) {
+        self.settings.light_paths_per_pixel = l;
+    }
+
     /// Bytes held per pixel by the sums, the phase buffers and the photon map.
     pub fn bytes_per_pixel(&self) -> f64 {
         let pixels = self.scene.camera.pixel_count().max(1);

@@ -1,10 +1,11 @@
 //! Rendering runs: settings, the counters a run reports, the single-threaded progressive engine, images from the
-//! sums, memory, checkpoints, the run record and the forecast of a run's remaining time.
+//! sums, memory, checkpoints, the run record, the forecast of a run's remaining time and the choice of light paths per pixel.
 
 pub mod checkpoint;
 pub mod engine;
 pub mod forecast;
 pub mod images;
+pub mod light_balance;
 pub mod memory;
 pub mod method;
 pub mod record;

@@ -20,6 +20,10 @@ pub struct HistoryEntry {
     pub delta_unlit: f64,
     pub backward_rays: u64,
     pub forward_rays: u64,
+    /// The light paths per pixel of the step that ended here; None where a distributed run's workers chose
+    /// their own.
+    #[serde(default)]
+    pub light_paths_per_pixel: Option<f32>,
     /// Relative RMSE against the reference over all pixels and over the pixels the lit mask leaves unlit.
     /// Always serialized (null without a reference): checkpoints keep the history with bincode, which cannot
     /// skip fields.

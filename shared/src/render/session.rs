@@ -2,6 +2,7 @@
 
 use super::engine::Engine;
 use super::forecast::Forecast;
+use super::light_balance::LightBalance;
 use super::record::HistoryEntry;
 use super::settings::RenderSettings;
 use super::totals::RayTotals;
@@ -44,6 +45,10 @@ pub trait Progressive {
     }
     /// Collects the work still in flight once the run has stopped (a distributed renderer's last snapshots).
     fn finish(&mut self) {}
+    /// Sets the light paths per pixel of the steps to come; false for a renderer whose workers choose their own.
+    fn set_light_paths_per_pixel(&mut self, _l: f32) -> bool {
+        false
+    }
 }
 
 impl Progressive for Engine<'_> {
@@ -64,6 +69,10 @@ impl Progressive for Engine<'_> {
     }
     fn threads(&self) -> usize {
         1
+    }
+    fn set_light_paths_per_pixel(&mut self, l: f32) -> bool {
+        Engine::set_light_paths_per_pixel(self, l);
+        true
     }
 }
 
@@ -142,6 +151,16 @@ pub fn run<R: Progressive + ?Sized>(
 ) -> StopReason {
     let Tracking { lit, forecast, elapsed_before } = tracking;
     let start = Instant::now();
+    // The light paths per pixel, chosen as the run goes unless they were fixed; a distributed renderer's
+    // workers choose their own.
+    let mut balance =
+        engine.settings().adaptive_light.then(|| LightBalance::new(engine.settings().light_paths_per_pixel));
+    if balance.as_ref().is_some_and(|b| !engine.set_light_paths_per_pixel(b.next())) {
+        balance = None;
+    }
+    if let Some(b) = &mut balance {
+        b.observe(engine.sums(), engine.totals());
+    }
     loop {
         if interrupted.load(Ordering::Relaxed) {
             return StopReason::Interrupted;
@@ -152,7 +171,15 @@ pub fn run<R: Progressive + ?Sized>(
             }
         }
         let deadline = stop.time.map(|t| start + t.saturating_sub(elapsed_before));
+        if let Some(b) = &balance {
+            engine.set_light_paths_per_pixel(b.next());
+        }
+        let s = engine.settings();
+        let light = (balance.is_some() || !s.adaptive_light).then_some(s.light_paths_per_pixel);
         engine.step(interrupted, deadline);
+        if let Some(b) = &mut balance {
+            b.observe(engine.sums(), engine.totals());
+        }
         let e = engine.sums().error(lit);
         let t = engine.totals();
         let entry = HistoryEntry {
@@ -162,6 +189,7 @@ pub fn run<R: Progressive + ?Sized>(
             delta_unlit: e.delta_unlit,
             backward_rays: t.backward_rays,
             forward_rays: t.forward_rays,
+            light_paths_per_pixel: light,
             ..HistoryEntry::default()
         };
         history.push(entry);

@@ -21,8 +21,12 @@ pub struct RenderSettings {
     pub radius_scale: f32,
     /// Knaus–Zwicker α.
     pub radius_alpha: f32,
-    /// Light paths per phase, per pixel.
+    /// Light paths per phase, per pixel: fixed, or where `adaptive_light` starts (and, in a record, ends).
     pub light_paths_per_pixel: f32,
+    /// True when the run chooses the light paths per pixel as it goes (`light_balance`); the scene's
+    /// `[render]` table or `--light-paths-per-pixel` fixes them.
+    #[serde(default)]
+    pub adaptive_light: bool,
     /// Wavelength bands written as layers (`--spectral-output`); 0 for none. Any band makes every path spectral
     /// from its first vertex.
     pub spectral_bands: u32,
@@ -40,7 +44,8 @@ impl RenderSettings {
             backward_diffuse_depth,
             radius_scale,
             radius_alpha: 2.0 / 3.0,
-            light_paths_per_pixel,
+            light_paths_per_pixel: light_paths_per_pixel.unwrap_or(super::light_balance::START),
+            adaptive_light: light_paths_per_pixel.is_none(),
             spectral_bands: 0,
         }
     }
@@ -76,6 +81,16 @@ impl RenderSettings {
             spectrum: self.phase_spectrum(scene, key),
             sensor_ghosts: crate::ghost::sensor_ghosts(scene),
         }
+    }
+
+    /// The settings a record keeps: a run that chose its light paths per pixel as it went keeps where it
+    /// started, which with the rest determines its result.
+    pub fn as_recorded(&self) -> Self {
+        let mut s = *self;
+        if s.adaptive_light {
+            s.light_paths_per_pixel = super::light_balance::START;
+        }
+        s
     }
 
     /// Light paths traced per phase for an image of `pixels` pixels.

@@ -36,8 +36,9 @@ pub struct SceneRenderSettings {
     pub backward_diffuse_depth: u32,
     /// Initial photon radius in pixel footprints.
     pub radius_scale: f32,
-    /// Light paths per phase, per pixel of the image.
-    pub light_paths_per_pixel: f32,
+    /// Light paths per phase, per pixel of the image; None: the run chooses them as it goes
+    /// (`render::light_balance`), from 1.
+    pub light_paths_per_pixel: Option<f32>,
     /// For a lens that can make ghosts: whether light paths bring the all-specular ghost chains to the sensor
     /// (the default), or camera paths alone find them, as they find everything else.
     pub ghost_light_paths: bool,
@@ -49,7 +50,7 @@ impl Default for SceneRenderSettings {
             max_depth: 12,
             backward_diffuse_depth: 2,
             radius_scale: 3.0,
-            light_paths_per_pixel: 1.0,
+            light_paths_per_pixel: None,
             ghost_light_paths: true,
         }
     }

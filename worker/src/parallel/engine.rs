@@ -346,6 +346,11 @@ impl Progressive for ParallelEngine<'_> {
         self.config.threads()
     }
 
+    fn set_light_paths_per_pixel(&mut self, l: f32) -> bool {
+        self.settings.light_paths_per_pixel = l;
+        true
+    }
+
     fn pinned_threads(&self) -> usize {
         ParallelEngine::pinned_threads(self)
     }

@@ -161,13 +161,13 @@ impl Loader<'_> {
                 self.scalar(*x.get_ref(), &x.span(), "render.radius_scale", |v| v > 0.0, "a positive number")?;
         }
         if let Some(x) = &r.light_paths_per_pixel {
-            s.light_paths_per_pixel = self.scalar(
+            s.light_paths_per_pixel = Some(self.scalar(
                 *x.get_ref(),
                 &x.span(),
                 "render.light_paths_per_pixel",
                 |v| v > 0.0 && v <= 1000.0,
                 "in (0, 1000]",
-            )?;
+            )?);
         }
         if let Some(b) = r.ghost_light_paths {
             s.ghost_light_paths = b;
