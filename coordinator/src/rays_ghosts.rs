@@ -84,6 +84,7 @@ pub fn ghosts(args: RaysGhostsArgs) -> Result<()> {
     // A light path's weight is what it registered before the division by its phase's light paths; the record
     // of the render says how many each phase traced, once a light path is found that needs it.
     let light_paths_per_phase = std::sync::OnceLock::new();
+    let pixels = w * h;
     let per_portion: Vec<Vec<(Pair, f64, u32)>> = portions
         .par_iter()
         .map(|p| -> Result<_> {
@@ -95,8 +96,8 @@ pub fn ghosts(args: RaysGhostsArgs) -> Result<()> {
                     Some(match path.kind {
                         PathKind::Camera => Ok((pair, energy, pixel)),
                         PathKind::Light => {
-                            match light_paths_per_phase.get_or_init(|| light_paths_per_phase_of(&args.map)) {
-                                Ok(n) => Ok((pair, energy / *n, pixel)),
+                            match light_paths_per_phase.get_or_init(|| light_paths_per_phase_of(&args.map, pixels)) {
+                                Ok(n) => Ok((pair, energy / n.of(path.phase), pixel)),
                                 Err(e) => Err(anyhow::anyhow!("{e}")),
                             }
                         }
@@ -180,11 +181,27 @@ fn ghost_layer_total(map: &Path) -> Result<(f64, u64)> {
     Ok((sum * phases as f64, phases))
 }
 
-/// The light paths each phase of the map's render traced, from its run.json: what a light path's registered
-/// value is divided by in the image. Errors are kept as text so that every thread can report the one error.
-fn light_paths_per_phase_of(map: &Path) -> std::result::Result<f64, String> {
+/// The light paths each phase of a render traced: what a light path's registered value is divided by in the
+/// image.
+struct LightPathsPerPhase {
+    /// Per phase (index = phase − 1), from the record's history, where the run chose its light paths per
+    /// pixel phase by phase.
+    by_phase: Vec<f64>,
+    /// The run's mean, for phases the history does not name.
+    mean: f64,
+}
+
+impl LightPathsPerPhase {
+    fn of(&self, phase: u32) -> f64 {
+        self.by_phase.get((phase as usize).wrapping_sub(1)).copied().unwrap_or(self.mean)
+    }
+}
+
+/// The light paths each phase of the map's render traced, from its run.json (the recorded methods render one
+/// phase per history step). Errors are kept as text so that every thread can report the one error.
+fn light_paths_per_phase_of(map: &Path, pixels: usize) -> std::result::Result<LightPathsPerPhase, String> {
     let dir = render_folder(map);
-    let read = || -> Result<f64> {
+    let read = || -> Result<LightPathsPerPhase> {
         let record: serde_json::Value = serde_json::from_str(
             &std::fs::read_to_string(dir.join("run.json"))
                 .with_context(|| format!("no run.json in {}", dir.display()))?,
@@ -194,7 +211,18 @@ fn light_paths_per_phase_of(map: &Path) -> std::result::Result<f64, String> {
         if phases == 0 || light_paths == 0 {
             bail!("run.json records {light_paths} light paths over {phases} phases");
         }
-        Ok(light_paths as f64 / phases as f64)
+        let mut by_phase = Vec::new();
+        for step in record["history"].as_array().into_iter().flatten() {
+            let (Some(phase), Some(l)) = (step["phase"].as_u64(), step["light_paths_per_pixel"].as_f64()) else {
+                break;
+            };
+            if phase != by_phase.len() as u64 + 1 {
+                break;
+            }
+            // As `RenderSettings::light_paths_per_phase`, in f32 as the engine held L.
+            by_phase.push(((l as f32 as f64 * pixels as f64).round()).max(1.0));
+        }
+        Ok(LightPathsPerPhase { by_phase, mean: light_paths as f64 / phases as f64 })
     };
     read().map_err(|e| {
         format!("light paths reached the sensor, but their share needs the render's light paths per phase: {e:#}")
