@@ -1,5 +1,5 @@
 //! δ is an honest error figure: on the shipped scenes, PBPM's true relative RMSE against the long path-traced
-//! reference in `scenes/references/` stays within a factor of 2 of δ once δ < 10%. The reference has noise of
+//! reference in `scenes/references/` stays within a factor of 2 of δ once δ < 10%, pooled over three runs. The reference has noise of
 //! its own (its `sem` layer), which adds in quadrature to the error measured against it.
 
 #![allow(clippy::needless_range_loop)]
@@ -7,11 +7,12 @@
 mod common;
 
 use common::{settings, shipped};
-use photonfarm::accumulation::LitMask;
+use photonfarm::accumulation::{Accumulator, LitMask};
 use photonfarm::color::luminance_f64;
 use photonfarm::image_io::exr_file::{find_layer, read_exr};
 use photonfarm::render::images::luminance_of;
 use photonfarm::render::{Engine, Method};
+use photonfarm::scene::Scene;
 use std::path::Path;
 
 fn check_calibration(scene_file: &str, reference_file: &str) {
@@ -21,46 +22,63 @@ fn check_calibration(scene_file: &str, reference_file: &str) {
     let reference = find_layer(&layers, &path, "total").unwrap();
     let ref_sem = find_layer(&layers, &path, "sem").unwrap();
 
-    let settings = settings(&sc, Method::Pbpm, 2024);
     // The run's mask of lit pixels, decided before the render: δ and the true error use the same pixel sets.
-    let lit = LitMask::of_scene(&sc, settings.max_depth);
-    let mut engine = Engine::new(&sc, settings);
+    let lit = LitMask::of_scene(&sc, settings(&sc, Method::Pbpm, 1).max_depth);
+    // One run's true error and δ at δ < 10% both swing by a quarter on `caustic` (a few pixels that see the
+    // light through the sphere hold much of Σ SEM²): the check pools independent runs, Σ true error² against
+    // Σ (δ² + δ_ref²), as a calibration over many renders would.
+    let runs: Vec<_> = SEEDS.iter().map(|&seed| run_until_delta_below_10_percent(&sc, &lit, seed)).collect();
+    for (name, include) in [("all pixels", None), ("unlit pixels", Some(false))] {
+        let (mut true2, mut expected2) = (0.0, 0.0);
+        for (seed, (sums, phases)) in SEEDS.iter().zip(&runs) {
+            let (mut sem2, mut ref_sem2, mut err2, mut norm) = (0.0, 0.0, 0.0, 0.0);
+            for i in 0..sums.pixels.len() {
+                if include.is_some_and(|want| lit.is_lit(i) != want) {
+                    continue;
+                }
+                let mine = luminance_f64(sums.mean_total(i));
+                let theirs = luminance_of(reference.rgb[i]);
+                sem2 += sums.replicate_sem2(i);
+                ref_sem2 += luminance_of(ref_sem.rgb[i]).powi(2);
+                err2 += (mine - theirs).powi(2);
+                norm += theirs * theirs;
+            }
+            let delta = (sem2 / norm).sqrt();
+            let delta_ref = (ref_sem2 / norm).sqrt();
+            let true_error = (err2 / norm).sqrt();
+            let expected = (delta * delta + delta_ref * delta_ref).sqrt();
+            eprintln!(
+                "{scene_file}, {name}, seed {seed}, {phases} phases: δ {:.2}%, reference δ {:.2}%, true relative RMSE {:.2}%, ratio {:.2}",
+                100.0 * delta,
+                100.0 * delta_ref,
+                100.0 * true_error,
+                true_error / expected
+            );
+            true2 += true_error * true_error;
+            expected2 += expected * expected;
+        }
+        let ratio = (true2 / expected2).sqrt();
+        eprintln!("{scene_file}, {name}: pooled ratio {ratio:.2}");
+        assert!((0.5..=2.0).contains(&ratio), "{scene_file} ({name}): true error / δ = {ratio:.2}");
+    }
+}
+
+/// The seeds of the pooled runs.
+const SEEDS: [u64; 3] = [2024, 2025, 2026];
+
+/// A one-thread PBPM run of `sc` until its δ over unlit pixels is below 10% (and at least 8 phases): its sums and
+/// phases.
+fn run_until_delta_below_10_percent(sc: &Scene, lit: &LitMask, seed: u64) -> (Accumulator, u32) {
+    let mut engine = Engine::new(sc, settings(sc, Method::Pbpm, seed));
     let mut phases = 0;
     loop {
         engine.run_phase();
         phases += 1;
-        let e = engine.sums().error(&lit);
+        let e = engine.sums().error(lit);
         if e.delta_unlit < 0.10 && phases >= 8 {
-            break;
+            return (engine.sums().clone(), phases);
         }
-        assert!(phases < 400, "{scene_file}: δ (unlit) still {} after {phases} phases", e.delta_unlit);
-    }
-    let sums = engine.sums();
-    for (name, include) in [("all pixels", None), ("unlit pixels", Some(false))] {
-        let (mut sem2, mut ref_sem2, mut err2, mut norm) = (0.0, 0.0, 0.0, 0.0);
-        for i in 0..sums.pixels.len() {
-            if include.is_some_and(|want| lit.is_lit(i) != want) {
-                continue;
-            }
-            let mine = luminance_f64(sums.mean_total(i));
-            let theirs = luminance_of(reference.rgb[i]);
-            sem2 += sums.replicate_sem2(i);
-            ref_sem2 += luminance_of(ref_sem.rgb[i]).powi(2);
-            err2 += (mine - theirs).powi(2);
-            norm += theirs * theirs;
-        }
-        let delta = (sem2 / norm).sqrt();
-        let delta_ref = (ref_sem2 / norm).sqrt();
-        let true_error = (err2 / norm).sqrt();
-        let expected = (delta * delta + delta_ref * delta_ref).sqrt();
-        let ratio = true_error / expected;
-        eprintln!(
-            "{scene_file}, {name}, {phases} phases: δ {:.2}%, reference δ {:.2}%, true relative RMSE {:.2}%, ratio {ratio:.2}",
-            100.0 * delta,
-            100.0 * delta_ref,
-            100.0 * true_error
-        );
-        assert!((0.5..=2.0).contains(&ratio), "{scene_file} ({name}): true error / δ = {ratio:.2}");
+        assert!(phases < 400, "δ (unlit) still {} after {phases} phases", e.delta_unlit);
     }
 }
 

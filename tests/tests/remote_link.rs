@@ -62,6 +62,8 @@ fn remote_render(dir: &Path, name: &str, address: &str, keys: &Path, seconds: &s
     let o = Command::new(binary("coordinator"))
         .args(["render", "scenes/cornell.toml", "--method", "three-level", "--remote-only", "--quiet"])
         .args(["--worker", address, "--time", seconds, "--reference", "scenes/references/cornell-path.exr"])
+        // Fixed, so that runs compared by rays per second trace the same mix of camera and light rays.
+        .args(["--light-paths-per-pixel", "1"])
         .arg("--tls-dir")
         .arg(keys)
         .arg("--out")
