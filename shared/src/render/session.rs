@@ -1,5 +1,6 @@
 //! A progressive run: phases until a time, phase or error target is met, or the user interrupts.
 
+use super::active_tiles::ActiveTiles;
 use super::engine::Engine;
 use super::forecast::Forecast;
 use super::record::HistoryEntry;
@@ -44,6 +45,12 @@ pub trait Progressive {
     }
     /// Collects the work still in flight once the run has stopped (a distributed renderer's last snapshots).
     fn finish(&mut self) {}
+    /// True when the renderer can restrict its steps to some tiles (`set_active_tiles`).
+    fn renders_tiles(&self) -> bool {
+        false
+    }
+    /// Renders only `tiles`' active tiles from the next step on; renderers that cannot ignore it.
+    fn set_active_tiles(&mut self, _tiles: &ActiveTiles) {}
 }
 
 impl Progressive for Engine<'_> {
@@ -118,6 +125,9 @@ pub struct Tracking<'a> {
     pub forecast: &'a mut Forecast,
     /// Wall time spent in earlier sessions of the same run (resume).
     pub elapsed_before: Duration,
+    /// Adaptive tiles: the tiles still above the target error, decided after every step from the merged sums
+    /// (None renders every tile every step).
+    pub tiles: Option<&'a mut ActiveTiles>,
 }
 
 impl StopRule {
@@ -140,8 +150,18 @@ pub fn run<R: Progressive + ?Sized>(
     tracking: Tracking,
     mut on_phase: impl FnMut(&R, &mut [HistoryEntry], &Forecast),
 ) -> StopReason {
-    let Tracking { lit, forecast, elapsed_before } = tracking;
+    let Tracking { lit, forecast, elapsed_before, mut tiles } = tracking;
     let start = Instant::now();
+    // Tiles only retire towards a target; a resumed run starts from what its sums already say.
+    let target = stop.target_error.filter(|_| engine.renders_tiles());
+    let decide = |engine: &mut R, tiles: &mut Option<&mut ActiveTiles>| {
+        if let (Some(t), Some(target)) = (tiles.as_deref_mut(), target) {
+            if t.update(engine.sums(), lit, stop.error_over, target) {
+                engine.set_active_tiles(t);
+            }
+        }
+    };
+    decide(engine, &mut tiles);
     loop {
         if interrupted.load(Ordering::Relaxed) {
             return StopReason::Interrupted;
@@ -152,6 +172,7 @@ pub fn run<R: Progressive + ?Sized>(
             }
         }
         let deadline = stop.time.map(|t| start + t.saturating_sub(elapsed_before));
+        let active_tiles = tiles.as_deref().filter(|_| target.is_some()).map(|t| t.active_count() as u32);
         engine.step(interrupted, deadline);
         let e = engine.sums().error(lit);
         let t = engine.totals();
@@ -162,6 +183,7 @@ pub fn run<R: Progressive + ?Sized>(
             delta_unlit: e.delta_unlit,
             backward_rays: t.backward_rays,
             forward_rays: t.forward_rays,
+            active_tiles,
             ..HistoryEntry::default()
         };
         history.push(entry);
@@ -183,5 +205,6 @@ pub fn run<R: Progressive + ?Sized>(
         if stop.phases.is_some_and(|n| e.min_phases as u64 >= n) {
             return StopReason::Phases;
         }
+        decide(engine, &mut tiles);
     }
 }
