@@ -207,6 +207,10 @@ pub struct RenderArgs {
     /// Pixels δ is measured over for --target-error and the progress bar.
     #[arg(long, value_enum, default_value = "unlit")]
     pub error_over: ErrorOverArg,
+    /// With --target-error, render every tile every round: without it, a tile whose own δ is below the target
+    /// stops receiving phases (adaptive tiles, in the parallel and distributed methods).
+    #[arg(long)]
+    pub uniform: bool,
     /// Output folder (created if missing). Default: a new folder under out/.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,

@@ -71,7 +71,9 @@ pub async fn serve_job(
         Message::Refused { reason } => return Err(ProtocolError::Refused(reason).into()),
         other => return Err(ProtocolError::Unexpected { expected: "Job", got: other.kind().into() }.into()),
     };
-    if fetch_files(&mut conn, &job, cache).await? == Fetched::Stopped {
+    // Tiles the coordinator restricts the job to (adaptive tiles), handed to the engine thread before a round.
+    let tiles: Arc<std::sync::Mutex<Option<(u32, Vec<bool>)>>> = Arc::default();
+    if fetch_files(&mut conn, &job, cache, &tiles).await? == Fetched::Stopped {
         // The run ended while this worker was still being set up: nothing rendered, nothing lost.
         conn.write(&Message::Finished).await?;
         drain_until_closed(&mut conn).await;
@@ -103,12 +105,14 @@ pub async fn serve_job(
     let (events_tx, mut events) = mpsc::unbounded_channel();
     let engine = {
         let (job, stop, interval_ms, slowdown) = (job.clone(), stop.clone(), interval_ms.clone(), opts.slowdown);
+        let tiles = tiles.clone();
         // On this machine the link is free and the worker's time is not: compress fast.
         let compression = Compression::for_peer(conn.peer);
         std::thread::Builder::new()
             .name("job".into())
             .spawn(move || {
-                job::run(&scene, &job, &stop, &interval_ms, slowdown, compression, |e| events_tx.send(e).is_ok())
+                let control = job::Control { stop: &stop, interval_ms: &interval_ms, tiles: &tiles };
+                job::run(&scene, &job, control, slowdown, compression, |e| events_tx.send(e).is_ok())
             })
             .map_err(|e| LinkError::Job(format!("cannot start the engine thread: {e}")))?
     };
@@ -174,9 +178,12 @@ pub async fn serve_job(
                         }
                     }
                     Some(Ok(Message::Stop)) => stop.store(true, Ordering::Release),
+                    Some(Ok(Message::ActiveTiles { tile, flags })) => {
+                        *tiles.lock().unwrap_or_else(|e| e.into_inner()) = Some((tile, flags));
+                    }
                     Some(Ok(Message::Heartbeat)) => {}
                     Some(Ok(other)) => {
-                        break Err(ProtocolError::Unexpected { expected: "Ack, Stop or Heartbeat", got: other.kind().into() }.into())
+                        break Err(ProtocolError::Unexpected { expected: "Ack, Stop, ActiveTiles or Heartbeat", got: other.kind().into() }.into())
                     }
                     // After `Finished` the coordinator may close once it has what it needs.
                     Some(Err(ProtocolError::Closed)) | None if finished => break Ok(()),
@@ -222,8 +229,13 @@ async fn drain_until_closed(conn: &mut Connection) {
 }
 
 /// Asks for the job's files that are not in `cache` and checks every one against its hash. A stop request
-/// that arrives first ends the job normally.
-async fn fetch_files(conn: &mut Connection, job: &Job, cache: &mut FileCache) -> Result<Fetched, ProtocolError> {
+/// that arrives first ends the job normally; active tiles that arrive meanwhile are kept in `tiles`.
+async fn fetch_files(
+    conn: &mut Connection,
+    job: &Job,
+    cache: &mut FileCache,
+    tiles: &std::sync::Mutex<Option<(u32, Vec<bool>)>>,
+) -> Result<Fetched, ProtocolError> {
     let mut missing: Vec<String> =
         job.files.iter().map(|f| f.sha256.clone()).filter(|h| !cache.contains_key(h)).collect();
     missing.sort();
@@ -246,6 +258,9 @@ async fn fetch_files(conn: &mut Connection, job: &Job, cache: &mut FileCache) ->
                 cache.insert(sha256, bytes);
             }
             Message::Stop => return Ok(Fetched::Stopped),
+            Message::ActiveTiles { tile, flags } => {
+                *tiles.lock().unwrap_or_else(|e| e.into_inner()) = Some((tile, flags));
+            }
             Message::Heartbeat => {}
             Message::Refused { reason } => return Err(ProtocolError::Refused(reason)),
             other => return Err(ProtocolError::Unexpected { expected: "File", got: other.kind().into() }),
