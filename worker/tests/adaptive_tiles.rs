@@ -60,7 +60,10 @@ fn retired_tiles_get_no_more_phases_while_active_ones_do_in_every_method() {
             let before: Vec<u32> = e.sums().pixels.iter().map(|p| p.phases).collect();
             let (phases_before, light_before) = (e.totals().phases, e.totals().map_light_paths);
             let groups_before: Vec<u64> = e.group_stats().iter().map(|g| g.phases).collect();
-            e.run_round(&never, None);
+            // A few rounds: in one round a group may find the round over before its first phase on a tiny mask.
+            for _ in 0..4 {
+                e.run_round(&never, None);
+            }
             let after: Vec<u32> = e.sums().pixels.iter().map(|p| p.phases).collect();
             for t in 0..tiles.len() {
                 for p in tiles.pixels_of(t) {
@@ -82,11 +85,13 @@ fn retired_tiles_get_no_more_phases_while_active_ones_do_in_every_method() {
                 per_phase >= 0.25 * quota && per_phase <= 2.0 * quota,
                 "{method:?}: {per_phase} paths per phase for {quota}"
             );
-            // However few tiles are active, every group works.
-            for (g, (&a, b)) in
-                e.group_stats().iter().map(|g| g.phases).collect::<Vec<_>>().iter().zip(groups_before).enumerate()
-            {
-                assert!(a > b, "{method:?}: group {g} rendered nothing with {} active tiles", tiles.active_count());
+            // However few tiles are active, every group has pixels to render.
+            for (g, (a, b)) in e.group_stats().iter().zip(groups_before).enumerate() {
+                assert!(
+                    a.phases > b,
+                    "{method:?}: group {g} rendered nothing with {} active tiles",
+                    tiles.active_count()
+                );
             }
         }
     }

@@ -1,11 +1,15 @@
-//! Adaptive tiles: with a target error, a tile whose own δ is below the target leaves the masks, so the camera
-//! and light paths of a round go to the tiles that still need them, and comes back if its δ rises above the
-//! target again. Whoever holds the merged sums decides (the run loop of the coordinator); the engines only
-//! render the tiles they are given.
+//! Adaptive tiles: with a target error, a tile that has had its share of the work leaves the masks, so the
+//! camera and light paths of a round go to the tiles that still need them, and comes back when its share grows
+//! again. Whoever holds the merged sums decides (the run loop of the coordinator); the engines only render the
+//! tiles they are given.
 //!
-//! A tile's δ is eq. 6 over its own pixels of the class the target refers to (unlit or all), with the same
-//! per-pixel SEM (eq. 7 over the replicates) as the image's δ. Since the image's δ² is the mean of the tiles'
-//! δ² weighted by their Σ mean², the image reaches the target at the latest when every tile has.
+//! The image's δ² (eq. 6) is Σ_t S_t / (N_t Λ): S_t the per-phase variance of tile t summed over its pixels of
+//! the target's class (eq. 7's SEM² times the pixel's phases), N_t its phases, Λ = Σ mean² over the class. For
+//! a tile phase costing the same in every tile, the fewest phases that reach δ = D give each tile
+//! N*_t = √S_t · Σ_u √S_u / (D² Λ) (Lagrange: the marginal gain S_t / N_t² equal in every tile). A tile
+//! retires once it has N*_t phases, estimated from the merged sums at every step; when every tile has, δ ≤ D.
+//! Retiring a tile once its own δ (the same formula over its pixels) is below D instead keeps dark tiles, whose
+//! relative error is high but whose weight in δ is small, rendering long after they matter.
 
 use super::session::ErrorOver;
 use crate::accumulation::{Accumulator, LitMask};
@@ -147,15 +151,41 @@ impl ActiveTiles {
             .collect()
     }
 
+    /// Each tile's per-phase variance S_t over its pixels of the class `over` selects (Σ n_p · SEM²_p with
+    /// the replicate SEM that δ uses; infinite while a pixel has fewer than two phases), and the image's
+    /// Λ = Σ mean² over the class.
+    pub fn variances(&self, sums: &Accumulator, lit: &LitMask, over: ErrorOver) -> (Vec<f64>, f64) {
+        let mut lambda = 0.0;
+        let variances = (0..self.len())
+            .map(|t| {
+                let mut variance = 0.0;
+                for p in self.pixels_of(t).map(|p| p as usize) {
+                    if over == ErrorOver::Unlit && lit.is_lit(p) {
+                        continue;
+                    }
+                    lambda += luminance_f64(sums.mean_total(p)).powi(2);
+                    variance += sums.pixels[p].phases as f64 * sums.replicate_sem2(p);
+                }
+                variance
+            })
+            .collect();
+        (variances, lambda)
+    }
+
     /// Decides the tiles of the next rounds from the merged sums: a tile is active while it has fewer than
-    /// `MIN_TILE_PHASES` phases at some pixel or its δ is above `target`, so a retired tile whose δ rose again
-    /// (sums that arrived after it retired) comes back. If that leaves no tile, every tile is active: the
-    /// target cannot be met by retiring tiles. Returns true when the set changed.
+    /// `MIN_TILE_PHASES` phases at some pixel or fewer than its share N*_t of the work to reach `target` (see
+    /// the module's notes), so a retired tile whose share grew as the estimates improved comes back. If that
+    /// leaves no tile, every tile is active: the target cannot be met by retiring tiles. Returns true when the
+    /// set changed.
     pub fn update(&mut self, sums: &Accumulator, lit: &LitMask, over: ErrorOver, target: f64) -> bool {
-        let mut next: Vec<bool> = self
-            .errors(sums, lit, over)
-            .iter()
-            .map(|e| e.min_phases < MIN_TILE_PHASES || !(e.delta <= target))
+        let (variances, lambda) = self.variances(sums, lit, over);
+        let roots: f64 = variances.iter().map(|v| v.sqrt()).sum();
+        let mut next: Vec<bool> = (0..self.len())
+            .map(|t| {
+                let phases = self.pixels_of(t).map(|p| sums.pixels[p as usize].phases).min().unwrap_or(0);
+                let share = variances[t].sqrt() * roots / (target * target * lambda);
+                phases < MIN_TILE_PHASES || !(phases as f64 >= share)
+            })
             .collect();
         if !next.iter().any(|&a| a) {
             next.fill(true);
@@ -219,21 +249,29 @@ mod tests {
     }
 
     #[test]
-    fn tiles_retire_below_the_target_after_the_minimum_phases_and_come_back_above_it() {
+    fn a_tile_retires_once_it_has_its_share_of_the_phases_to_the_target() {
         let lit = LitMask::none(4, 2);
         let mut t = ActiveTiles::all(4, 2, 2).unwrap();
-        // Too few phases: both stay, whatever their δ.
-        assert!(!t.update(&sums(MIN_TILE_PHASES - 1), &lit, ErrorOver::All, 1.0));
+        // Too few phases: both stay, whatever the target.
+        assert!(!t.update(&sums(MIN_TILE_PHASES - 1), &lit, ErrorOver::All, 1e3));
         assert!(t.all_active());
         let acc = sums(MIN_TILE_PHASES);
-        let noisy = t.errors(&acc, &lit, ErrorOver::All)[1].delta;
-        assert!(t.update(&acc, &lit, ErrorOver::All, noisy * 0.9));
+        let (v, lambda) = t.variances(&acc, &lit, ErrorOver::All);
+        assert_eq!(v[0], 0.0);
+        // Tile 1's share at target D is √S₁ (√S₀ + √S₁) / (D² Λ) = S₁ / (D² Λ): the phases at which its δ over
+        // Λ, the image's δ, reaches D. Its δ now is exactly the image's.
+        let delta = acc.error(&lit).delta_all;
+        assert!((v[1] / (MIN_TILE_PHASES as f64 * lambda) - delta * delta).abs() < 1e-12);
+        // A target just above δ: tile 1 has its share, tile 0 (no variance) too: every tile would retire, so
+        // every tile renders.
+        assert!(!t.update(&acc, &lit, ErrorOver::All, delta * 1.01));
+        assert!(t.all_active());
+        // Just below: tile 1 needs more phases, tile 0 retires.
+        assert!(t.update(&acc, &lit, ErrorOver::All, delta * 0.99));
         assert_eq!(t.flags(), &[false, true]);
         assert_eq!(t.active_pixels(), vec![2, 3, 6, 7]);
-        // Every tile below the target: both retire, and the next update with a smaller target brings one back.
-        assert!(t.update(&acc, &lit, ErrorOver::All, noisy * 1.1));
-        assert_eq!(t.flags(), &[true, true], "no tile left: every tile renders");
-        assert!(t.update(&acc, &lit, ErrorOver::All, noisy * 0.9));
-        assert_eq!(t.flags(), &[false, true]);
+        // A larger target again: tile 1 retires, which leaves none, so both come back.
+        assert!(t.update(&acc, &lit, ErrorOver::All, delta * 1.01));
+        assert!(t.all_active());
     }
 }
