@@ -556,7 +556,8 @@ fn report(runs: &[Run], args: &BenchArgs, threads: &[usize]) -> String {
 }
 
 /// Per configuration run with `--target-error`: the mean time to the target with adaptive and with uniform
-/// tiles, their ratio over runs paired by repeat, and the adaptive runs' true error / δ at the end.
+/// tiles, their ratio over runs paired by repeat, and the adaptive runs' true error / √(δ² + δ_ref²) at the
+/// end.
 fn time_to_target(runs: &[Run]) -> String {
     let mut s = String::new();
     let mut keys: Vec<(&str, Method, usize)> = Vec::new();
@@ -595,7 +596,10 @@ fn time_to_target(runs: &[Run]) -> String {
             let (m, se) = mean_and_sem(&ratios);
             format!("{m:.2} ± {se:.2}")
         };
-        let calibration = opt_mean(adaptive.iter().map(|r| r.row.true_unlit.map(|e| e / r.row.delta_unlit)));
+        let calibration = opt_mean(adaptive.iter().map(|r| {
+            let d_ref = r.row.reference_delta_unlit.unwrap_or(0.0);
+            r.row.true_unlit.map(|e| e / r.row.delta_unlit.hypot(d_ref))
+        }));
         let _ = writeln!(
             s,
             "| {scene} | {method} | {t} | {:.1}% | {} | {} | {ratio} | {} |",

@@ -8,6 +8,8 @@
 //! a tile phase costing the same in every tile, the fewest phases that reach δ = D give each tile
 //! N*_t = √S_t · Σ_u √S_u / (D² Λ) (Lagrange: the marginal gain S_t / N_t² equal in every tile). A tile
 //! retires once it has N*_t phases, estimated from the merged sums at every step; when every tile has, δ ≤ D.
+//! With a target over unlit pixels a tile needs its share towards δ over all pixels ≤ D as well, or the
+//! pixels that see a light would keep the few phases of a tile without unlit pixels.
 //! Retiring a tile once its own δ (the same formula over its pixels) is below D instead keeps dark tiles, whose
 //! relative error is high but whose weight in δ is small, rendering long after they matter.
 
@@ -174,17 +176,29 @@ impl ActiveTiles {
 
     /// Decides the tiles of the next rounds from the merged sums: a tile is active while it has fewer than
     /// `MIN_TILE_PHASES` phases at some pixel or fewer than its share N*_t of the work to reach `target` (see
-    /// the module's notes), so a retired tile whose share grew as the estimates improved comes back. If that
-    /// leaves no tile, every tile is active: the target cannot be met by retiring tiles. Returns true when the
-    /// set changed.
+    /// the module's notes), so a retired tile whose share grew as the estimates improved comes back. With a
+    /// target over unlit pixels a tile also needs its share of the same target over all pixels, so the pixels
+    /// that see a light are not left at a few phases. If that leaves no tile, every tile is active: the target
+    /// cannot be met by retiring tiles. Returns true when the set changed.
     pub fn update(&mut self, sums: &Accumulator, lit: &LitMask, over: ErrorOver, target: f64) -> bool {
-        let (variances, lambda) = self.variances(sums, lit, over);
-        let roots: f64 = variances.iter().map(|v| v.sqrt()).sum();
+        let classes: &[ErrorOver] = match over {
+            ErrorOver::Unlit => &[ErrorOver::Unlit, ErrorOver::All],
+            ErrorOver::All => &[ErrorOver::All],
+        };
+        let mut shares = vec![0.0f64; self.len()];
+        for &class in classes {
+            let (variances, lambda) = self.variances(sums, lit, class);
+            let roots: f64 = variances.iter().map(|v| v.sqrt()).sum();
+            for (share, v) in shares.iter_mut().zip(&variances) {
+                let needed = v.sqrt() * roots / (target * target * lambda);
+                // No light in the class at all (Λ = 0) leaves nothing to share: the tile stays active.
+                *share = if needed.is_nan() || needed > *share { needed } else { *share };
+            }
+        }
         let mut next: Vec<bool> = (0..self.len())
             .map(|t| {
                 let phases = self.pixels_of(t).map(|p| sums.pixels[p as usize].phases).min().unwrap_or(0);
-                let share = variances[t].sqrt() * roots / (target * target * lambda);
-                phases < MIN_TILE_PHASES || !(phases as f64 >= share)
+                phases < MIN_TILE_PHASES || !(phases as f64 >= shares[t])
             })
             .collect();
         if !next.iter().any(|&a| a) {
@@ -273,5 +287,17 @@ mod tests {
         // A larger target again: tile 1 retires, which leaves none, so both come back.
         assert!(t.update(&acc, &lit, ErrorOver::All, delta * 1.01));
         assert!(t.all_active());
+    }
+
+    #[test]
+    fn with_a_target_over_unlit_pixels_lit_tiles_still_get_their_share_towards_all_pixels() {
+        let acc = sums(MIN_TILE_PHASES);
+        // The noisy tile 1 sees a light: δ unlit is 0, but δ over all pixels is not.
+        let lit = LitMask::from_flags(4, 2, (0..8).map(|p| p % 4 >= 2).collect(), 1);
+        let e = acc.error(&lit);
+        assert_eq!(e.delta_unlit, 0.0);
+        let mut t = ActiveTiles::all(4, 2, 2).unwrap();
+        assert!(t.update(&acc, &lit, ErrorOver::Unlit, e.delta_all * 0.99));
+        assert_eq!(t.flags(), &[false, true]);
     }
 }
