@@ -70,6 +70,10 @@ pub fn engine_config(job: &Job) -> Result<EngineConfig, String> {
     Ok(config)
 }
 
+/// Tiles the coordinator restricted a job to and the engine has not taken yet: the tile edge and one flag per
+/// tile.
+pub type PendingTiles = std::sync::Mutex<Option<(u32, Vec<bool>)>>;
+
 /// What the link changes while a job runs.
 pub struct Control<'a> {
     /// Set to end the job after its current round.
@@ -77,7 +81,7 @@ pub struct Control<'a> {
     /// The time between snapshots; the link lengthens it on slow links.
     pub interval_ms: &'a AtomicU64,
     /// Tiles the coordinator restricted the job to since the last round (tile edge, one flag per tile).
-    pub tiles: &'a std::sync::Mutex<Option<(u32, Vec<bool>)>>,
+    pub tiles: &'a PendingTiles,
 }
 
 /// Renders `job` until `control.stop` is set, calling `emit` with its events (it returns false when nobody

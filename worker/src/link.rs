@@ -72,7 +72,7 @@ pub async fn serve_job(
         other => return Err(ProtocolError::Unexpected { expected: "Job", got: other.kind().into() }.into()),
     };
     // Tiles the coordinator restricts the job to (adaptive tiles), handed to the engine thread before a round.
-    let tiles: Arc<std::sync::Mutex<Option<(u32, Vec<bool>)>>> = Arc::default();
+    let tiles: Arc<job::PendingTiles> = Arc::default();
     if fetch_files(&mut conn, &job, cache, &tiles).await? == Fetched::Stopped {
         // The run ended while this worker was still being set up: nothing rendered, nothing lost.
         conn.write(&Message::Finished).await?;
@@ -234,7 +234,7 @@ async fn fetch_files(
     conn: &mut Connection,
     job: &Job,
     cache: &mut FileCache,
-    tiles: &std::sync::Mutex<Option<(u32, Vec<bool>)>>,
+    tiles: &job::PendingTiles,
 ) -> Result<Fetched, ProtocolError> {
     let mut missing: Vec<String> =
         job.files.iter().map(|f| f.sha256.clone()).filter(|h| !cache.contains_key(h)).collect();

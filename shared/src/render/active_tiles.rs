@@ -198,7 +198,8 @@ impl ActiveTiles {
         let mut next: Vec<bool> = (0..self.len())
             .map(|t| {
                 let phases = self.pixels_of(t).map(|p| sums.pixels[p as usize].phases).min().unwrap_or(0);
-                phases < MIN_TILE_PHASES || !(phases as f64 >= shares[t])
+                // A NaN share (no light in the class) keeps the tile active.
+                phases < MIN_TILE_PHASES || shares[t].is_nan() || (phases as f64) < shares[t]
             })
             .collect();
         if !next.iter().any(|&a| a) {
