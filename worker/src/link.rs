@@ -346,4 +346,48 @@ mod tests {
             assert_eq!(coordinator.await.unwrap(), "Finished");
         });
     }
+
+    #[test]
+    fn active_tiles_that_do_not_fit_the_image_fail_the_job_with_the_reason() {
+        let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+        runtime.block_on(async {
+            let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
+            let addr = listener.local_addr().unwrap();
+            let (mut job, store) = cornell_job();
+            job.scene_text = job.scene_text.replace("width = 256", "width = 16").replace("height = 256", "height = 16");
+            job.scene_hash = Scene::from_toml_with_meshes(
+                &job.scene_text,
+                Path::new("cornell.toml"),
+                &job.files.iter().map(|f| (f.path.clone(), store[&f.sha256].clone())).collect(),
+            )
+            .unwrap()
+            .hash;
+            let coordinator = tokio::spawn(async move {
+                let (s, _) = listener.accept().await.unwrap();
+                let mut c = Connection::new(s).unwrap();
+                handshake(&mut c, Role::Coordinator, "c", &Secret::insecure()).await.unwrap();
+                c.write(&Message::Job(Box::new(job))).await.unwrap();
+                // A 16 × 16 image has one 32-pixel tile, not three.
+                c.write(&Message::ActiveTiles { tile: 32, flags: vec![true, false, true] }).await.unwrap();
+                loop {
+                    match c.read().await.unwrap() {
+                        Message::NeedFiles { hashes } => {
+                            for h in hashes {
+                                let bytes = store[&h].clone();
+                                c.write(&Message::File { sha256: h, bytes }).await.unwrap();
+                            }
+                        }
+                        Message::Failed { reason } => return reason,
+                        Message::Started(_) | Message::Heartbeat => {}
+                        other => panic!("unexpected {}", other.kind()),
+                    }
+                }
+            });
+            let conn = Connection::new(TcpStream::connect(addr).await.unwrap()).unwrap();
+            let opts = LinkOptions::new("w".into(), Secret::insecure());
+            assert!(serve_job(conn, &opts, &mut FileCache::new()).await.is_err());
+            let reason = coordinator.await.unwrap();
+            assert!(reason.contains("active tiles") && reason.contains("3 tile flags"), "{reason}");
+        });
+    }
 }
