@@ -58,9 +58,47 @@ impl Run {
     }
 }
 
-/// A run of the plan in words: scene, method, threads and repeat.
-fn label(scene: &str, method: Method, threads: usize, repeat: u32) -> String {
-    format!("{scene} {method} {threads} threads, run {}", repeat + 1)
+/// One run of the plan: a configuration, its repeat and, with `--target-error`, its tiles and target.
+#[derive(Clone, Debug)]
+struct Entry {
+    scene: String,
+    method: Method,
+    threads: usize,
+    repeat: u32,
+    /// "adaptive" or "uniform", with the target error; None at equal time.
+    target: Option<(&'static str, f64)>,
+}
+
+/// A run of the plan in words: scene, method, threads, tiles and repeat.
+fn label(e: &Entry) -> String {
+    let tiles = e.target.map(|(t, d)| format!(" {t} tiles to {:.1}%", 100.0 * d)).unwrap_or_default();
+    format!("{} {} {} threads{tiles}, run {}", e.scene, e.method, e.threads, e.repeat + 1)
+}
+
+/// The target error of each scene from `--target-error`: one D for every scene, or SCENE=D pairs naming
+/// every scene of the bench.
+fn targets(spec: &str, scenes: &[String]) -> Result<std::collections::BTreeMap<String, f64>> {
+    let check = |d: &str| -> Result<f64> {
+        match d.trim().parse::<f64>() {
+            Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+            _ => bail!("--target-error: {d:?} is not a positive number (e.g. 0.03 for 3%)"),
+        }
+    };
+    if !spec.contains('=') {
+        let d = check(spec)?;
+        return Ok(scenes.iter().map(|s| (s.clone(), d)).collect());
+    }
+    let mut out = std::collections::BTreeMap::new();
+    for pair in spec.split(',') {
+        let Some((scene, d)) = pair.split_once('=') else {
+            bail!("--target-error: {pair:?} is not SCENE=D (e.g. cornell=0.03,caustic=0.08)");
+        };
+        out.insert(scene.trim().to_string(), check(d)?);
+    }
+    if let Some(missing) = scenes.iter().find(|s| !out.contains_key(*s)) {
+        bail!("--target-error gives no target for the scene {missing}");
+    }
+    Ok(out)
 }
 
 /// The scene's reference image, if one is shipped: the path tracer's, or PBPM's where the path tracer cannot
@@ -117,20 +155,14 @@ fn synthetic_nodes(n: usize) -> String {
 }
 
 /// Runs `coordinator render` for one configuration and reads its record.
-fn run_one(
-    scene: &str,
-    method: Method,
-    threads: usize,
-    repeat: u32,
-    args: &BenchArgs,
-    dir: &Path,
-) -> Result<Option<Run>> {
-    let Some(plan) = planned(method, threads, args.group_size)? else {
+fn run_one(e: &Entry, args: &BenchArgs, dir: &Path) -> Result<Option<Run>> {
+    let Some(plan) = planned(e.method, e.threads, args.group_size)? else {
         return Ok(None);
     };
-    let out = dir.join("runs").join(format!("{scene}-{method}-{threads}t-r{repeat}"));
-    render(scene, method, threads, repeat, args, &out)?;
-    let key = RunKey { scene, method, threads, repeat };
+    let tiles = e.target.map(|(t, _)| format!("-{t}")).unwrap_or_default();
+    let out = dir.join("runs").join(format!("{}-{}-{}t{tiles}-r{}", e.scene, e.method, e.threads, e.repeat));
+    render(e, args, &out)?;
+    let key = RunKey { scene: &e.scene, method: e.method, threads: e.threads, repeat: e.repeat, target: e.target };
     read_run(&out.join("run.json"), key, plan).map(Some)
 }
 
@@ -141,17 +173,25 @@ struct RunKey<'a> {
     method: Method,
     threads: usize,
     repeat: u32,
+    target: Option<(&'static str, f64)>,
 }
 
 /// Renders one configuration into `out` as a `coordinator render` process.
-fn render(scene: &str, method: Method, threads: usize, repeat: u32, args: &BenchArgs, out: &Path) -> Result<()> {
+fn render(e: &Entry, args: &BenchArgs, out: &Path) -> Result<()> {
+    let (scene, method, threads) = (e.scene.as_str(), e.method, e.threads);
     let exe = std::env::current_exe().context("cannot find this program")?;
     let mut cmd = std::process::Command::new(exe);
     cmd.args(["render", &format!("scenes/{scene}.toml"), "--quiet", "--method", method.name()])
-        .args(["--time", &args.time.to_string(), "--seed", &(args.seed + repeat as u64).to_string()])
+        .args(["--time", &args.time.to_string(), "--seed", &(args.seed + e.repeat as u64).to_string()])
         .arg("--out")
         .arg(out)
         .stdout(std::process::Stdio::null());
+    if let Some((tiles, d)) = e.target {
+        cmd.args(["--target-error", &d.to_string()]);
+        if tiles == "uniform" {
+            cmd.arg("--uniform");
+        }
+    }
     let layout = method.layout();
     match (layout.processes, layout.parallel) {
         (Processes::PerNumaNode, _) => {
@@ -203,8 +243,10 @@ fn read_run(path: &Path, key: RunKey, plan: Planned) -> Result<Run> {
             delta_all: f(&h["delta_all"]),
             true_unlit: h["true_unlit"].as_f64(),
             true_all: h["true_all"].as_f64(),
+            tiles: key.target.map(|(t, _)| t.to_string()).unwrap_or_default(),
         })
         .collect();
+    let reached_s = key.target.and_then(|(_, d)| series.iter().find(|p| p.delta_unlit <= d)).map(|p| p.time_s);
     let workers = r["workers"].as_array().cloned().unwrap_or_default();
     let wall = series.last().map_or(f(&r["wall_time_s"]), |p| p.time_s);
     let peak =
@@ -246,6 +288,9 @@ fn read_run(path: &Path, key: RunKey, plan: Planned) -> Result<Run> {
         reference_delta_unlit: r["true_error"]["reference_delta_unlit"].as_f64(),
         mean_difference_unlit: r["true_error"]["mean_difference_unlit"].as_f64(),
         mean_difference_all: r["true_error"]["mean_difference_all"].as_f64(),
+        tiles: key.target.map(|(t, _)| t.to_string()).unwrap_or_default(),
+        target_error: key.target.map(|(_, d)| d),
+        reached_s,
     };
     Ok(Run { row, series, snapshot_bytes })
 }
@@ -284,13 +329,23 @@ pub fn run(mut args: BenchArgs) -> Result<()> {
     }
     let dir = args.out.clone().unwrap_or_else(|| output_folder::default_dir(Path::new("bench")));
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let targets = args.target_error.as_deref().map(|spec| targets(spec, &args.scenes)).transpose()?;
     let mut plan = Vec::new();
     for repeat in 0..args.repeats {
         for scene in &args.scenes {
             for &method in &args.methods {
                 for &t in &threads {
-                    if planned(method, t, args.group_size)?.is_some() {
-                        plan.push((scene.clone(), method, t, repeat));
+                    if planned(method, t, args.group_size)?.is_none() {
+                        continue;
+                    }
+                    let entry = |target| Entry { scene: scene.clone(), method, threads: t, repeat, target };
+                    match &targets {
+                        // Adaptive and uniform back to back: the pair shares the machine's drift.
+                        Some(d) => {
+                            plan.push(entry(Some(("adaptive", d[scene]))));
+                            plan.push(entry(Some(("uniform", d[scene]))));
+                        }
+                        None => plan.push(entry(None)),
                     }
                 }
             }
@@ -309,7 +364,7 @@ pub fn run(mut args: BenchArgs) -> Result<()> {
                 Some(f) => Some(Secret::from_file(f)?),
                 None => Secret::from_env()?,
             };
-            let labels = plan.iter().map(|(s, m, t, r)| label(s, *m, *t, *r)).collect();
+            let labels = plan.iter().map(label).collect();
             let page = BenchLive::start(addr, secret, labels, dir.join("charts"))?;
             say!("live page: {}  (results in {})", page.url, dir.display());
             Some(page)
@@ -336,19 +391,14 @@ pub fn run(mut args: BenchArgs) -> Result<()> {
 
 /// Runs every configuration of `plan` in turn, writing results.csv and series.csv after each; with a live page,
 /// shows each run's state and redraws the charts after each.
-fn run_plan(
-    plan: &[(String, Method, usize, u32)],
-    args: &BenchArgs,
-    dir: &Path,
-    page: Option<&BenchLive>,
-) -> Result<Vec<Run>> {
+fn run_plan(plan: &[Entry], args: &BenchArgs, dir: &Path, page: Option<&BenchLive>) -> Result<Vec<Run>> {
     let mut runs: Vec<Run> = Vec::new();
-    for (i, (scene, method, t, repeat)) in plan.iter().enumerate() {
+    for (i, entry) in plan.iter().enumerate() {
         if let Some(p) = page {
             p.running(i);
         }
-        let Some(run) = run_one(scene, *method, *t, *repeat, args, dir)? else { continue };
-        eprintln!("[{}/{}] {}: {}", i + 1, plan.len(), label(scene, *method, *t, *repeat), run.summary());
+        let Some(run) = run_one(entry, args, dir)? else { continue };
+        eprintln!("[{}/{}] {}: {}", i + 1, plan.len(), label(entry), run.summary());
         let summary = run.summary();
         runs.push(run);
         // Written after every run, so an interrupted bench keeps what it measured.
@@ -412,15 +462,16 @@ fn report(runs: &[Run], args: &BenchArgs, threads: &[usize]) -> String {
     );
     let _ = writeln!(s, "| scene | method | threads | processes × groups × threads | forward rays | backward rays | tracing speedup | δ unlit / all | true error unlit / all | mean against the reference unlit / all | peak memory | bytes/pixel | idle | maps per light path |");
     let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
-    let mut keys: Vec<(&str, Method, usize)> = Vec::new();
+    let mut keys: Vec<(&str, Method, usize, &str)> = Vec::new();
     for r in runs {
-        let k = (r.row.scene.as_str(), r.row.method, r.row.threads);
+        let k = (r.row.scene.as_str(), r.row.method, r.row.threads, r.row.tiles.as_str());
         if !keys.contains(&k) {
             keys.push(k);
         }
     }
-    for &(scene, method, t) in &keys {
-        let group = runs_of(runs, scene, method, t);
+    for &(scene, method, t, tiles) in &keys {
+        let group: Vec<&Run> = runs_of(runs, scene, method, t).into_iter().filter(|r| r.row.tiles == tiles).collect();
+        let shown = if tiles.is_empty() { method.to_string() } else { format!("{method} ({tiles} tiles)") };
         let first = runs
             .iter()
             .filter(|r| r.row.scene == scene && r.row.method == method)
@@ -437,7 +488,7 @@ fn report(runs: &[Run], args: &BenchArgs, threads: &[usize]) -> String {
         let g = &group[0].row;
         let _ = writeln!(
             s,
-            "| {scene} | {method} | {t} | {}×{}×{} | {:.2} M | {:.2} M | {:.2}× | {:.2}%{range} / {:.2}% | {} / {} | {} / {} | {} | {:.0} | {} | {} |",
+            "| {scene} | {shown} | {t} | {}×{}×{} | {:.2} M | {:.2} M | {:.2}× | {:.2}%{range} / {:.2}% | {} / {} | {} / {} | {} | {:.0} | {} | {} |",
             g.processes,
             g.groups / g.processes.max(1),
             g.threads_per_group,
@@ -489,12 +540,74 @@ fn report(runs: &[Run], args: &BenchArgs, threads: &[usize]) -> String {
             calibration(runs),
         ),
         ("Two-level against sync and async", two_level_against_sync_and_async(runs)),
+        (
+            "Time to the target error (δ unlit), adaptive tiles against uniform: seconds until δ unlit first met \
+             the target, and adaptive / uniform as the mean ratio over runs paired by repeat",
+            time_to_target(runs),
+        ),
     ];
     if comparisons.iter().all(|(_, lines)| lines.is_empty()) {
         let _ = writeln!(s, "\n(Comparisons need path and pbpm runs on scenes with a reference, or two-level runs.)");
     }
     for (heading, lines) in comparisons.iter().filter(|(_, lines)| !lines.is_empty()) {
         let _ = write!(s, "\n{heading}:\n\n{lines}");
+    }
+    s
+}
+
+/// Per configuration run with `--target-error`: the mean time to the target with adaptive and with uniform
+/// tiles, their ratio over runs paired by repeat, and the adaptive runs' true error / √(δ² + δ_ref²) at the
+/// end.
+fn time_to_target(runs: &[Run]) -> String {
+    let mut s = String::new();
+    let mut keys: Vec<(&str, Method, usize)> = Vec::new();
+    for r in runs.iter().filter(|r| r.row.tiles == "adaptive") {
+        let k = (r.row.scene.as_str(), r.row.method, r.row.threads);
+        if !keys.contains(&k) {
+            keys.push(k);
+        }
+    }
+    if keys.is_empty() {
+        return s;
+    }
+    let _ = writeln!(
+        s,
+        "| scene | method | threads | target | uniform | adaptive | adaptive / uniform | true error / δ (adaptive) |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|");
+    let secs = |t: Option<f64>| t.map_or_else(|| "not reached".to_string(), |t| format!("{t:.1} s"));
+    for (scene, method, t) in keys {
+        let of = |tiles: &str| -> Vec<&Run> {
+            runs_of(runs, scene, method, t).into_iter().filter(|r| r.row.tiles == tiles).collect()
+        };
+        let (adaptive, uniform) = (of("adaptive"), of("uniform"));
+        let all_reached = |v: &[&Run]| v.iter().all(|r| r.row.reached_s.is_some());
+        let mean_reached = |v: &[&Run]| all_reached(v).then(|| mean(v.iter().filter_map(|r| r.row.reached_s)));
+        let ratios: Vec<f64> = adaptive
+            .iter()
+            .filter_map(|a| {
+                let u = uniform.iter().find(|u| u.row.repeat == a.row.repeat)?;
+                Some(a.row.reached_s? / u.row.reached_s?)
+            })
+            .collect();
+        let ratio = if ratios.is_empty() {
+            "–".to_string()
+        } else {
+            let (m, se) = mean_and_sem(&ratios);
+            format!("{m:.2} ± {se:.2}")
+        };
+        let calibration = opt_mean(adaptive.iter().map(|r| {
+            let d_ref = r.row.reference_delta_unlit.unwrap_or(0.0);
+            r.row.true_unlit.map(|e| e / r.row.delta_unlit.hypot(d_ref))
+        }));
+        let _ = writeln!(
+            s,
+            "| {scene} | {method} | {t} | {:.1}% | {} | {} | {ratio} | {} |",
+            100.0 * adaptive[0].row.target_error.unwrap_or(f64::NAN),
+            secs(mean_reached(&uniform)),
+            secs(mean_reached(&adaptive)),
+            calibration.map_or_else(|| "–".into(), |c| format!("{c:.2}")),
+        );
     }
     s
 }
@@ -641,6 +754,9 @@ mod tests {
             reference_delta_unlit: None,
             mean_difference_unlit: None,
             mean_difference_all: None,
+            tiles: String::new(),
+            target_error: None,
+            reached_s: None,
         };
         Run { row, series: Vec::new(), snapshot_bytes: None }
     }
@@ -678,6 +794,7 @@ mod tests {
             cores: None,
             repeats: 1,
             seed: 1,
+            target_error: None,
             out: None,
             serve: None,
             secret_file: None,
@@ -688,6 +805,32 @@ mod tests {
         for graded in ["goal", "Goal", "not met"] {
             assert!(!report.contains(graded), "{graded}: {report}");
         }
+    }
+
+    #[test]
+    fn time_to_target_pairs_adaptive_and_uniform_runs_by_repeat() {
+        let timed = |tiles: &str, repeat, reached: Option<f64>| {
+            let mut r = run(Method::TwoLevel, 2, repeat, 0.03, 100);
+            (r.row.tiles, r.row.target_error, r.row.reached_s) = (tiles.into(), Some(0.03), reached);
+            r.row.true_unlit = Some(0.033);
+            r
+        };
+        let runs = vec![
+            timed("adaptive", 0, Some(6.0)),
+            timed("uniform", 0, Some(10.0)),
+            timed("adaptive", 1, Some(4.0)),
+            timed("uniform", 1, Some(10.0)),
+        ];
+        let s = time_to_target(&runs);
+        assert!(s.contains("| cornell | two-level | 2 | 3.0% | 10.0 s | 5.0 s | 0.50 ± 0.10 | 1.10 |"), "{s}");
+        let unreached = vec![timed("adaptive", 0, Some(6.0)), timed("uniform", 0, None)];
+        assert!(time_to_target(&unreached).contains("| not reached | 6.0 s | – |"), "{}", time_to_target(&unreached));
+        assert!(time_to_target(&runs[..0]).is_empty());
+        let scenes = vec!["cornell".to_string(), "caustic".to_string()];
+        assert_eq!(targets("cornell=0.03,caustic=0.08", &scenes).unwrap()["caustic"], 0.08);
+        assert_eq!(targets("0.05", &scenes).unwrap()["cornell"], 0.05);
+        assert!(targets("cornell=0.03", &scenes).is_err());
+        assert!(targets("cornell=-1,caustic=0.1", &scenes).is_err());
     }
 
     #[test]

@@ -52,6 +52,14 @@ pub struct ResultsRow {
     pub mean_difference_unlit: Option<f64>,
     #[serde(default)]
     pub mean_difference_all: Option<f64>,
+    /// With `--target-error`: "adaptive" or "uniform" tiles, the run's target, and the wall seconds at which
+    /// δ unlit first met it (empty when it did not within `--time`). Empty otherwise.
+    #[serde(default)]
+    pub tiles: String,
+    #[serde(default)]
+    pub target_error: Option<f64>,
+    #[serde(default)]
+    pub reached_s: Option<f64>,
 }
 
 /// One step of a run (a phase, a round or a merged snapshot): its error against time and rays.
@@ -69,6 +77,9 @@ pub struct SeriesRow {
     /// Empty without a reference image.
     pub true_unlit: Option<f64>,
     pub true_all: Option<f64>,
+    /// "adaptive" or "uniform" with `--target-error`, empty otherwise.
+    #[serde(default)]
+    pub tiles: String,
 }
 
 /// A row type of a CSV table the bench writes.
@@ -78,11 +89,21 @@ pub trait TableRow: DeserializeOwned {
 }
 
 impl TableRow for ResultsRow {
-    const OPTIONAL_COLUMNS: &'static [&'static str] =
-        &["light_paths", "map_light_paths", "reference_delta_unlit", "mean_difference_unlit", "mean_difference_all"];
+    const OPTIONAL_COLUMNS: &'static [&'static str] = &[
+        "light_paths",
+        "map_light_paths",
+        "reference_delta_unlit",
+        "mean_difference_unlit",
+        "mean_difference_all",
+        "tiles",
+        "target_error",
+        "reached_s",
+    ];
 }
 
-impl TableRow for SeriesRow {}
+impl TableRow for SeriesRow {
+    const OPTIONAL_COLUMNS: &'static [&'static str] = &["tiles"];
+}
 
 /// Writes `rows` as a CSV table with a header line.
 pub fn write_table<T: Serialize>(path: &Path, rows: &[T]) -> Result<()> {
@@ -210,6 +231,9 @@ mod tests {
             reference_delta_unlit: Some(0.002),
             mean_difference_unlit: Some(-0.0004),
             mean_difference_all: None,
+            tiles: "adaptive".into(),
+            target_error: Some(0.03),
+            reached_s: Some(7.5),
         }
     }
 
@@ -225,7 +249,7 @@ mod tests {
             "scene,method,topology,processes,groups,threads_per_group,threads,repeat,wall_s,backward_rays,\
              forward_rays,merges,light_paths,map_light_paths,phases,delta_unlit,delta_all,true_unlit,true_all,\
              peak_memory_bytes,bytes_per_pixel,idle_fraction,reference_delta_unlit,mean_difference_unlit,\
-             mean_difference_all"
+             mean_difference_all,tiles,target_error,reached_s"
         );
         assert!(text.lines().nth(1).unwrap().starts_with("cornell,three-level,synthetic pack:1 numa:2"), "{text}");
         let back: Vec<ResultsRow> = read_table(&path).unwrap();
@@ -246,14 +270,15 @@ mod tests {
             delta_all: 0.125,
             true_unlit: None,
             true_all: Some(0.5),
+            tiles: String::new(),
         };
         let path = dir.join("series.csv");
         write_table(&path, std::slice::from_ref(&step)).unwrap();
         let text = std::fs::read_to_string(&path).unwrap();
         assert_eq!(
             text,
-            "scene,method,threads,repeat,time_s,rays,delta_unlit,delta_all,true_unlit,true_all\n\
-             caustic,two-level,4,1,0.5,12345,0.25,0.125,,0.5\n"
+            "scene,method,threads,repeat,time_s,rays,delta_unlit,delta_all,true_unlit,true_all,tiles\n\
+             caustic,two-level,4,1,0.5,12345,0.25,0.125,,0.5,\n"
         );
         assert_eq!(read_table::<SeriesRow>(&path).unwrap(), [step]);
         std::fs::remove_dir_all(&dir).ok();

@@ -247,10 +247,11 @@ fn series_lines(rows: &[&SeriesRow], curves: &[Curve], markers: &ThreadMarkers) 
     for &(method, threads) in &keys {
         let of_key: Vec<&SeriesRow> =
             rows.iter().copied().filter(|r| r.method == method && r.threads == threads).collect();
-        for repeat in first_appearances(of_key.iter().map(|r| r.repeat)) {
+        // A run is its repeat and, with a target error, its tiles (adaptive and uniform runs share a repeat).
+        for (repeat, tiles) in first_appearances(of_key.iter().map(|r| (r.repeat, r.tiles.as_str()))) {
             for &(stroke, point) in curves {
                 let mut points: Vec<(f64, f64)> =
-                    of_key.iter().filter(|r| r.repeat == repeat).filter_map(|r| point(r)).collect();
+                    of_key.iter().filter(|r| r.repeat == repeat && r.tiles == tiles).filter_map(|r| point(r)).collect();
                 points.sort_by(|a, b| a.0.total_cmp(&b.0));
                 if points.is_empty() {
                     continue;
@@ -930,6 +931,7 @@ mod tests {
             delta_all: 0.1,
             true_unlit: Some(0.12),
             true_all: Some(0.12),
+            tiles: String::new(),
         }
     }
 

@@ -163,6 +163,11 @@ pub struct BenchArgs {
     /// Job seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Time to a target error instead of the error at equal time: every configuration runs twice, with adaptive
+    /// tiles and with --uniform, each until δ unlit is at or below D (or --time passes), and the report gives
+    /// both times. D for every scene, or per scene, e.g. cornell=0.03,caustic=0.08.
+    #[arg(long, value_name = "D|SCENE=D,…")]
+    pub target_error: Option<String>,
     /// Output folder for results.csv and report.md (default: a new folder under out/).
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
@@ -207,6 +212,10 @@ pub struct RenderArgs {
     /// Pixels δ is measured over for --target-error and the progress bar.
     #[arg(long, value_enum, default_value = "unlit")]
     pub error_over: ErrorOverArg,
+    /// With --target-error, render every tile every round: without it, a tile whose own δ is below the target
+    /// stops receiving phases (adaptive tiles, in the parallel and distributed methods).
+    #[arg(long)]
+    pub uniform: bool,
     /// Output folder (created if missing). Default: a new folder under out/.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,

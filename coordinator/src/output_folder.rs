@@ -6,7 +6,7 @@ use photonfarm::color::luminance_f64;
 use photonfarm::image_io::exr_file::{find_layer, read_exr, write_exr, LayerImage};
 use photonfarm::image_io::preview::{auto_exposure, write_preview_png};
 use photonfarm::render::images::luminance_of;
-use photonfarm::render::images::{layer_images, lit_layer, total_image};
+use photonfarm::render::images::{layer_images, lit_layer, phases_layer, total_image};
 use photonfarm::render::record::{RunRecord, TrueError};
 use std::path::{Path, PathBuf};
 
@@ -68,11 +68,12 @@ impl Reference {
     }
 }
 
-/// Writes image.exr (with the lit mask as its `lit` layer), preview.png and run.json; each file is replaced
+/// Writes image.exr (with the lit mask as its `lit` layer and the phases per pixel as its `phases` layer), preview.png and run.json; each file is replaced
 /// atomically.
 pub fn save(dir: &Path, sums: &Accumulator, lit: &LitMask, record: &RunRecord) -> Result<()> {
     let mut layers: Vec<LayerImage> = layer_images(sums);
     layers.push(lit_layer(lit));
+    layers.push(phases_layer(sums));
     write_exr(&dir.join("image.exr"), &layers)?;
     let total = layers.iter().find(|l| l.name == "total").context("total layer missing")?;
     write_preview_png(&dir.join("preview.png"), total, auto_exposure(total))?;

@@ -12,12 +12,13 @@ use indicatif::{ProgressBar, ProgressStyle};
 use photonfarm::accumulation::{Accumulator, LitMask};
 use photonfarm::protocol::Secret;
 use photonfarm::ray_map::{self, Recorder};
+use photonfarm::render::active_tiles::DEFAULT_TILE;
 use photonfarm::render::checkpoint::Checkpoint;
 use photonfarm::render::forecast::Forecast;
 use photonfarm::render::method::{Images, Processes};
 use photonfarm::render::record::{flags_of, HistoryEntry, RunRecord, WorkerRecord, WorkerState};
 use photonfarm::render::session::{self, ErrorOver, Progressive, StopReason, StopRule, Tracking};
-use photonfarm::render::{memory, Engine, Method, RenderSettings};
+use photonfarm::render::{memory, ActiveTiles, Engine, Method, RenderSettings};
 use photonfarm::scene::Scene;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -55,6 +56,12 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let bar = progress_bar(args.quiet);
 
     let mut notes = Vec::new();
+    if args.target_error.is_some() && !args.uniform && args.method.layout().parallel.is_none() {
+        notes.push(format!(
+            "--method {} renders every pixel every phase: adaptive tiles apply to the parallel and distributed methods",
+            args.method
+        ));
+    }
     let recorder = start_ray_map(&args, &scene, &settings, &dir)?;
     let (mut engine, layout) =
         start_engine(&args, &scene, settings, &dir, checkpoint.as_ref(), recorder.clone(), &mut notes)?;
@@ -80,8 +87,16 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let mut history = checkpoint.map(|c| c.history).unwrap_or_default();
     let mut feed = live.as_mut().map(|l| &mut l.feed);
     let mut forecast = Forecast::new(stop.target_error);
-    let run =
-        run_until_stop(engine.as_mut(), &interrupted, &outputs, &bar, &mut history, &mut forecast, feed.as_deref_mut());
+    let mut tiles = adaptive_tiles(&args, &scene, &stop, engine.as_ref())?;
+    let run = run_until_stop(
+        engine.as_mut(),
+        &interrupted,
+        &outputs,
+        &bar,
+        &mut history,
+        (&mut forecast, tiles.as_mut()),
+        feed.as_deref_mut(),
+    );
     bar.set_message("stopping: collecting the last completed phases");
     if let Some(f) = feed.as_deref_mut() {
         f.stopping(engine.as_ref(), &history, outputs.elapsed_s());
@@ -410,6 +425,24 @@ fn start_engine<'s>(
     }
 }
 
+/// The tiles of an adaptive run: with a target error, unless `--uniform`, on renderers that can restrict
+/// their rounds to some tiles (the tile edge is `--tile-size`'s, by default the masks' 32 pixels).
+fn adaptive_tiles(
+    args: &RenderArgs,
+    scene: &Scene,
+    stop: &StopRule,
+    engine: &dyn Progressive,
+) -> Result<Option<ActiveTiles>> {
+    if stop.target_error.is_none() || args.uniform || !engine.renders_tiles() {
+        return Ok(None);
+    }
+    let tile = args.tile_size.unwrap_or(DEFAULT_TILE);
+    Ok(Some(
+        ActiveTiles::all(scene.camera.width, scene.camera.height, tile)
+            .map_err(|e| anyhow::anyhow!("--tile-size: {e}"))?,
+    ))
+}
+
 /// What the launcher of worker processes takes from the command line.
 fn launch_options(args: &RenderArgs) -> LaunchOptions {
     LaunchOptions {
@@ -536,14 +569,14 @@ fn run_until_stop(
     outputs: &Outputs,
     bar: &ProgressBar,
     history: &mut Vec<HistoryEntry>,
-    forecast: &mut Forecast,
+    (forecast, tiles): (&mut Forecast, Option<&mut ActiveTiles>),
     mut feed: Option<&mut LiveFeed>,
 ) -> Result<StopReason> {
     let save_interval = Duration::from_secs_f64(outputs.args.save_interval.max(0.5));
     let mut last_save = Instant::now();
     let mut save_error: Option<anyhow::Error> = None;
     let stop = outputs.stop;
-    let tracking = Tracking { lit: outputs.lit, forecast, elapsed_before: outputs.elapsed_before };
+    let tracking = Tracking { lit: outputs.lit, forecast, elapsed_before: outputs.elapsed_before, tiles };
     let reason = session::run(engine, stop, interrupted, history, tracking, |engine, history, forecast| {
         let Some(entry) = history.last_mut() else { return };
         if let Some(r) = outputs.reference {
@@ -633,6 +666,7 @@ fn finish(engine: &mut dyn Progressive, outputs: &Outputs, history: &mut Vec<His
         light_paths_per_pixel: (!engine.settings().adaptive_light).then_some(engine.settings().light_paths_per_pixel),
         true_all: truth.as_ref().map(|t| t.rmse_all),
         true_unlit: truth.as_ref().map(|t| t.rmse_unlit),
+        active_tiles: history.last().and_then(|h| h.active_tiles),
     });
 }
 

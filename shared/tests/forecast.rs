@@ -34,7 +34,7 @@ fn the_prediction_made_within_twice_the_target_meets_the_actual_remaining_work_w
     let mut engine = Engine::new(&sc, settings);
     let mut forecast = Forecast::new(Some(target));
     let mut history = Vec::new();
-    let tracking = Tracking { lit: &lit, forecast: &mut forecast, elapsed_before: Duration::ZERO };
+    let tracking = Tracking { lit: &lit, forecast: &mut forecast, elapsed_before: Duration::ZERO, tiles: None };
     let reason = session::run(&mut engine, &stop, &AtomicBool::new(false), &mut history, tracking, |_, _, _| {});
     assert_eq!(reason, StopReason::TargetError);
     let record = forecast.record().expect("a record with a target");

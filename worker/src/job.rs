@@ -9,6 +9,7 @@ use photonfarm::accumulation::delta::{encode_delta, Compression};
 use photonfarm::protocol::{Job, Snapshot, WorkerInfo};
 use photonfarm::render::light_balance::LightBalance;
 use photonfarm::render::session::Progressive;
+use photonfarm::render::ActiveTiles;
 use photonfarm::scene::Scene;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -70,15 +71,27 @@ pub fn engine_config(job: &Job) -> Result<EngineConfig, String> {
     Ok(config)
 }
 
-/// Renders `job` until `stop` is set, calling `emit` with its events (it returns false when nobody listens any
-/// more). Snapshots are deltas since the previous one, so a snapshot that never arrives is lost, never counted
-/// twice.
-/// `interval_ms` is the time between snapshots; the link lengthens it on slow links.
+/// Tiles the coordinator restricted a job to and the engine has not taken yet: the tile edge and one flag per
+/// tile.
+pub type PendingTiles = std::sync::Mutex<Option<(u32, Vec<bool>)>>;
+
+/// What the link changes while a job runs.
+pub struct Control<'a> {
+    /// Set to end the job after its current round.
+    pub stop: &'a AtomicBool,
+    /// The time between snapshots; the link lengthens it on slow links.
+    pub interval_ms: &'a AtomicU64,
+    /// Tiles the coordinator restricted the job to since the last round (tile edge, one flag per tile).
+    pub tiles: &'a PendingTiles,
+}
+
+/// Renders `job` until `control.stop` is set, calling `emit` with its events (it returns false when nobody
+/// listens any more). Snapshots are deltas since the previous one, so a snapshot that never arrives is lost,
+/// never counted twice.
 pub fn run(
     scene: &Scene,
     job: &Job,
-    stop: &AtomicBool,
-    interval_ms: &AtomicU64,
+    control: Control,
     slowdown: f64,
     compression: Compression,
     mut emit: impl FnMut(JobEvent) -> bool,
@@ -136,7 +149,18 @@ pub fn run(
     let mut base = engine.sums().clone();
     let mut seq = 0;
     let mut last = Instant::now();
+    let Control { stop, interval_ms, tiles } = control;
     loop {
+        let pending = tiles.lock().unwrap_or_else(|e| e.into_inner()).take();
+        if let Some((tile, flags)) = pending {
+            match ActiveTiles::from_flags(scene.camera.width, scene.camera.height, tile, flags) {
+                Ok(t) => engine.set_active_tiles(&t),
+                Err(e) => {
+                    emit(JobEvent::Failed(format!("the coordinator's active tiles do not fit the image: {e}")));
+                    return;
+                }
+            }
+        }
         let stopping = stop.load(Ordering::Acquire);
         if !stopping {
             let round = Instant::now();

@@ -71,7 +71,9 @@ pub async fn serve_job(
         Message::Refused { reason } => return Err(ProtocolError::Refused(reason).into()),
         other => return Err(ProtocolError::Unexpected { expected: "Job", got: other.kind().into() }.into()),
     };
-    if fetch_files(&mut conn, &job, cache).await? == Fetched::Stopped {
+    // Tiles the coordinator restricts the job to (adaptive tiles), handed to the engine thread before a round.
+    let tiles: Arc<job::PendingTiles> = Arc::default();
+    if fetch_files(&mut conn, &job, cache, &tiles).await? == Fetched::Stopped {
         // The run ended while this worker was still being set up: nothing rendered, nothing lost.
         conn.write(&Message::Finished).await?;
         drain_until_closed(&mut conn).await;
@@ -103,12 +105,14 @@ pub async fn serve_job(
     let (events_tx, mut events) = mpsc::unbounded_channel();
     let engine = {
         let (job, stop, interval_ms, slowdown) = (job.clone(), stop.clone(), interval_ms.clone(), opts.slowdown);
+        let tiles = tiles.clone();
         // On this machine the link is free and the worker's time is not: compress fast.
         let compression = Compression::for_peer(conn.peer);
         std::thread::Builder::new()
             .name("job".into())
             .spawn(move || {
-                job::run(&scene, &job, &stop, &interval_ms, slowdown, compression, |e| events_tx.send(e).is_ok())
+                let control = job::Control { stop: &stop, interval_ms: &interval_ms, tiles: &tiles };
+                job::run(&scene, &job, control, slowdown, compression, |e| events_tx.send(e).is_ok())
             })
             .map_err(|e| LinkError::Job(format!("cannot start the engine thread: {e}")))?
     };
@@ -174,9 +178,12 @@ pub async fn serve_job(
                         }
                     }
                     Some(Ok(Message::Stop)) => stop.store(true, Ordering::Release),
+                    Some(Ok(Message::ActiveTiles { tile, flags })) => {
+                        *tiles.lock().unwrap_or_else(|e| e.into_inner()) = Some((tile, flags));
+                    }
                     Some(Ok(Message::Heartbeat)) => {}
                     Some(Ok(other)) => {
-                        break Err(ProtocolError::Unexpected { expected: "Ack, Stop or Heartbeat", got: other.kind().into() }.into())
+                        break Err(ProtocolError::Unexpected { expected: "Ack, Stop, ActiveTiles or Heartbeat", got: other.kind().into() }.into())
                     }
                     // After `Finished` the coordinator may close once it has what it needs.
                     Some(Err(ProtocolError::Closed)) | None if finished => break Ok(()),
@@ -222,8 +229,13 @@ async fn drain_until_closed(conn: &mut Connection) {
 }
 
 /// Asks for the job's files that are not in `cache` and checks every one against its hash. A stop request
-/// that arrives first ends the job normally.
-async fn fetch_files(conn: &mut Connection, job: &Job, cache: &mut FileCache) -> Result<Fetched, ProtocolError> {
+/// that arrives first ends the job normally; active tiles that arrive meanwhile are kept in `tiles`.
+async fn fetch_files(
+    conn: &mut Connection,
+    job: &Job,
+    cache: &mut FileCache,
+    tiles: &job::PendingTiles,
+) -> Result<Fetched, ProtocolError> {
     let mut missing: Vec<String> =
         job.files.iter().map(|f| f.sha256.clone()).filter(|h| !cache.contains_key(h)).collect();
     missing.sort();
@@ -246,6 +258,9 @@ async fn fetch_files(conn: &mut Connection, job: &Job, cache: &mut FileCache) ->
                 cache.insert(sha256, bytes);
             }
             Message::Stop => return Ok(Fetched::Stopped),
+            Message::ActiveTiles { tile, flags } => {
+                *tiles.lock().unwrap_or_else(|e| e.into_inner()) = Some((tile, flags));
+            }
             Message::Heartbeat => {}
             Message::Refused { reason } => return Err(ProtocolError::Refused(reason)),
             other => return Err(ProtocolError::Unexpected { expected: "File", got: other.kind().into() }),
@@ -329,6 +344,50 @@ mod tests {
             let outcome = serve_job(conn, &opts, &mut FileCache::new()).await.expect("a normal end");
             assert_eq!((outcome.snapshots_sent, outcome.snapshots_acked), (0, 0));
             assert_eq!(coordinator.await.unwrap(), "Finished");
+        });
+    }
+
+    #[test]
+    fn active_tiles_that_do_not_fit_the_image_fail_the_job_with_the_reason() {
+        let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+        runtime.block_on(async {
+            let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
+            let addr = listener.local_addr().unwrap();
+            let (mut job, store) = cornell_job();
+            job.scene_text = job.scene_text.replace("width = 256", "width = 16").replace("height = 256", "height = 16");
+            job.scene_hash = Scene::from_toml_with_meshes(
+                &job.scene_text,
+                Path::new("cornell.toml"),
+                &job.files.iter().map(|f| (f.path.clone(), store[&f.sha256].clone())).collect(),
+            )
+            .unwrap()
+            .hash;
+            let coordinator = tokio::spawn(async move {
+                let (s, _) = listener.accept().await.unwrap();
+                let mut c = Connection::new(s).unwrap();
+                handshake(&mut c, Role::Coordinator, "c", &Secret::insecure()).await.unwrap();
+                c.write(&Message::Job(Box::new(job))).await.unwrap();
+                // A 16 × 16 image has one 32-pixel tile, not three.
+                c.write(&Message::ActiveTiles { tile: 32, flags: vec![true, false, true] }).await.unwrap();
+                loop {
+                    match c.read().await.unwrap() {
+                        Message::NeedFiles { hashes } => {
+                            for h in hashes {
+                                let bytes = store[&h].clone();
+                                c.write(&Message::File { sha256: h, bytes }).await.unwrap();
+                            }
+                        }
+                        Message::Failed { reason } => return reason,
+                        Message::Started(_) | Message::Heartbeat => {}
+                        other => panic!("unexpected {}", other.kind()),
+                    }
+                }
+            });
+            let conn = Connection::new(TcpStream::connect(addr).await.unwrap()).unwrap();
+            let opts = LinkOptions::new("w".into(), Secret::insecure());
+            assert!(serve_job(conn, &opts, &mut FileCache::new()).await.is_err());
+            let reason = coordinator.await.unwrap();
+            assert!(reason.contains("active tiles") && reason.contains("3 tile flags"), "{reason}");
         });
     }
 }

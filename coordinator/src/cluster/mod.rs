@@ -12,7 +12,7 @@ use photonfarm::accumulation::delta::apply_delta;
 use photonfarm::accumulation::{Accumulator, AuxLayout};
 use photonfarm::render::record::{WorkerRecord, WorkerState};
 use photonfarm::render::session::Progressive;
-use photonfarm::render::{RayTotals, RenderSettings};
+use photonfarm::render::{ActiveTiles, RayTotals, RenderSettings};
 use std::net::IpAddr;
 use std::process::Child;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -382,5 +382,13 @@ impl Progressive for Cluster {
 
     fn finish(&mut self) {
         self.collect(Duration::from_secs(60));
+    }
+
+    fn renders_tiles(&self) -> bool {
+        true
+    }
+
+    fn set_active_tiles(&mut self, tiles: &ActiveTiles) {
+        self.send(Control::ActiveTiles { tile: tiles.tile, flags: Arc::new(tiles.flags().to_vec()) });
     }
 }

@@ -64,6 +64,11 @@ pub enum Control {
         worker: usize,
         reason: String,
     },
+    /// Every worker, and every worker that starts later, renders only these tiles (adaptive tiles).
+    ActiveTiles {
+        tile: u32,
+        flags: Arc<Vec<bool>>,
+    },
 }
 
 /// Failures of worker links per host address in this job, as render-farm managers keep them: a host whose
@@ -176,6 +181,8 @@ pub async fn run(
     let (link_tx, mut link_rx) = mpsc::unbounded_channel::<(usize, mpsc::UnboundedSender<Control>)>();
     let mut links: Links = BTreeMap::new();
     let mut stopping = false;
+    // The latest active tiles, for workers whose link starts after they were decided.
+    let mut tiles: Option<(u32, Arc<Vec<bool>>)> = None;
     // Remote daemons: dial them.
     for (i, p) in plan.planned.iter().enumerate() {
         if let Planned::Remote { address } = p {
@@ -276,11 +283,19 @@ pub async fn run(
                         let _ = l.send(Control::Drop { worker, reason });
                     }
                 }
+                Some(Control::ActiveTiles { tile, flags }) => {
+                    for l in links.values() {
+                        let _ = l.send(Control::ActiveTiles { tile, flags: flags.clone() });
+                    }
+                    tiles = Some((tile, flags));
+                }
                 None => return,
             },
             Some((worker, tx)) = link_rx.recv() => {
                 if stopping {
                     let _ = tx.send(Control::StopAll);
+                } else if let Some((tile, flags)) = &tiles {
+                    let _ = tx.send(Control::ActiveTiles { tile: *tile, flags: flags.clone() });
                 }
                 links.insert(worker, tx);
             }
@@ -383,6 +398,7 @@ async fn drive(
                     let message = match c {
                         Some(Control::Ack { seq, .. }) => Message::Ack { seq },
                         Some(Control::StopAll) => Message::Stop,
+                        Some(Control::ActiveTiles { tile, flags }) => Message::ActiveTiles { tile, flags: flags.to_vec() },
                         Some(Control::Drop { reason, .. }) => {
                             let _ = writer.write(&Message::Refused { reason: reason.clone() }).await;
                             break Err(reason);

@@ -9,7 +9,9 @@ use serde::{Deserialize, Serialize};
 
 /// Bumped whenever a message changes shape; peers with another version are refused in the handshake.
 /// 5: the totals count the light paths counted against photon maps. 6: snapshots carry the replicate sums.
-pub const PROTOCOL_VERSION: u32 = 7;
+/// 7: the coordinator may restrict workers to the tiles still above the target error (`ActiveTiles`).
+/// 8: jobs say whether the worker chooses its light paths per pixel (`RenderSettings::adaptive_light`).
+pub const PROTOCOL_VERSION: u32 = 8;
 
 /// Which end of a link a peer is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -128,6 +130,10 @@ pub enum Message {
     Finished,
     /// Worker → coordinator: the job cannot run (bad scene, missing file, …).
     Failed { reason: String },
+    /// Coordinator → worker: render only these tiles from the next round on (adaptive tiles, decided from the
+    /// merged sums): one flag per `tile`-pixel tile of the image, row-major. A worker never told renders every
+    /// tile.
+    ActiveTiles { tile: u32, flags: Vec<bool> },
 }
 
 impl Message {
@@ -147,6 +153,7 @@ impl Message {
             Message::Stop => "Stop",
             Message::Finished => "Finished",
             Message::Failed { .. } => "Failed",
+            Message::ActiveTiles { .. } => "ActiveTiles",
         }
     }
 }
@@ -183,6 +190,8 @@ mod tests {
         let m = Message::Hello { version: 1, role: Role::Worker, nonce: [7; 32], name: "w".into() };
         assert_eq!(decode(&encode(&m).unwrap()).unwrap(), m);
         let m = Message::Ack { seq: 42 };
+        assert_eq!(decode(&encode(&m).unwrap()).unwrap(), m);
+        let m = Message::ActiveTiles { tile: 32, flags: vec![true, false, true] };
         assert_eq!(decode(&encode(&m).unwrap()).unwrap(), m);
     }
 

@@ -14,7 +14,8 @@ use std::path::Path;
 
 /// 2: the sums' auxiliary layers (the ghost layer) are kept. 3: the settings hold the spectral-output bands.
 /// 4: the totals count the light paths counted against photon maps. 5: the sums keep their replicates.
-const FORMAT: u32 = 5;
+/// 6: the history says how many tiles each step rendered.
+const FORMAT: u32 = 6;
 
 /// Everything a resumed run continues from.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

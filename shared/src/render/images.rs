@@ -45,6 +45,19 @@ pub fn lit_layer(lit: &LitMask) -> LayerImage {
     image
 }
 
+/// Phases per pixel as a grey layer: where adaptive tiles spent the work (uniform where every tile rendered
+/// every round).
+pub fn phases_layer(sums: &Accumulator) -> LayerImage {
+    let mut image = LayerImage::new(PHASES_LAYER, sums.width as usize, sums.height as usize);
+    for (px, p) in image.rgb.iter_mut().zip(&sums.pixels) {
+        *px = [p.phases as f32; 3];
+    }
+    image
+}
+
+/// The name of the phases-per-pixel EXR layer.
+pub const PHASES_LAYER: &str = "phases";
+
 /// The mean total image, f64 per channel.
 pub fn total_image(sums: &Accumulator) -> Vec<[f64; 3]> {
     (0..sums.pixels.len()).map(|i| sums.mean_total(i)).collect()

@@ -31,6 +31,9 @@ pub struct HistoryEntry {
     pub true_all: Option<f64>,
     #[serde(default)]
     pub true_unlit: Option<f64>,
+    /// Tiles the step rendered, with adaptive tiles (null when every tile rendered every step).
+    #[serde(default)]
+    pub active_tiles: Option<u32>,
 }
 
 /// Error against a reference image.

@@ -1,5 +1,6 @@
 //! A progressive run: phases until a time, phase or error target is met, or the user interrupts.
 
+use super::active_tiles::ActiveTiles;
 use super::engine::Engine;
 use super::forecast::Forecast;
 use super::light_balance::LightBalance;
@@ -49,6 +50,12 @@ pub trait Progressive {
     fn set_light_paths_per_pixel(&mut self, _l: f32) -> bool {
         false
     }
+    /// True when the renderer can restrict its steps to some tiles (`set_active_tiles`).
+    fn renders_tiles(&self) -> bool {
+        false
+    }
+    /// Renders only `tiles`' active tiles from the next step on; renderers that cannot ignore it.
+    fn set_active_tiles(&mut self, _tiles: &ActiveTiles) {}
 }
 
 impl Progressive for Engine<'_> {
@@ -127,6 +134,9 @@ pub struct Tracking<'a> {
     pub forecast: &'a mut Forecast,
     /// Wall time spent in earlier sessions of the same run (resume).
     pub elapsed_before: Duration,
+    /// Adaptive tiles: the tiles still above the target error, decided after every step from the merged sums
+    /// (None renders every tile every step).
+    pub tiles: Option<&'a mut ActiveTiles>,
 }
 
 impl StopRule {
@@ -149,7 +159,7 @@ pub fn run<R: Progressive + ?Sized>(
     tracking: Tracking,
     mut on_phase: impl FnMut(&R, &mut [HistoryEntry], &Forecast),
 ) -> StopReason {
-    let Tracking { lit, forecast, elapsed_before } = tracking;
+    let Tracking { lit, forecast, elapsed_before, mut tiles } = tracking;
     let start = Instant::now();
     // The light paths per pixel, chosen as the run goes unless they were fixed; a distributed renderer's
     // workers choose their own.
@@ -161,6 +171,16 @@ pub fn run<R: Progressive + ?Sized>(
     if let Some(b) = &mut balance {
         b.observe(engine.sums(), engine.totals());
     }
+    // Tiles only retire towards a target; a resumed run starts from what its sums already say.
+    let target = stop.target_error.filter(|_| engine.renders_tiles());
+    let decide = |engine: &mut R, tiles: &mut Option<&mut ActiveTiles>| {
+        if let (Some(t), Some(target)) = (tiles.as_deref_mut(), target) {
+            if t.update(engine.sums(), lit, stop.error_over, target) {
+                engine.set_active_tiles(t);
+            }
+        }
+    };
+    decide(engine, &mut tiles);
     loop {
         if interrupted.load(Ordering::Relaxed) {
             return StopReason::Interrupted;
@@ -176,6 +196,7 @@ pub fn run<R: Progressive + ?Sized>(
         }
         let s = engine.settings();
         let light = (balance.is_some() || !s.adaptive_light).then_some(s.light_paths_per_pixel);
+        let active_tiles = tiles.as_deref().filter(|_| target.is_some()).map(|t| t.active_count() as u32);
         engine.step(interrupted, deadline);
         if let Some(b) = &mut balance {
             b.observe(engine.sums(), engine.totals());
@@ -190,6 +211,7 @@ pub fn run<R: Progressive + ?Sized>(
             backward_rays: t.backward_rays,
             forward_rays: t.forward_rays,
             light_paths_per_pixel: light,
+            active_tiles,
             ..HistoryEntry::default()
         };
         history.push(entry);
@@ -211,5 +233,6 @@ pub fn run<R: Progressive + ?Sized>(
         if stop.phases.is_some_and(|n| e.min_phases as u64 >= n) {
             return StopReason::Phases;
         }
+        decide(engine, &mut tiles);
     }
 }

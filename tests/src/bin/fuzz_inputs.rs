@@ -320,6 +320,7 @@ fn main() -> Result<()> {
         Message::Stop,
         Message::Finished,
         Message::Failed { reason: "x".into() },
+        Message::ActiveTiles { tile: 32, flags: vec![true, false, true, true] },
     ];
     let runtime = tokio::runtime::Builder::new_current_thread().build()?;
     let mut frame_seeds = Vec::new();

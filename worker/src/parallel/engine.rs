@@ -9,7 +9,7 @@ use photonfarm::accumulation::{Accumulator, AuxLayout};
 use photonfarm::pbpm::PhaseNumbering;
 use photonfarm::render::record::StageSeconds;
 use photonfarm::render::session::Progressive;
-use photonfarm::render::{RayTotals, RenderSettings};
+use photonfarm::render::{ActiveTiles, RayTotals, RenderSettings};
 use photonfarm::scene::Scene;
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -142,6 +142,8 @@ pub struct ParallelEngine<'s> {
     slots: Vec<MapSlot<GroupMap>>,
     sums: Accumulator,
     deals: u64,
+    /// The tiles rounds render (adaptive tiles); None renders every tile.
+    tiles: Option<ActiveTiles>,
     /// Thread-nanoseconds idle at round ends and between rounds.
     waiting_nanos: u64,
     between_nanos: u64,
@@ -183,6 +185,7 @@ impl<'s> ParallelEngine<'s> {
             groups,
             slots,
             deals: 0,
+            tiles: None,
             waiting_nanos: 0,
             between_nanos: 0,
             last_round_end: None,
@@ -192,6 +195,16 @@ impl<'s> ParallelEngine<'s> {
     /// The configuration.
     pub fn config(&self) -> &EngineConfig {
         &self.config
+    }
+
+    /// Renders only the active tiles of `tiles` from the next round on (every tile when all are active).
+    pub fn set_active_tiles(&mut self, tiles: &ActiveTiles) {
+        assert_eq!(
+            (tiles.width, tiles.height),
+            (self.scene.camera.width, self.scene.camera.height),
+            "tiles of another image"
+        );
+        self.tiles = (!tiles.all_active()).then(|| tiles.clone());
     }
 
     /// Per-group counters.
@@ -222,11 +235,15 @@ impl<'s> ParallelEngine<'s> {
         }
         self.deals += 1;
         let (w, h) = (self.scene.camera.width, self.scene.camera.height);
-        let masks = if self.config.masks {
-            mask::deal(w, h, self.config.tile_size, self.config.groups, self.settings.seed, self.deals)
-        } else {
-            vec![mask::whole_image(w, h); self.config.groups]
+        let (groups, seed) = (self.config.groups, self.settings.seed);
+        let masks = match (&self.tiles, self.config.masks) {
+            (None, true) => mask::deal(w, h, self.config.tile_size, groups, seed, self.deals),
+            (None, false) => vec![mask::whole_image(w, h); groups],
+            (Some(t), true) => mask::deal_tiles(t, groups, seed, self.deals),
+            (Some(t), false) => vec![t.active_pixels(); groups],
         };
+        // The pixels of the round: the light-path quota is L per pixel rendered.
+        let rendered_pixels = if self.config.masks { masks.iter().map(Vec::len).sum() } else { masks[0].len() };
         for (g, m) in self.groups.iter_mut().zip(masks) {
             let before = m.iter().map(|&p| self.sums.pixels[p as usize].phases).collect();
             g.start_deal(m, before, if self.config.masks { 1 } else { self.config.groups as u32 });
@@ -240,6 +257,7 @@ impl<'s> ParallelEngine<'s> {
             sole_foreign_writer: self.config.groups == 2 && self.config.threads_per_group == 1,
             stop: &stop,
             deal: self.deals,
+            rendered_pixels,
             numbering: PhaseNumbering {
                 processes: self.config.processes_per_pixel.max(1) as u64,
                 process: self.config.process_rank as u64,
@@ -357,6 +375,14 @@ impl Progressive for ParallelEngine<'_> {
 
     fn stage_seconds(&self) -> Option<StageSeconds> {
         Some(ParallelEngine::stage_seconds(self))
+    }
+
+    fn renders_tiles(&self) -> bool {
+        true
+    }
+
+    fn set_active_tiles(&mut self, tiles: &ActiveTiles) {
+        ParallelEngine::set_active_tiles(self, tiles);
     }
 }
 

@@ -138,6 +138,9 @@ pub struct RoundContext<'a> {
     pub sole_foreign_writer: bool,
     pub stop: &'a AtomicBool,
     pub deal: u64,
+    /// Pixels the round renders over all groups (every pixel unless tiles retired): the light-path quota is
+    /// L per rendered pixel.
+    pub rendered_pixels: usize,
     /// The processes rendering the same pixels and the phases before this run, for the radius schedule (each
     /// group adds the groups of its deal).
     pub numbering: PhaseNumbering,
@@ -321,10 +324,11 @@ impl Group {
         // 2. Build the map while it is closed. The phase's quota counts every light path traced against the map,
         // its own group's and the other groups' (paper §4.2): a light path that gathers into several open maps
         // serves each of them, so a group whose map others trace against needs fewer paths of its own for the
-        // same light per pixel. The quota is per image pixel, not per mask pixel: light paths leave the lights
-        // over the whole scene, so a pixel's gathered estimate has the variance of the map's light-path count,
-        // and every method gives a pixel the same light at the same `light_paths_per_pixel`.
-        let required = ctx.settings.light_paths_per_phase(ctx.scene.camera.pixel_count());
+        // same light per pixel. The quota is per pixel the round renders, not per mask pixel: light paths leave
+        // the lights over the whole scene, so a pixel's gathered estimate has the variance of the map's
+        // light-path count, and every method gives a pixel the same light at the same `light_paths_per_pixel`.
+        // Where tiles retired, the round's light shrinks with its camera paths.
+        let required = ctx.settings.light_paths_per_phase(ctx.rendered_pixels);
         let t0 = Instant::now();
         // One thread adds its own paths' light without atomics; several share the map's atomic buffer.
         let one_thread = rayon::current_num_threads() == 1;

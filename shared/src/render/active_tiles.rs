@@ -1,0 +1,304 @@
+//! Adaptive tiles: with a target error, a tile that has had its share of the work leaves the masks, so the
+//! camera and light paths of a round go to the tiles that still need them, and comes back when its share grows
+//! again. Whoever holds the merged sums decides (the run loop of the coordinator); the engines only render the
+//! tiles they are given.
+//!
+//! The image's δ² (eq. 6) is Σ_t S_t / (N_t Λ): S_t the per-phase variance of tile t summed over its pixels of
+//! the target's class (eq. 7's SEM² times the pixel's phases), N_t its phases, Λ = Σ mean² over the class. For
+//! a tile phase costing the same in every tile, the fewest phases that reach δ = D give each tile
+//! N*_t = √S_t · Σ_u √S_u / (D² Λ) (Lagrange: the marginal gain S_t / N_t² equal in every tile). A tile
+//! retires once it has N*_t phases, estimated from the merged sums at every step; when every tile has, δ ≤ D.
+//! With a target over unlit pixels a tile needs its share towards δ over all pixels ≤ D as well, or the
+//! pixels that see a light would keep the few phases of a tile without unlit pixels.
+//! Retiring a tile once its own δ (the same formula over its pixels) is below D instead keeps dark tiles, whose
+//! relative error is high but whose weight in δ is small, rendering long after they matter.
+
+use super::session::ErrorOver;
+use crate::accumulation::{Accumulator, LitMask};
+use crate::color::luminance_f64;
+use serde::{Deserialize, Serialize};
+
+/// Tile edge in pixels when the run does not set one (the parallel engine's tile for up to 16 groups).
+pub const DEFAULT_TILE: u32 = 32;
+
+/// Phases every pixel of a tile needs before the tile may retire: its δ is judged from the spread of the
+/// pixels' replicate means (four replicates), which needs a few phases in each.
+pub const MIN_TILE_PHASES: u32 = 8;
+
+/// Which tiles of an image a round renders, tile by tile in row-major order.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ActiveTiles {
+    pub width: u32,
+    pub height: u32,
+    /// Tile edge in pixels; tiles on the right and bottom edges may be smaller.
+    pub tile: u32,
+    active: Vec<bool>,
+}
+
+/// One tile's error: δ over its pixels of the target's class and the fewest phases at any of its pixels.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TileError {
+    pub delta: f64,
+    pub min_phases: u32,
+}
+
+/// Why a set of active tiles does not fit an image.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct TilesError(String);
+
+impl ActiveTiles {
+    /// Every tile of a `width` × `height` image active.
+    pub fn all(width: u32, height: u32, tile: u32) -> Result<Self, TilesError> {
+        if tile == 0 {
+            return Err(TilesError("the tile size must be at least one pixel".into()));
+        }
+        let n = (width.div_ceil(tile) * height.div_ceil(tile)) as usize;
+        Ok(ActiveTiles { width, height, tile, active: vec![true; n] })
+    }
+
+    /// Tiles from one flag per tile (row-major), checked against the image's tile count.
+    pub fn from_flags(width: u32, height: u32, tile: u32, flags: Vec<bool>) -> Result<Self, TilesError> {
+        let all = ActiveTiles::all(width, height, tile)?;
+        if flags.len() != all.active.len() {
+            return Err(TilesError(format!(
+                "{} tile flags for a {width}×{height} image of {tile}-pixel tiles, which has {} tiles",
+                flags.len(),
+                all.active.len()
+            )));
+        }
+        Ok(ActiveTiles { active: flags, ..all })
+    }
+
+    /// One flag per tile, row-major.
+    pub fn flags(&self) -> &[bool] {
+        &self.active
+    }
+
+    /// Tiles per row.
+    pub fn tiles_x(&self) -> u32 {
+        self.width.div_ceil(self.tile)
+    }
+
+    /// Tiles of the image.
+    pub fn len(&self) -> usize {
+        self.active.len()
+    }
+
+    /// True for an image without tiles.
+    pub fn is_empty(&self) -> bool {
+        self.active.is_empty()
+    }
+
+    /// Tiles the next rounds render.
+    pub fn active_count(&self) -> usize {
+        self.active.iter().filter(|&&a| a).count()
+    }
+
+    /// True when every tile is active (a uniform round).
+    pub fn all_active(&self) -> bool {
+        self.active.iter().all(|&a| a)
+    }
+
+    /// True when tile `t` is active.
+    pub fn is_active(&self, t: usize) -> bool {
+        self.active[t]
+    }
+
+    /// Tile `t`'s rectangle: its first column and row, its width and height.
+    pub fn rect(&self, t: usize) -> (u32, u32, u32, u32) {
+        let tx = self.tiles_x();
+        let (x0, y0) = ((t as u32 % tx) * self.tile, (t as u32 / tx) * self.tile);
+        (x0, y0, self.tile.min(self.width - x0), self.tile.min(self.height - y0))
+    }
+
+    /// The image pixels of tile `t`, row by row.
+    pub fn pixels_of(&self, t: usize) -> impl Iterator<Item = u32> + '_ {
+        let (x0, y0, w, h) = self.rect(t);
+        (y0..y0 + h).flat_map(move |y| (x0..x0 + w).map(move |x| y * self.width + x))
+    }
+
+    /// The pixels of the active tiles, tile by tile.
+    pub fn active_pixels(&self) -> Vec<u32> {
+        (0..self.len()).filter(|&t| self.active[t]).flat_map(|t| self.pixels_of(t)).collect()
+    }
+
+    /// Each tile's δ over its pixels of the class `over` selects, and its fewest phases. A tile without pixels
+    /// of the class, or whose pixels are all black with no spread, has δ 0: it adds nothing to the image's δ.
+    pub fn errors(&self, sums: &Accumulator, lit: &LitMask, over: ErrorOver) -> Vec<TileError> {
+        assert_eq!((sums.width, sums.height), (self.width, self.height), "tiles of another image");
+        (0..self.len())
+            .map(|t| {
+                let (mut num, mut den, mut min_phases) = (0.0, 0.0, u32::MAX);
+                for p in self.pixels_of(t) {
+                    let p = p as usize;
+                    min_phases = min_phases.min(sums.pixels[p].phases);
+                    if over == ErrorOver::Unlit && lit.is_lit(p) {
+                        continue;
+                    }
+                    let l = luminance_f64(sums.mean_total(p));
+                    // Eq. 7 per pixel, summed as in eq. 6.
+                    num += sums.replicate_sem2(p);
+                    den += l * l;
+                }
+                let delta = if num == 0.0 {
+                    0.0
+                } else if den > 0.0 {
+                    (num / den).sqrt()
+                } else {
+                    f64::INFINITY
+                };
+                TileError { delta, min_phases }
+            })
+            .collect()
+    }
+
+    /// Each tile's per-phase variance S_t over its pixels of the class `over` selects (Σ n_p · SEM²_p with
+    /// the replicate SEM that δ uses; infinite while a pixel has fewer than two phases), and the image's
+    /// Λ = Σ mean² over the class.
+    pub fn variances(&self, sums: &Accumulator, lit: &LitMask, over: ErrorOver) -> (Vec<f64>, f64) {
+        let mut lambda = 0.0;
+        let variances = (0..self.len())
+            .map(|t| {
+                let mut variance = 0.0;
+                for p in self.pixels_of(t).map(|p| p as usize) {
+                    if over == ErrorOver::Unlit && lit.is_lit(p) {
+                        continue;
+                    }
+                    lambda += luminance_f64(sums.mean_total(p)).powi(2);
+                    variance += sums.pixels[p].phases as f64 * sums.replicate_sem2(p);
+                }
+                variance
+            })
+            .collect();
+        (variances, lambda)
+    }
+
+    /// Decides the tiles of the next rounds from the merged sums: a tile is active while it has fewer than
+    /// `MIN_TILE_PHASES` phases at some pixel or fewer than its share N*_t of the work to reach `target` (see
+    /// the module's notes), so a retired tile whose share grew as the estimates improved comes back. With a
+    /// target over unlit pixels a tile also needs its share of the same target over all pixels, so the pixels
+    /// that see a light are not left at a few phases. If that leaves no tile, every tile is active: the target
+    /// cannot be met by retiring tiles. Returns true when the set changed.
+    pub fn update(&mut self, sums: &Accumulator, lit: &LitMask, over: ErrorOver, target: f64) -> bool {
+        let classes: &[ErrorOver] = match over {
+            ErrorOver::Unlit => &[ErrorOver::Unlit, ErrorOver::All],
+            ErrorOver::All => &[ErrorOver::All],
+        };
+        let mut shares = vec![0.0f64; self.len()];
+        for &class in classes {
+            let (variances, lambda) = self.variances(sums, lit, class);
+            let roots: f64 = variances.iter().map(|v| v.sqrt()).sum();
+            for (share, v) in shares.iter_mut().zip(&variances) {
+                let needed = v.sqrt() * roots / (target * target * lambda);
+                // No light in the class at all (Λ = 0) leaves nothing to share: the tile stays active.
+                *share = if needed.is_nan() || needed > *share { needed } else { *share };
+            }
+        }
+        let mut next: Vec<bool> = (0..self.len())
+            .map(|t| {
+                let phases = self.pixels_of(t).map(|p| sums.pixels[p as usize].phases).min().unwrap_or(0);
+                // A NaN share (no light in the class) keeps the tile active.
+                phases < MIN_TILE_PHASES || shares[t].is_nan() || (phases as f64) < shares[t]
+            })
+            .collect();
+        if !next.iter().any(|&a| a) {
+            next.fill(true);
+        }
+        let changed = next != self.active;
+        self.active = next;
+        changed
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::color::Rgb;
+    use crate::integrator::LayerValues;
+
+    fn value(x: f32) -> LayerValues {
+        [Rgb::ZERO, Rgb::splat(x), Rgb::ZERO, Rgb::ZERO]
+    }
+
+    /// A 4×2 image of 2-pixel tiles: tile 0 constant (δ 0), tile 1 noisy.
+    fn sums(phases: u32) -> Accumulator {
+        let mut acc = Accumulator::new(4, 2);
+        for j in 0..phases {
+            for p in 0..8 {
+                let noisy = p % 4 >= 2;
+                let x = if noisy { 1.0 + if j % 2 == 0 { 0.5 } else { -0.5 } * ((j / 2) % 3) as f32 } else { 1.0 };
+                acc.add_phase(p, &value(x), 1, (j as usize) % crate::sampling::REPLICATES);
+            }
+        }
+        acc
+    }
+
+    #[test]
+    fn tiles_cover_every_pixel_once_including_partial_edge_tiles() {
+        let t = ActiveTiles::all(70, 33, 32).unwrap();
+        assert_eq!((t.tiles_x(), t.len()), (3, 6));
+        let mut seen = vec![0u8; 70 * 33];
+        for i in 0..t.len() {
+            for p in t.pixels_of(i) {
+                seen[p as usize] += 1;
+            }
+        }
+        assert!(seen.iter().all(|&c| c == 1));
+        assert_eq!(t.rect(5), (64, 32, 6, 1));
+        assert!(ActiveTiles::all(4, 4, 0).is_err());
+        assert!(ActiveTiles::from_flags(70, 33, 32, vec![true; 5]).is_err());
+    }
+
+    #[test]
+    fn a_tiles_delta_is_eq_6_over_its_own_pixels() {
+        let acc = sums(8);
+        let t = ActiveTiles::all(4, 2, 2).unwrap();
+        let e = t.errors(&acc, &LitMask::none(4, 2), ErrorOver::All);
+        assert_eq!(e[0].delta, 0.0);
+        // Tile 1 is pixels 2, 3, 6, 7: the same δ as the image's δ over a mask that leaves only them unlit.
+        let only_tile_1 = LitMask::from_flags(4, 2, (0..8).map(|p| p % 4 < 2).collect(), 1);
+        let image = acc.error(&only_tile_1).delta_unlit;
+        assert!((e[1].delta - image).abs() < 1e-12 && image > 0.0, "{} vs {image}", e[1].delta);
+        assert_eq!(e[1].min_phases, 8);
+    }
+
+    #[test]
+    fn a_tile_retires_once_it_has_its_share_of_the_phases_to_the_target() {
+        let lit = LitMask::none(4, 2);
+        let mut t = ActiveTiles::all(4, 2, 2).unwrap();
+        // Too few phases: both stay, whatever the target.
+        assert!(!t.update(&sums(MIN_TILE_PHASES - 1), &lit, ErrorOver::All, 1e3));
+        assert!(t.all_active());
+        let acc = sums(MIN_TILE_PHASES);
+        let (v, lambda) = t.variances(&acc, &lit, ErrorOver::All);
+        assert_eq!(v[0], 0.0);
+        // Tile 1's share at target D is √S₁ (√S₀ + √S₁) / (D² Λ) = S₁ / (D² Λ): the phases at which its δ over
+        // Λ, the image's δ, reaches D. Its δ now is exactly the image's.
+        let delta = acc.error(&lit).delta_all;
+        assert!((v[1] / (MIN_TILE_PHASES as f64 * lambda) - delta * delta).abs() < 1e-12);
+        // A target just above δ: tile 1 has its share, tile 0 (no variance) too: every tile would retire, so
+        // every tile renders.
+        assert!(!t.update(&acc, &lit, ErrorOver::All, delta * 1.01));
+        assert!(t.all_active());
+        // Just below: tile 1 needs more phases, tile 0 retires.
+        assert!(t.update(&acc, &lit, ErrorOver::All, delta * 0.99));
+        assert_eq!(t.flags(), &[false, true]);
+        assert_eq!(t.active_pixels(), vec![2, 3, 6, 7]);
+        // A larger target again: tile 1 retires, which leaves none, so both come back.
+        assert!(t.update(&acc, &lit, ErrorOver::All, delta * 1.01));
+        assert!(t.all_active());
+    }
+
+    #[test]
+    fn with_a_target_over_unlit_pixels_lit_tiles_still_get_their_share_towards_all_pixels() {
+        let acc = sums(MIN_TILE_PHASES);
+        // The noisy tile 1 sees a light: δ unlit is 0, but δ over all pixels is not.
+        let lit = LitMask::from_flags(4, 2, (0..8).map(|p| p % 4 >= 2).collect(), 1);
+        let e = acc.error(&lit);
+        assert_eq!(e.delta_unlit, 0.0);
+        let mut t = ActiveTiles::all(4, 2, 2).unwrap();
+        assert!(t.update(&acc, &lit, ErrorOver::Unlit, e.delta_all * 0.99));
+        assert_eq!(t.flags(), &[false, true]);
+    }
+}

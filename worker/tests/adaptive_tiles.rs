@@ -1,0 +1,178 @@
+//! Adaptive tiles: retired tiles get no more phases while active ones do, an adaptive run converges to the
+//! same image as a uniform one, and δ over the merged sums stays calibrated against a reference.
+
+mod common;
+
+use common::{scene, variance_ratio};
+use photonfarm::accumulation::{Accumulator, LitMask};
+use photonfarm::color::luminance_f64;
+use photonfarm::image_io::exr_file::{find_layer, read_exr};
+use photonfarm::render::forecast::Forecast;
+use photonfarm::render::images::luminance_of;
+use photonfarm::render::record::HistoryEntry;
+use photonfarm::render::session::{self, ErrorOver, Progressive, StopReason, StopRule, Tracking};
+use photonfarm::render::{ActiveTiles, Method, RenderSettings};
+use photonfarm::scene::Scene;
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+use std::time::Duration;
+use worker::{EngineConfig, ParallelEngine, ParallelMethod};
+
+fn engine(sc: &Scene, method: ParallelMethod, seed: u64) -> ParallelEngine<'_> {
+    let config = EngineConfig::for_method(method, 2, 1, vec![0, 1]).unwrap();
+    ParallelEngine::new(sc, RenderSettings::for_scene(sc, Method::Pbpm, seed), config).unwrap()
+}
+
+/// Runs `engine` to `target` (δ unlit) with adaptive tiles of `tile` pixels; returns why it stopped and its
+/// history.
+fn run_adaptive(
+    engine: &mut ParallelEngine,
+    lit: &LitMask,
+    target: f64,
+    tile: u32,
+    limit: Duration,
+) -> (StopReason, Vec<HistoryEntry>) {
+    let sums = engine.sums();
+    let mut tiles = ActiveTiles::all(sums.width, sums.height, tile).unwrap();
+    let stop = StopRule { time: Some(limit), phases: None, target_error: Some(target), error_over: ErrorOver::Unlit };
+    let mut forecast = Forecast::new(Some(target));
+    let mut history = Vec::new();
+    let tracking = Tracking { lit, forecast: &mut forecast, elapsed_before: Duration::ZERO, tiles: Some(&mut tiles) };
+    let never = AtomicBool::new(false);
+    let reason = session::run(engine, &stop, &never, &mut history, tracking, |_, _, _| {});
+    (reason, history)
+}
+
+#[test]
+fn retired_tiles_get_no_more_phases_while_active_ones_do_in_every_method() {
+    let sc = scene("cornell.toml", 64);
+    let never = AtomicBool::new(false);
+    for method in [ParallelMethod::Sync, ParallelMethod::Async, ParallelMethod::TwoLevel] {
+        let mut e = engine(&sc, method, 3);
+        e.run_round(&never, None);
+        // Every other tile of 16 pixels; then a single tile, fewer than the groups.
+        let checkerboard: Vec<bool> = (0..16).map(|t| (t + t / 4) % 2 == 0).collect();
+        let mut single = vec![false; 16];
+        single[5] = true;
+        for flags in [checkerboard, single] {
+            let tiles = ActiveTiles::from_flags(64, 64, 16, flags).unwrap();
+            e.set_active_tiles(&tiles);
+            let before: Vec<u32> = e.sums().pixels.iter().map(|p| p.phases).collect();
+            let (phases_before, light_before) = (e.totals().phases, e.totals().map_light_paths);
+            let groups_before: Vec<u64> = e.group_stats().iter().map(|g| g.phases).collect();
+            // A few rounds: in one round a group may find the round over before its first phase on a tiny mask.
+            for _ in 0..4 {
+                e.run_round(&never, None);
+            }
+            let after: Vec<u32> = e.sums().pixels.iter().map(|p| p.phases).collect();
+            for t in 0..tiles.len() {
+                for p in tiles.pixels_of(t) {
+                    let added = after[p as usize] - before[p as usize];
+                    if tiles.is_active(t) {
+                        assert!(added >= 1, "{method:?}: active pixel {p} got no phase");
+                    } else {
+                        assert_eq!(added, 0, "{method:?}: retired pixel {p} got {added} phases");
+                    }
+                }
+            }
+            // The light-path quota is L per rendered pixel: a group phase counts about L × (active pixels) paths
+            // (a stopped phase at least a quarter of them, a phase whose map others still use a few more).
+            let active_pixels = tiles.active_pixels().len() as f64;
+            let phases = (e.totals().phases - phases_before) as f64;
+            let per_phase = (e.totals().map_light_paths - light_before) as f64 / phases;
+            let quota = e.settings().light_paths_per_pixel as f64 * active_pixels;
+            assert!(
+                per_phase >= 0.25 * quota && per_phase <= 2.0 * quota,
+                "{method:?}: {per_phase} paths per phase for {quota}"
+            );
+            // However few tiles are active, every group has pixels to render.
+            for (g, (a, b)) in e.group_stats().iter().zip(groups_before).enumerate() {
+                assert!(
+                    a.phases > b,
+                    "{method:?}: group {g} rendered nothing with {} active tiles",
+                    tiles.active_count()
+                );
+            }
+        }
+    }
+}
+
+/// Per-pixel z² = (a − b)² / (SEM_a² + SEM_b²) of the total luminance, eq. 7's SEMs.
+fn z2(a: &Accumulator, b: &Accumulator) -> Vec<f64> {
+    (0..a.pixels.len())
+        .map(|i| {
+            let d = luminance_f64(a.mean_total(i)) - luminance_f64(b.mean_total(i));
+            let s2 = a.sem2(i) + b.sem2(i);
+            if s2 > 0.0 {
+                d * d / s2
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn an_adaptive_run_converges_to_the_image_of_a_uniform_one() {
+    let sc = scene("cornell.toml", 64);
+    let lit = LitMask::of_scene(&sc, RenderSettings::for_scene(&sc, Method::Pbpm, 1).max_depth);
+    let mut uniform = engine(&sc, ParallelMethod::TwoLevel, 11);
+    let never = AtomicBool::new(false);
+    while uniform.sums().min_phases() < 400 {
+        uniform.run_round(&never, None);
+    }
+    let mut adaptive = engine(&sc, ParallelMethod::TwoLevel, 12);
+    let (reason, history) = run_adaptive(&mut adaptive, &lit, 0.02, 16, Duration::from_secs(60));
+    assert_eq!(reason, StopReason::TargetError);
+    let sums = adaptive.sums();
+    let (fewest, most) = (sums.min_phases(), sums.pixels.iter().map(|p| p.phases).max().unwrap());
+    let least_active = history.iter().filter_map(|h| h.active_tiles).min().unwrap();
+    eprintln!("adaptive: {fewest}..{most} phases per pixel, down to {least_active} of 16 tiles active");
+    assert!(least_active < 16 && most >= 2 * fewest, "tiles did not retire: {fewest}..{most} phases");
+    // z² is 1 on average for two unbiased estimates of the same image (less with quasi-random phases, whose
+    // mean eq. 7 overstates); a bias of the adaptive run shows as a mean above 1 by more than its spread allows.
+    let z = z2(sums, uniform.sums());
+    let n = z.len() as f64;
+    let mean = z.iter().sum::<f64>() / n;
+    let sem = (z.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt();
+    eprintln!("mean z² {mean:.3} ± {sem:.3}");
+    assert!(mean <= 1.0 + 4.0 * sem, "mean z² {mean:.3} above 1 + 4 × {sem:.3}");
+    // Summed over unlit pixels, the replicate SEMs that δ uses account for the whole difference.
+    let ratio = variance_ratio(sums, uniform.sums(), &lit);
+    let (r, se) = (ratio.value, ratio.standard_error);
+    eprintln!("difference² / SEM² {r:.3} ± {se:.3}");
+    assert!((r - 1.0).abs() <= 4.0 * se, "difference² / SEM² = {r:.3} ± {se:.3}, not 1 within 4 SE");
+}
+
+#[test]
+fn delta_of_an_adaptive_run_is_calibrated_against_the_reference() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+    let sc = Scene::load(&dir.join("cornell.toml")).unwrap();
+    let path = dir.join("references/cornell-path.exr");
+    let layers = read_exr(&path).unwrap();
+    let reference = find_layer(&layers, &path, "total").unwrap();
+    let ref_sem = find_layer(&layers, &path, "sem").unwrap();
+    let lit = LitMask::of_scene(&sc, RenderSettings::for_scene(&sc, Method::Pbpm, 1).max_depth);
+    let mut e = engine(&sc, ParallelMethod::TwoLevel, 2024);
+    let (reason, history) = run_adaptive(&mut e, &lit, 0.07, 32, Duration::from_secs(60));
+    assert_eq!(reason, StopReason::TargetError);
+    assert!(history.iter().filter_map(|h| h.active_tiles).min().unwrap() < 64, "no tile retired");
+    let sums = e.sums();
+    let (mut sem2, mut ref_sem2, mut err2, mut norm) = (0.0, 0.0, 0.0, 0.0);
+    for i in (0..sums.pixels.len()).filter(|&i| !lit.is_lit(i)) {
+        let theirs = luminance_of(reference.rgb[i]);
+        sem2 += sums.replicate_sem2(i);
+        ref_sem2 += luminance_of(ref_sem.rgb[i]).powi(2);
+        err2 += (luminance_f64(sums.mean_total(i)) - theirs).powi(2);
+        norm += theirs * theirs;
+    }
+    let (delta, delta_ref, true_error) = ((sem2 / norm).sqrt(), (ref_sem2 / norm).sqrt(), (err2 / norm).sqrt());
+    let ratio = true_error / delta.hypot(delta_ref);
+    eprintln!(
+        "δ {:.2}%, reference δ {:.2}%, true error {:.2}%, ratio {ratio:.2}",
+        100.0 * delta,
+        100.0 * delta_ref,
+        100.0 * true_error
+    );
+    assert!((0.5..=2.0).contains(&ratio), "true error / δ = {ratio:.2}");
+}
