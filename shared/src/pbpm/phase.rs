@@ -168,9 +168,12 @@ impl Phase<'_> {
             sorted.gather_into(map, &self.spectrum, self.max_depth, self.backward_diffuse_depth, gathered)
         };
         for index in indices {
-            let mut full = false;
+            // A path hands over fewer than `max_depth` vertices.
+            if sorted.room() < self.max_depth as usize {
+                merges += gather(sorted, gathered);
+            }
             let mut visit = |e: &LightEvent| match e {
-                LightEvent::Vertex(v) => full |= sorted.push(map, v.point()),
+                LightEvent::Vertex(v) => sorted.push(map, v.point()),
                 LightEvent::Sensor(hit) => self.register(&LocalPixels::Image, hit, gathered),
             };
             match recorder.filter(|(r, n)| r.keeps(PathKind::Light, *n, index)) {
@@ -180,9 +183,6 @@ impl Phase<'_> {
                     self.trace_light_path_logged(index, &mut stats, &mut visit, Some(&mut log));
                     rec.record(&log);
                 }
-            }
-            if full {
-                merges += gather(sorted, gathered);
             }
         }
         merges += gather(sorted, gathered);

@@ -32,13 +32,17 @@ impl SortedGathers {
         Self::default()
     }
 
-    /// Holds back a vertex that will gather into `map`; true once `SORTED_GATHER_BATCH` are waiting and it is
-    /// time to `gather_into` that map.
+    /// Holds back a vertex that will gather into `map`. Call `gather_into` before `room` runs out: the
+    /// buffers never grow past `SORTED_GATHER_BATCH` vertices.
     #[inline]
-    pub fn push(&mut self, map: &PhotonMap, point: GatherPoint) -> bool {
+    pub fn push(&mut self, map: &PhotonMap, point: GatherPoint) {
         self.keys.push((map.bucket_of(point.p) as u64) << 32 | self.points.len() as u64);
         self.points.push(point);
-        self.points.len() >= SORTED_GATHER_BATCH
+    }
+
+    /// Vertices that can still be held back before the batch is full.
+    pub fn room(&self) -> usize {
+        SORTED_GATHER_BATCH.saturating_sub(self.points.len())
     }
 
     /// Vertices waiting.
@@ -156,19 +160,22 @@ mod tests {
         };
 
         let mut sorted_adds = Adds::new();
-        let sorted_merges = {
+        let (sorted_merges, sorted_capacity) = {
             let mut sink = record(&mut sorted_adds);
             let mut sorted = SortedGathers::new();
             let mut merges = 0;
             for &v in &points {
-                if sorted.push(&map, v) {
+                sorted.push(&map, v);
+                if sorted.room() == 0 {
                     assert_eq!(sorted.len(), SORTED_GATHER_BATCH);
                     merges += sorted.gather_into(&map, &phase, max_depth, bdd, &mut sink);
                     assert!(sorted.is_empty());
                 }
             }
-            merges + sorted.gather_into(&map, &phase, max_depth, bdd, &mut sink)
+            let merges = merges + sorted.gather_into(&map, &phase, max_depth, bdd, &mut sink);
+            (merges, sorted.points.capacity().max(sorted.ordered.capacity()).max(sorted.keys.capacity()))
         };
+        assert_eq!(sorted_capacity, SORTED_GATHER_BATCH, "the batch grew past its size");
 
         assert!(merges > 10_000, "too few merges for the test to bite: {merges}");
         assert_eq!(sorted_merges, merges);
@@ -191,7 +198,8 @@ mod tests {
             all_specular: false,
             spectrum: 0,
         };
-        assert!(!sorted.push(&map, v));
+        sorted.push(&map, v);
+        assert_eq!(sorted.room(), SORTED_GATHER_BATCH - 1);
         let mut adds = Adds::new();
         let merges = sorted.gather_into(&map, &PhaseSpectrum::RGB, 8, 2, &mut record(&mut adds));
         assert_eq!(merges, 0);
