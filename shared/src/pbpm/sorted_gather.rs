@@ -69,6 +69,8 @@ impl SortedGathers {
         let Self { points, keys, ordered } = self;
         keys.sort_unstable();
         ordered.clear();
+        // Room for a whole batch at once: `extend` would grow by doubling when a batch outgrows the last one.
+        ordered.reserve_exact(SORTED_GATHER_BATCH.max(points.len()));
         ordered.extend(keys.iter().map(|&k| points[k as u32 as usize]));
         let merges = keys
             .iter()
