@@ -2,8 +2,8 @@
 //! backward photons, builds a map of them, traces light paths that gather into the map, and closes the phase
 //! into the running sums. `phase` puts the stages together once, for the single-threaded engine and the
 //! worker's groups alike; the other files are the stages' parts (camera and light paths, the photon and its
-//! map, the area a photon gathers over, the buffers gathered light waits in, the
-//! light vertices waiting for a gather in bucket order, the radius schedule) and where the stages run (`executor`).
+//! map, the area a photon gathers over, the buffers gathered light waits in, the light vertices waiting for a
+//! gather in bucket order, the radius schedule) and where the stages run (`executor`).
 
 pub mod backward_pass;
 pub mod executor;
