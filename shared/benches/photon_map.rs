@@ -1,7 +1,9 @@
 //! The backward photon map of one PBPM phase of `scenes/cornell.toml` (256×256, the scene's own settings, phase
 //! 64, seed 1): building the grid over the photons of a real backward pass, sequentially and with
 //! `build_parallel` in rayon pools of 1 and 2 threads, and gathering the vertices of a real forward pass into
-//! it, both the whole `gather` and the `containing` lookup alone.
+//! it: the whole `gather` of each vertex as it comes, the same vertices held back and gathered in the map's
+//! bucket order (`SortedGathers`, as the single-threaded engine's forward pass does, its sorts included), and
+//! the `containing` lookup alone.
 //!
 //! `cargo bench -p photonfarm --bench photon_map` — criterion prints elements/s = photons/s for the builds and
 //! light vertices/s for the gathers; the photon, vertex and merge counts are printed once.
@@ -13,8 +15,8 @@ use photonfarm::geometry::SurfaceHit;
 use photonfarm::integrator::Layer;
 use photonfarm::pbpm::backward_pass::BackwardStats;
 use photonfarm::pbpm::{
-    gather, trace_camera_path, trace_light_path, BackwardPhoton, BackwardSettings, ForwardStats, LightEvent,
-    LightSettings, LightVertex, PhotonMap,
+    gather, trace_camera_path, trace_light_path, BackwardPhoton, BackwardSettings, ForwardStats, GatherPoint,
+    LightEvent, LightSettings, LightVertex, PhotonMap, SortedGathers,
 };
 use photonfarm::render::{Method, RenderSettings};
 use photonfarm::sampling::{Pass, Sampler};
@@ -146,6 +148,20 @@ fn photon_map(c: &mut Criterion) {
     group.throughput(Throughput::Elements(vertices.len() as u64));
     group.bench_function("gather", |b| {
         b.iter(|| vertices.iter().map(|v| gather(&map, black_box(&v.view()), max_depth, bdd, &mut sink)).sum::<u64>())
+    });
+    let points: Vec<GatherPoint> = vertices.iter().map(|v| v.view().point()).collect();
+    let mut sorted = SortedGathers::new();
+    group.bench_function("gather_sorted", |b| {
+        b.iter(|| {
+            let mut merges = 0;
+            for &v in &points {
+                sorted.push(&map, black_box(v));
+                if sorted.room() == 0 {
+                    merges += sorted.gather_into(&map, &PhaseSpectrum::RGB, max_depth, bdd, &mut sink);
+                }
+            }
+            merges + sorted.gather_into(&map, &PhaseSpectrum::RGB, max_depth, bdd, &mut sink)
+        })
     });
     group.bench_function("containing", |b| {
         b.iter(|| vertices.iter().map(|v| map.containing(black_box(v.hit.p)).count()).sum::<usize>())

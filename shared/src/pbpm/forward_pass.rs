@@ -265,6 +265,37 @@ fn light_path<const S: bool>(
     }
 }
 
+/// What a gather needs of a light vertex, owned, so that vertices can wait for a sorted gather
+/// (`SortedGathers`) after their light path's hit is gone.
+#[derive(Clone, Copy, Debug)]
+pub struct GatherPoint {
+    /// The vertex's position and the geometric normal of its surface.
+    pub p: Vec3,
+    pub ng: Vec3,
+    /// As in `LightVertex`.
+    pub wi: Vec3,
+    pub flux: Rgb,
+    pub m: u32,
+    pub all_specular: bool,
+    pub spectrum: u8,
+}
+
+impl LightVertex<'_> {
+    /// The vertex as a gather needs it.
+    #[inline]
+    pub fn point(&self) -> GatherPoint {
+        GatherPoint {
+            p: self.hit.p,
+            ng: self.hit.ng,
+            wi: self.wi,
+            flux: self.flux,
+            m: self.m,
+            all_specular: self.all_specular,
+            spectrum: self.spectrum,
+        }
+    }
+}
+
 /// Gathers a light vertex into `map`: every photon whose sphere contains the vertex, whose surface agrees and
 /// on whose side the light arrives receives τ · f · ΔΦ / (π r²). Returns the number of merges.
 #[inline]
@@ -275,25 +306,54 @@ pub fn gather(
     backward_diffuse_depth: u32,
     sink: &mut impl Gather,
 ) -> u64 {
-    if v.phase.wavelengths.is_some() {
-        gather_in::<true>(map, v, max_depth, backward_diffuse_depth, sink)
+    gather_point(map, &v.point(), v.phase, max_depth, backward_diffuse_depth, sink)
+}
+
+/// `gather` of a vertex of a light path of the phase of wavelengths `phase`.
+#[inline]
+pub fn gather_point(
+    map: &PhotonMap,
+    v: &GatherPoint,
+    phase: &PhaseSpectrum,
+    max_depth: u32,
+    backward_diffuse_depth: u32,
+    sink: &mut impl Gather,
+) -> u64 {
+    gather_in_bucket(map, map.bucket_of(v.p), v, phase, max_depth, backward_diffuse_depth, sink)
+}
+
+/// `gather_point` of a vertex in `bucket`, found before by `PhotonMap::bucket_of`.
+#[inline]
+pub fn gather_in_bucket(
+    map: &PhotonMap,
+    bucket: u32,
+    v: &GatherPoint,
+    phase: &PhaseSpectrum,
+    max_depth: u32,
+    backward_diffuse_depth: u32,
+    sink: &mut impl Gather,
+) -> u64 {
+    if phase.wavelengths.is_some() {
+        gather_in::<true>(map, bucket, v, phase, max_depth, backward_diffuse_depth, sink)
     } else {
-        gather_in::<false>(map, v, max_depth, backward_diffuse_depth, sink)
+        gather_in::<false>(map, bucket, v, phase, max_depth, backward_diffuse_depth, sink)
     }
 }
 
 #[inline(always)]
 fn gather_in<const S: bool>(
     map: &PhotonMap,
-    v: &LightVertex,
+    bucket: u32,
+    v: &GatherPoint,
+    phase: &PhaseSpectrum,
     max_depth: u32,
     backward_diffuse_depth: u32,
     sink: &mut impl Gather,
 ) -> u64 {
     let mut merges = 0;
-    for b in map.containing(v.hit.p) {
+    for b in map.containing_in(bucket, v.p) {
         if v.wi.dot(b.normal) <= 0.0
-            || v.hit.ng.dot(b.normal).abs() < NORMAL_AGREEMENT
+            || v.ng.dot(b.normal).abs() < NORMAL_AGREEMENT
             || b.segments as u32 + v.m > max_depth
         {
             continue;
@@ -307,7 +367,7 @@ fn gather_in<const S: bool>(
         };
         merges += 1;
         // eq. 4
-        let value = if S { join(b.weight, b.spectrum, v.flux, v.spectrum, v.phase) } else { b.weight * v.flux };
+        let value = if S { join(b.weight, b.spectrum, v.flux, v.spectrum, phase) } else { b.weight * v.flux };
         sink.add(b.pixel, layer, b.ghost, value);
     }
     merges

@@ -2,7 +2,8 @@
 //! backward photons, builds a map of them, traces light paths that gather into the map, and closes the phase
 //! into the running sums. `phase` puts the stages together once, for the single-threaded engine and the
 //! worker's groups alike; the other files are the stages' parts (camera and light paths, the photon and its
-//! map, the area a photon gathers over, the buffers gathered light waits in, the radius schedule) and where the stages run (`executor`).
+//! map, the area a photon gathers over, the buffers gathered light waits in, the light vertices waiting for a
+//! gather in bucket order, the radius schedule) and where the stages run (`executor`).
 
 pub mod backward_pass;
 pub mod executor;
@@ -13,14 +14,17 @@ pub mod phase;
 pub mod photon;
 pub mod photon_map;
 pub mod radius;
+pub mod sorted_gather;
 
 pub use backward_pass::{trace_camera_path, BackwardSettings};
 pub use executor::Executor;
 pub use forward_pass::{
-    gather, trace_light_path, ForwardStats, Gather, LightEvent, LightSettings, LightVertex, SensorHit,
+    gather, gather_in_bucket, gather_point, trace_light_path, ForwardStats, Gather, GatherPoint, LightEvent,
+    LightSettings, LightVertex, SensorHit,
 };
 pub use gather_buffer::{AtomicGatherBuffer, AtomicSink, GatherBuffer};
 pub use phase::{LocalPixels, Phase, PhaseBuffers};
 pub use photon::BackwardPhoton;
 pub use photon_map::PhotonMap;
 pub use radius::{PhaseNumbering, RadiusSchedule};
+pub use sorted_gather::{SortedGathers, SORTED_GATHER_BATCH};

@@ -19,6 +19,7 @@ use super::gather_buffer::GatherBuffer;
 use super::photon::BackwardPhoton;
 use super::photon_map::PhotonMap;
 use super::radius::RadiusSchedule;
+use super::sorted_gather::SortedGathers;
 use crate::accumulation::{auxiliary::add_phase_to, AuxLayout, AuxSums, PixelSums};
 use crate::color::Rgb;
 use crate::integrator::{Layer, LayerValues};
@@ -139,14 +140,17 @@ impl Phase<'_> {
         sink.add(local, Layer::VisibleLights, true, value);
     }
 
-    /// Traces light paths `indices` into one map and its buffer: the forward pass of a map nobody shares.
+    /// Traces light paths `indices` into one map and its buffer: the forward pass of a map nobody shares. The
+    /// paths' vertices wait in `sorted` and gather in the map's bucket order (`SortedGathers`), which leaves
+    /// `sorted` empty.
     pub fn forward_pass(
         &self,
         indices: std::ops::Range<u64>,
         map: &PhotonMap,
         gathered: &mut GatherBuffer,
+        sorted: &mut SortedGathers,
     ) -> ForwardStats {
-        self.forward_pass_recorded(indices, map, gathered, None)
+        self.forward_pass_recorded(indices, map, gathered, sorted, None)
     }
 
     /// `forward_pass` that hands the paths `recorder` keeps of phase `number` to it.
@@ -155,20 +159,33 @@ impl Phase<'_> {
         indices: std::ops::Range<u64>,
         map: &PhotonMap,
         gathered: &mut GatherBuffer,
+        sorted: &mut SortedGathers,
         recorder: Option<(&Recorder, u64)>,
     ) -> ForwardStats {
         let (mut stats, mut merges) = (ForwardStats::default(), 0);
         let mut log = RecordedPath::new(PathKind::Light, 0, 0, 0);
+        let gather = |sorted: &mut SortedGathers, gathered: &mut GatherBuffer| {
+            sorted.gather_into(map, &self.spectrum, self.max_depth, self.backward_diffuse_depth, gathered)
+        };
         for index in indices {
-            let mut visit = |e: &LightEvent| merges += self.gather(map, &LocalPixels::Image, e, gathered);
-            let Some((rec, number)) = recorder.filter(|(r, n)| r.keeps(PathKind::Light, *n, index)) else {
-                self.trace_light_path(index, &mut stats, &mut visit);
-                continue;
+            // A path hands over fewer than `max_depth` vertices.
+            if sorted.room() < self.max_depth as usize {
+                merges += gather(sorted, gathered);
+            }
+            let mut visit = |e: &LightEvent| match e {
+                LightEvent::Vertex(v) => sorted.push(map, v.point()),
+                LightEvent::Sensor(hit) => self.register(&LocalPixels::Image, hit, gathered),
             };
-            (log.phase, log.item) = (number as u32, index as u32);
-            self.trace_light_path_logged(index, &mut stats, &mut visit, Some(&mut log));
-            rec.record(&log);
+            match recorder.filter(|(r, n)| r.keeps(PathKind::Light, *n, index)) {
+                None => self.trace_light_path(index, &mut stats, &mut visit),
+                Some((rec, number)) => {
+                    (log.phase, log.item) = (number as u32, index as u32);
+                    self.trace_light_path_logged(index, &mut stats, &mut visit, Some(&mut log));
+                    rec.record(&log);
+                }
+            }
         }
+        merges += gather(sorted, gathered);
         stats.merges = merges;
         stats
     }

@@ -304,15 +304,28 @@ impl PhotonMap {
         }
     }
 
+    /// The bucket a gather at `p` reads (0 before `build`): gathers in bucket order read the map's entries and
+    /// photons front to back, as `put_photons_in_grid_order` laid them out.
+    #[inline]
+    pub fn bucket_of(&self, p: Vec3) -> u32 {
+        if self.built {
+            self.grid.bucket(self.grid.cell(p)) as u32
+        } else {
+            0
+        }
+    }
+
     /// Exactly the photons whose sphere contains `p`.
     #[inline]
     pub fn containing(&self, p: Vec3) -> impl Iterator<Item = &BackwardPhoton> {
-        let range = if !self.built {
-            0..0
-        } else {
-            let b = self.grid.bucket(self.grid.cell(p));
-            self.starts[b] as usize..self.starts[b + 1] as usize
-        };
+        self.containing_in(self.bucket_of(p), p)
+    }
+
+    /// `containing(p)` for a `p` in `bucket`, found before by `bucket_of(p)`.
+    #[inline]
+    pub fn containing_in(&self, bucket: u32, p: Vec3) -> impl Iterator<Item = &BackwardPhoton> {
+        let b = bucket as usize;
+        let range = if self.built { self.starts[b] as usize..self.starts[b + 1] as usize } else { 0..0 };
         self.entries[range]
             .iter()
             .map(move |&i| &self.photons[i as usize])

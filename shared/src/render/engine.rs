@@ -7,7 +7,7 @@ use crate::accumulation::{Accumulator, AuxLayout};
 use crate::integrator::path_tracer;
 use crate::pbpm::forward_pass::{trace_light_path_logged, LightEvent, LightSettings};
 use crate::pbpm::phase::{start_aux, Closing, LocalPixels};
-use crate::pbpm::{Executor, ForwardStats, GatherBuffer, PhaseBuffers, PhotonMap};
+use crate::pbpm::{Executor, ForwardStats, GatherBuffer, PhaseBuffers, PhotonMap, SortedGathers};
 use crate::ray_map::{PathKind, RecordedPath, Recorder};
 use crate::sampling::{replicate_of, Sampler};
 use crate::scene::Scene;
@@ -23,6 +23,8 @@ pub struct Engine<'s> {
     buffers: PhaseBuffers,
     map: PhotonMap,
     gathered: GatherBuffer,
+    /// Light vertices waiting for the forward pass's gather in bucket order.
+    sorted: SortedGathers,
     totals: RayTotals,
     /// Records the kept camera and light paths into a ray map.
     recorder: Option<Arc<Recorder>>,
@@ -47,6 +49,7 @@ impl<'s> Engine<'s> {
             buffers,
             map,
             gathered,
+            sorted: SortedGathers::new(),
             totals: RayTotals::default(),
             recorder: None,
         }
@@ -84,7 +87,10 @@ impl<'s> Engine<'s> {
         let pixels = self.scene.camera.pixel_count().max(1);
         let sums = self.sums.pixels.capacity() * std::mem::size_of::<crate::accumulation::PixelSums>()
             + self.sums.aux.capacity_bytes();
-        let phase = self.buffers.capacity_bytes() + self.gathered.capacity_bytes() + self.map.capacity_bytes();
+        let phase = self.buffers.capacity_bytes()
+            + self.gathered.capacity_bytes()
+            + self.sorted.capacity_bytes()
+            + self.map.capacity_bytes();
         (sums + phase) as f64 / pixels as f64
     }
 
@@ -204,7 +210,7 @@ impl<'s> Engine<'s> {
         self.buffers.build_map(exec, &mut self.map);
         let n = self.settings.light_paths_per_phase(self.scene.camera.pixel_count());
         let recorder = self.recorder.as_deref().map(|r| (r, number));
-        let forward = phase.forward_pass_recorded(0..n, &self.map, &mut self.gathered, recorder);
+        let forward = phase.forward_pass_recorded(0..n, &self.map, &mut self.gathered, &mut self.sorted, recorder);
         self.buffers.close(exec, &phase, &mut self.gathered, n, &mut self.sums.pixels, &mut self.sums.aux);
         self.totals.backward_photons += backward.photons;
         self.totals.capped_light_paths += forward.capped;
