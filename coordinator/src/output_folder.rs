@@ -68,8 +68,8 @@ impl Reference {
     }
 }
 
-/// Writes image.exr (with the lit mask as its `lit` layer and the phases per pixel as its `phases` layer), preview.png and run.json; each file is replaced
-/// atomically.
+/// Writes image.exr (with the lit mask as its `lit` layer and the phases per pixel as its `phases` layer),
+/// preview.png and run.json; each file is replaced atomically.
 pub fn save(dir: &Path, sums: &Accumulator, lit: &LitMask, record: &RunRecord) -> Result<()> {
     let mut layers: Vec<LayerImage> = layer_images(sums);
     layers.push(lit_layer(lit));

@@ -4,7 +4,7 @@
 //! reconnects when tev comes back.
 
 use super::feed::RunView;
-use photonfarm::render::images::{layer_images, lit_layer};
+use photonfarm::render::images::{layer_images, lit_layer, phases_layer};
 use std::net::{SocketAddr, TcpStream, ToSocketAddrs};
 use std::sync::Arc;
 use std::time::Duration;
@@ -84,6 +84,7 @@ impl TevLink {
         let Some(client) = self.client.as_mut() else { return Ok(()) };
         let mut layers = layer_images(&view.sums);
         layers.push(lit_layer(&view.lit));
+        layers.push(phases_layer(&view.sums));
         let (width, height) = (view.sums.width, view.sums.height);
         let names: Vec<String> = layers.iter().map(|l| l.name.clone()).collect();
         if self.created.as_ref() != Some(&(width, height, names.clone())) {
