@@ -141,10 +141,9 @@ pub fn run(
         return;
     }
     // Each worker chooses its own light paths per pixel from its own phases, unless the job fixes them.
-    let mut balance = settings.adaptive_light.then(|| LightBalance::new(settings.light_paths_per_pixel));
-    if let Some(b) = &mut balance {
-        b.observe(engine.sums(), engine.totals());
-    }
+    let mut balance = settings
+        .adaptive_light
+        .then(|| LightBalance::starting_from(settings.light_paths_per_pixel, engine.sums(), engine.totals()));
     // The sums at the previous snapshot, auxiliary layers included.
     let mut base = engine.sums().clone();
     let mut seq = 0;

@@ -78,6 +78,13 @@ impl LightBalance {
         }
     }
 
+    /// A controller that starts from `start`, measuring its first step against `sums` and `totals` as they are.
+    pub fn starting_from(start: f32, sums: &Accumulator, totals: RayTotals) -> Self {
+        let mut b = LightBalance::new(start);
+        b.observe(sums, totals);
+        b
+    }
+
     /// The L the controller is centred on (its best estimate of L*).
     pub fn centre(&self) -> f32 {
         self.centre as f32

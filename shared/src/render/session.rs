@@ -163,13 +163,11 @@ pub fn run<R: Progressive + ?Sized>(
     let start = Instant::now();
     // The light paths per pixel, chosen as the run goes unless they were fixed; a distributed renderer's
     // workers choose their own.
+    let s = engine.settings();
     let mut balance =
-        engine.settings().adaptive_light.then(|| LightBalance::new(engine.settings().light_paths_per_pixel));
+        s.adaptive_light.then(|| LightBalance::starting_from(s.light_paths_per_pixel, engine.sums(), engine.totals()));
     if balance.as_ref().is_some_and(|b| !engine.set_light_paths_per_pixel(b.next())) {
         balance = None;
-    }
-    if let Some(b) = &mut balance {
-        b.observe(engine.sums(), engine.totals());
     }
     // Tiles only retire towards a target; a resumed run starts from what its sums already say.
     let target = stop.target_error.filter(|_| engine.renders_tiles());
