@@ -56,12 +56,6 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let bar = progress_bar(args.quiet);
 
     let mut notes = Vec::new();
-    if args.target_error.is_some() && !args.uniform && args.method.layout().parallel.is_none() {
-        notes.push(format!(
-            "--method {} renders every pixel every phase: adaptive tiles apply to the parallel and distributed methods",
-            args.method
-        ));
-    }
     let recorder = start_ray_map(&args, &scene, &settings, &dir)?;
     let (mut engine, layout) =
         start_engine(&args, &scene, settings, &dir, checkpoint.as_ref(), recorder.clone(), &mut notes)?;

@@ -1,5 +1,6 @@
 //! Adaptive tiles: retired tiles get no more phases while active ones do, an adaptive run converges to the
-//! same image as a uniform one, and δ over the merged sums stays calibrated against a reference.
+//! same image as a uniform one, in the parallel methods and the single-threaded engine alike, and δ over the
+//! merged sums stays calibrated against a reference.
 
 mod common;
 
@@ -11,7 +12,7 @@ use photonfarm::render::forecast::Forecast;
 use photonfarm::render::images::luminance_of;
 use photonfarm::render::record::HistoryEntry;
 use photonfarm::render::session::{self, ErrorOver, Progressive, StopReason, StopRule, Tracking};
-use photonfarm::render::{ActiveTiles, Method, RenderSettings};
+use photonfarm::render::{ActiveTiles, Engine, Method, RenderSettings};
 use photonfarm::scene::Scene;
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
@@ -25,8 +26,8 @@ fn engine(sc: &Scene, method: ParallelMethod, seed: u64) -> ParallelEngine<'_> {
 
 /// Runs `engine` to `target` (δ unlit) with adaptive tiles of `tile` pixels; returns why it stopped and its
 /// history.
-fn run_adaptive(
-    engine: &mut ParallelEngine,
+fn run_adaptive<R: Progressive>(
+    engine: &mut R,
     lit: &LitMask,
     target: f64,
     tile: u32,
@@ -94,6 +95,69 @@ fn retired_tiles_get_no_more_phases_while_active_ones_do_in_every_method() {
                 );
             }
         }
+    }
+}
+
+#[test]
+fn the_single_threaded_engine_renders_only_the_active_tiles_with_each_pixels_own_phase_number() {
+    let sc = scene("cornell.toml", 64);
+    for method in [Method::Pbpm, Method::Path] {
+        let mut e = Engine::new(&sc, RenderSettings::for_scene(&sc, method, 3));
+        e.run_phase();
+        let checkerboard: Vec<bool> = (0..16).map(|t| (t + t / 4) % 2 == 0).collect();
+        let tiles = ActiveTiles::from_flags(64, 64, 16, checkerboard).unwrap();
+        e.set_active_tiles(&tiles);
+        for _ in 0..3 {
+            e.run_phase();
+        }
+        let light_before = e.totals().map_light_paths;
+        e.run_phase();
+        for t in 0..tiles.len() {
+            for p in tiles.pixels_of(t) {
+                let want = if tiles.is_active(t) { 5 } else { 1 };
+                assert_eq!(e.sums().pixels[p as usize].phases, want, "{method:?}: pixel {p}");
+            }
+        }
+        // The phase's light is L per rendered pixel (the path tracer's light paths only bring lens ghosts, which
+        // cornell has none of).
+        let light = e.totals().map_light_paths - light_before;
+        let quota = e.settings().light_paths_per_phase(tiles.active_pixels().len());
+        assert_eq!(light, if method == Method::Pbpm { quota } else { 0 }, "{method:?}");
+        // Back to every tile: the retired pixels catch up from their own phase number.
+        e.set_active_tiles(&ActiveTiles::all(64, 64, 16).unwrap());
+        e.run_phase();
+        assert_eq!(e.sums().min_phases(), 2);
+        assert_eq!(e.sums().pixels.iter().map(|p| p.phases).max(), Some(6));
+    }
+}
+
+#[test]
+fn an_adaptive_single_threaded_run_converges_to_the_image_of_a_uniform_one() {
+    let sc = scene("cornell.toml", 64);
+    let lit = LitMask::of_scene(&sc, RenderSettings::for_scene(&sc, Method::Pbpm, 1).max_depth);
+    for method in [Method::Pbpm, Method::Path] {
+        let mut uniform = Engine::new(&sc, RenderSettings::for_scene(&sc, method, 21));
+        while uniform.sums().min_phases() < 400 {
+            uniform.run_phase();
+        }
+        let mut adaptive = Engine::new(&sc, RenderSettings::for_scene(&sc, method, 22));
+        let (reason, history) = run_adaptive(&mut adaptive, &lit, 0.02, 16, Duration::from_secs(60));
+        assert_eq!(reason, StopReason::TargetError, "{method:?}");
+        let sums = adaptive.sums();
+        let (fewest, most) = (sums.min_phases(), sums.pixels.iter().map(|p| p.phases).max().unwrap());
+        let least_active = history.iter().filter_map(|h| h.active_tiles).min().unwrap();
+        eprintln!("{method:?}: {fewest}..{most} phases per pixel, down to {least_active} of 16 tiles active");
+        assert!(least_active < 16 && most >= 2 * fewest, "{method:?}: tiles did not retire: {fewest}..{most}");
+        let z = z2(sums, uniform.sums());
+        let n = z.len() as f64;
+        let mean = z.iter().sum::<f64>() / n;
+        let sem = (z.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt();
+        eprintln!("{method:?}: mean z² {mean:.3} ± {sem:.3}");
+        assert!(mean <= 1.0 + 4.0 * sem, "{method:?}: mean z² {mean:.3} above 1 + 4 × {sem:.3}");
+        let ratio = variance_ratio(sums, uniform.sums(), &lit);
+        let (r, se) = (ratio.value, ratio.standard_error);
+        eprintln!("{method:?}: difference² / SEM² {r:.3} ± {se:.3}");
+        assert!((r - 1.0).abs() <= 4.0 * se, "{method:?}: difference² / SEM² = {r:.3} ± {se:.3}, not 1 within 4 SE");
     }
 }
 

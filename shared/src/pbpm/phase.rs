@@ -140,17 +140,18 @@ impl Phase<'_> {
         sink.add(local, Layer::VisibleLights, true, value);
     }
 
-    /// Traces light paths `indices` into one map and its buffer: the forward pass of a map nobody shares. The
-    /// paths' vertices wait in `sorted` and gather in the map's bucket order (`SortedGathers`), which leaves
-    /// `sorted` empty.
+    /// Traces light paths `indices` into one map and its buffer: the forward pass of a map nobody shares, over
+    /// the local `pixels` whose camera paths made the map. The paths' vertices wait in `sorted` and gather in the
+    /// map's bucket order (`SortedGathers`), which leaves `sorted` empty.
     pub fn forward_pass(
         &self,
         indices: std::ops::Range<u64>,
         map: &PhotonMap,
+        pixels: &LocalPixels,
         gathered: &mut GatherBuffer,
         sorted: &mut SortedGathers,
     ) -> ForwardStats {
-        self.forward_pass_recorded(indices, map, gathered, sorted, None)
+        self.forward_pass_recorded(indices, map, pixels, gathered, sorted, None)
     }
 
     /// `forward_pass` that hands the paths `recorder` keeps of phase `number` to it.
@@ -158,6 +159,7 @@ impl Phase<'_> {
         &self,
         indices: std::ops::Range<u64>,
         map: &PhotonMap,
+        pixels: &LocalPixels,
         gathered: &mut GatherBuffer,
         sorted: &mut SortedGathers,
         recorder: Option<(&Recorder, u64)>,
@@ -174,7 +176,7 @@ impl Phase<'_> {
             }
             let mut visit = |e: &LightEvent| match e {
                 LightEvent::Vertex(v) => sorted.push(map, v.point()),
-                LightEvent::Sensor(hit) => self.register(&LocalPixels::Image, hit, gathered),
+                LightEvent::Sensor(hit) => self.register(pixels, hit, gathered),
             };
             match recorder.filter(|(r, n)| r.keeps(PathKind::Light, *n, index)) {
                 None => self.trace_light_path(index, &mut stats, &mut visit),

@@ -1,9 +1,11 @@
-//! The single-threaded progressive engine: the reference every parallel method must agree with.
+//! The single-threaded progressive engine: the reference every parallel method must agree with. It renders
+//! the whole image each phase, or only the active tiles once some have retired (adaptive tiles).
 
+use super::active_tiles::ActiveTiles;
 use super::method::Estimator;
 use super::settings::RenderSettings;
 use super::totals::{PhaseReport, RayTotals};
-use crate::accumulation::{Accumulator, AuxLayout};
+use crate::accumulation::{Accumulator, AuxLayout, AuxSums, PixelSums};
 use crate::integrator::path_tracer;
 use crate::pbpm::forward_pass::{trace_light_path_logged, LightEvent, LightSettings};
 use crate::pbpm::phase::{start_aux, Closing, LocalPixels};
@@ -14,8 +16,8 @@ use crate::scene::Scene;
 use crate::spectrum::PhaseSpectrum;
 use std::sync::Arc;
 
-/// Runs phases over the whole image on the calling thread and keeps the running sums: one group of one thread
-/// whose map nobody shares, running the stages of `pbpm::phase`.
+/// Runs phases over the image (or its active tiles) on the calling thread and keeps the running sums: one group
+/// of one thread whose map nobody shares, running the stages of `pbpm::phase`.
 pub struct Engine<'s> {
     scene: &'s Scene,
     settings: RenderSettings,
@@ -28,6 +30,19 @@ pub struct Engine<'s> {
     totals: RayTotals,
     /// Records the kept camera and light paths into a ray map.
     recorder: Option<Arc<Recorder>>,
+    /// The pixels of the active tiles once some have retired (None: every pixel).
+    tiles: Option<TilePixels>,
+}
+
+/// The pixels a phase renders when some tiles have retired, and the phase's sums over them: a phase closes
+/// into these and they are added to the image's sums, as a worker's group does with its mask.
+struct TilePixels {
+    /// Image pixel of each local pixel.
+    mask: Vec<u32>,
+    /// Local pixel of each image pixel, for light that registers on the sensor.
+    local: LocalPixels,
+    sums: Vec<PixelSums>,
+    aux: AuxSums,
 }
 
 impl<'s> Engine<'s> {
@@ -52,7 +67,26 @@ impl<'s> Engine<'s> {
             sorted: SortedGathers::new(),
             totals: RayTotals::default(),
             recorder: None,
+            tiles: None,
         }
+    }
+
+    /// Renders only `tiles`' active tiles from the next phase on (adaptive tiles); every pixel keeps its own
+    /// phase count, so each pixel's phase j and radius are its own.
+    pub fn set_active_tiles(&mut self, tiles: &ActiveTiles) {
+        let cam = &self.scene.camera;
+        assert_eq!((tiles.width, tiles.height), (cam.width, cam.height), "tiles of another image");
+        let aux = self.sums.aux.layout().clone();
+        self.tiles = (!tiles.all_active()).then(|| {
+            let mask = tiles.active_pixels();
+            let local = LocalPixels::of_mask(&mask, cam.pixel_count(), true);
+            let sums = vec![PixelSums::default(); mask.len()];
+            let aux = AuxSums::new(aux.clone(), mask.len());
+            TilePixels { mask, local, sums, aux }
+        });
+        let rendered = self.tiles.as_ref().map_or(cam.pixel_count(), |t| t.mask.len());
+        self.buffers.resize(rendered);
+        self.gathered.reset(rendered, &aux);
     }
 
     /// Records the paths `recorder` keeps (a ray map) from the next phase on; recording does not change the
@@ -90,7 +124,13 @@ impl<'s> Engine<'s> {
         let phase = self.buffers.capacity_bytes()
             + self.gathered.capacity_bytes()
             + self.sorted.capacity_bytes()
-            + self.map.capacity_bytes();
+            + self.map.capacity_bytes()
+            + self.tiles.as_ref().map_or(0, |t| {
+                t.mask.capacity() * 4
+                    + t.local.capacity_bytes()
+                    + t.sums.capacity() * std::mem::size_of::<crate::accumulation::PixelSums>()
+                    + t.aux.capacity_bytes()
+            });
         (sums + phase) as f64 / pixels as f64
     }
 
@@ -129,11 +169,15 @@ impl<'s> Engine<'s> {
         };
         let stride = self.gathered.stride();
         let mut aux_phase = vec![0.0; channels];
-        let (replicate, _) = replicate_of(phase);
         let mut log = RecordedPath::new(PathKind::Camera, 0, 0, 0);
-        for pixel in 0..cam.pixel_count() {
+        let mask = self.tiles.as_ref().map(|t| &t.mask[..]);
+        for local in 0..mask.map_or(cam.pixel_count(), <[u32]>::len) {
+            let pixel = mask.map_or(local, |m| m[local] as usize);
             let (x, y) = ((pixel % cam.width as usize) as u32, (pixel / cam.width as usize) as u32);
-            let mut s = Sampler::path(self.settings.seed, pixel as u64, phase);
+            // The pixel's own phase number: the engine's phase count unless tiles have retired.
+            let j = self.sums.pixels[pixel].phases as u64 + 1;
+            let (replicate, _) = replicate_of(j);
+            let mut s = Sampler::path(self.settings.seed, pixel as u64, j);
             let ray = cam.generate_ray(x, y, s.next_2d(), s.next_2d());
             // Paths of a path tracer never join: each draws its own wavelength.
             let spectrum = if spectral {
@@ -154,7 +198,7 @@ impl<'s> Engine<'s> {
             }
             start_aux(&mut aux_phase, ghost_offset, ghost);
             // Only the light paths' sensor hits are gathered.
-            let gathered = sensor_ghosts.then(|| &mut self.gathered.values_mut()[pixel * stride..(pixel + 1) * stride]);
+            let gathered = sensor_ghosts.then(|| &mut self.gathered.values_mut()[local * stride..(local + 1) * stride]);
             let aux_sums = &mut self.sums.aux.values_mut()[pixel * channels..(pixel + 1) * channels];
             let (aux, aux_sums) = if channels == 0 {
                 (None, None)
@@ -182,15 +226,20 @@ impl<'s> Engine<'s> {
         let light = LightSettings { max_depth: self.settings.max_depth, sensor: true, vertices: false };
         let mut stats = ForwardStats::default();
         let gathered = &mut self.gathered;
+        let whole = LocalPixels::Image;
+        let (pixels, rendered) = match &self.tiles {
+            Some(t) => (&t.local, t.mask.len()),
+            None => (&whole, scene.camera.pixel_count()),
+        };
         let mut log = RecordedPath::new(PathKind::Light, phase as u32, 0, 0);
-        for index in 0..self.settings.light_paths_per_phase(scene.camera.pixel_count()) {
+        for index in 0..self.settings.light_paths_per_phase(rendered) {
             let mut s = Sampler::light(self.settings.seed, p.key, index);
             let kept = self.recorder.as_deref().filter(|r| r.keeps(PathKind::Light, phase, index));
             log.item = index as u32;
             let logged = kept.is_some().then_some(&mut log);
             let mut visit = |e: &LightEvent| {
                 if let LightEvent::Sensor(hit) = e {
-                    p.register(&LocalPixels::Image, hit, gathered);
+                    p.register(pixels, hit, gathered);
                 }
             };
             trace_light_path_logged(scene, light, &p.spectrum, index, &mut s, &mut stats, &mut visit, logged);
@@ -205,13 +254,31 @@ impl<'s> Engine<'s> {
         let number = self.totals.phases + 1;
         let exec = Executor::CallingThread;
         let phase = self.settings.phase(self.scene, number);
-        // Every pixel has had the same phases: j is the engine's phase count plus one.
-        let backward = self.buffers.camera_pass(exec, &phase, None, |_| number, &mut self.map);
+        let mask = self.tiles.as_ref().map(|t| &t.mask[..]);
+        let pixels = &self.sums.pixels;
+        // A pixel's phase j is its own phase count plus one: the engine's phase count unless tiles have retired.
+        let next_phase = |local: usize| pixels[mask.map_or(local, |m| m[local] as usize)].phases as u64 + 1;
+        let backward = self.buffers.camera_pass(exec, &phase, mask, next_phase, &mut self.map);
         self.buffers.build_map(exec, &mut self.map);
-        let n = self.settings.light_paths_per_phase(self.scene.camera.pixel_count());
+        let whole = LocalPixels::Image;
+        let (local, rendered) = match &self.tiles {
+            Some(t) => (&t.local, t.mask.len()),
+            None => (&whole, self.scene.camera.pixel_count()),
+        };
+        // Light per rendered pixel: where tiles retired, the phase's light shrinks with its camera paths.
+        let n = self.settings.light_paths_per_phase(rendered);
         let recorder = self.recorder.as_deref().map(|r| (r, number));
-        let forward = phase.forward_pass_recorded(0..n, &self.map, &mut self.gathered, &mut self.sorted, recorder);
-        self.buffers.close(exec, &phase, &mut self.gathered, n, &mut self.sums.pixels, &mut self.sums.aux);
+        let forward =
+            phase.forward_pass_recorded(0..n, &self.map, local, &mut self.gathered, &mut self.sorted, recorder);
+        match &mut self.tiles {
+            None => self.buffers.close(exec, &phase, &mut self.gathered, n, &mut self.sums.pixels, &mut self.sums.aux),
+            Some(t) => {
+                self.buffers.close(exec, &phase, &mut self.gathered, n, &mut t.sums, &mut t.aux);
+                self.sums.merge_local(&t.mask, &t.sums, &t.aux);
+                t.sums.fill(PixelSums::default());
+                t.aux.reset(t.mask.len());
+            }
+        }
         self.totals.backward_photons += backward.photons;
         self.totals.capped_light_paths += forward.capped;
         PhaseReport {

@@ -81,6 +81,12 @@ impl Progressive for Engine<'_> {
         Engine::set_light_paths_per_pixel(self, l);
         true
     }
+    fn renders_tiles(&self) -> bool {
+        true
+    }
+    fn set_active_tiles(&mut self, tiles: &ActiveTiles) {
+        Engine::set_active_tiles(self, tiles);
+    }
 }
 
 /// Which δ a target error refers to.
