@@ -49,7 +49,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let lit = Arc::new(LitMask::of_scene(&scene, settings.max_depth));
     let lit_seconds = deciding.elapsed().as_secs_f64();
     if let (Some(c), Some(from)) = (&checkpoint, &args.resume) {
-        check_resume_has_work(c, &stop, from, &lit)?;
+        check_resume_has_work(c, &stop, args.uniform, from, &lit)?;
     }
     let dir = output_dir(&args)?;
     let interrupted = catch_interrupts()?;
@@ -81,7 +81,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let mut history = checkpoint.map(|c| c.history).unwrap_or_default();
     let mut feed = live.as_mut().map(|l| &mut l.feed);
     let mut forecast = Forecast::new(stop.target_error);
-    let mut tiles = adaptive_tiles(&args, &scene, &stop, engine.as_ref())?;
+    let mut tiles = adaptive_tiles(&args, &scene, &stop)?;
     let run = run_until_stop(
         engine.as_mut(),
         &interrupted,
@@ -262,7 +262,13 @@ fn load_checkpoint(args: &RenderArgs, scene: &Scene) -> Result<Option<Checkpoint
 
 /// Refuses to resume a run whose checkpoint already meets the stop rule: starting workers only to stop them at
 /// once would add nothing and say nothing about why.
-fn check_resume_has_work(c: &Checkpoint, stop: &StopRule, from: &Path, lit: &LitMask) -> Result<()> {
+fn check_resume_has_work(
+    c: &Checkpoint,
+    stop: &StopRule,
+    args_uniform: bool,
+    from: &Path,
+    lit: &LitMask,
+) -> Result<()> {
     let place = from.display();
     if let Some(t) = stop.time {
         if c.elapsed_s >= t.as_secs_f64() {
@@ -278,11 +284,14 @@ fn check_resume_has_work(c: &Checkpoint, stop: &StopRule, from: &Path, lit: &Lit
     let sums = c.sums().map_err(|e| anyhow::anyhow!("the checkpoint's sums: {e}"))?;
     let e = sums.error(lit);
     if let Some(n) = stop.phases {
-        if e.min_phases as u64 >= n {
+        // The run's adaptive tiles (a target without --uniform) count the pixels' mean phases.
+        let adaptive = stop.target_error.is_some() && !args_uniform;
+        let done = stop.phases_done(&sums, adaptive);
+        if done >= n as f64 {
+            let counted = if adaptive { "on average over the pixels" } else { "in every pixel" };
             bail!(
-                "the checkpoint in {place} already has at least {} phases in every pixel, which meets --phases {n}: \
-                nothing to render. Ask for more phases than that",
-                e.min_phases
+                "the checkpoint in {place} already has {done:.0} phases {counted}, which meets --phases {n}: \
+                nothing to render. Ask for more phases than that"
             );
         }
     }
@@ -419,15 +428,10 @@ fn start_engine<'s>(
     }
 }
 
-/// The tiles of an adaptive run: with a target error, unless `--uniform`, on renderers that can restrict
-/// their rounds to some tiles (the tile edge is `--tile-size`'s, by default the masks' 32 pixels).
-fn adaptive_tiles(
-    args: &RenderArgs,
-    scene: &Scene,
-    stop: &StopRule,
-    engine: &dyn Progressive,
-) -> Result<Option<ActiveTiles>> {
-    if stop.target_error.is_none() || args.uniform || !engine.renders_tiles() {
+/// The tiles of an adaptive run: with a target error, unless `--uniform` (the tile edge is `--tile-size`'s, by
+/// default the masks' 32 pixels).
+fn adaptive_tiles(args: &RenderArgs, scene: &Scene, stop: &StopRule) -> Result<Option<ActiveTiles>> {
+    if stop.target_error.is_none() || args.uniform {
         return Ok(None);
     }
     let tile = args.tile_size.unwrap_or(DEFAULT_TILE);

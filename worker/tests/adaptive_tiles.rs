@@ -33,9 +33,21 @@ fn run_adaptive<R: Progressive>(
     tile: u32,
     limit: Duration,
 ) -> (StopReason, Vec<HistoryEntry>) {
+    run_adaptive_to(engine, lit, target, None, tile, limit)
+}
+
+/// `run_adaptive` with a `phases` rule beside the target.
+fn run_adaptive_to<R: Progressive>(
+    engine: &mut R,
+    lit: &LitMask,
+    target: f64,
+    phases: Option<u64>,
+    tile: u32,
+    limit: Duration,
+) -> (StopReason, Vec<HistoryEntry>) {
     let sums = engine.sums();
     let mut tiles = ActiveTiles::all(sums.width, sums.height, tile).unwrap();
-    let stop = StopRule { time: Some(limit), phases: None, target_error: Some(target), error_over: ErrorOver::Unlit };
+    let stop = StopRule { time: Some(limit), phases, target_error: Some(target), error_over: ErrorOver::Unlit };
     let mut forecast = Forecast::new(Some(target));
     let mut history = Vec::new();
     let tracking = Tracking { lit, forecast: &mut forecast, elapsed_before: Duration::ZERO, tiles: Some(&mut tiles) };
@@ -159,6 +171,21 @@ fn an_adaptive_single_threaded_run_converges_to_the_image_of_a_uniform_one() {
         eprintln!("{method:?}: difference² / SEM² {r:.3} ± {se:.3}");
         assert!((r - 1.0).abs() <= 4.0 * se, "{method:?}: difference² / SEM² = {r:.3} ± {se:.3}, not 1 within 4 SE");
     }
+}
+
+#[test]
+fn a_phases_rule_beside_a_target_counts_the_pixels_mean_phases_once_tiles_retire() {
+    let sc = scene("cornell.toml", 64);
+    let lit = LitMask::of_scene(&sc, RenderSettings::for_scene(&sc, Method::Path, 1).max_depth);
+    let mut e = Engine::new(&sc, RenderSettings::for_scene(&sc, Method::Path, 5));
+    // The target is out of reach by 600 phases, and tiles retire before: counted at the fewest, the rule would
+    // not stop the run there.
+    let (reason, _) = run_adaptive_to(&mut e, &lit, 0.02, Some(600), 16, Duration::from_secs(120));
+    let (mean, fewest) = (e.sums().image_phases(), e.sums().min_phases());
+    eprintln!("stopped with {mean:.1} phases per pixel on average, {fewest} at the fewest");
+    assert_eq!(reason, StopReason::Phases);
+    assert!((600.0..601.0).contains(&mean), "mean phases {mean}");
+    assert!(fewest < 600, "no tile retired before the rule: the test does not test it");
 }
 
 /// Per-pixel z² = (a − b)² / (SEM_a² + SEM_b²) of the total luminance, eq. 7's SEMs.

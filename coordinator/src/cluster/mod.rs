@@ -384,10 +384,6 @@ impl Progressive for Cluster {
         self.collect(Duration::from_secs(60));
     }
 
-    fn renders_tiles(&self) -> bool {
-        true
-    }
-
     fn set_active_tiles(&mut self, tiles: &ActiveTiles) {
         self.send(Control::ActiveTiles { tile: tiles.tile, flags: Arc::new(tiles.flags().to_vec()) });
     }

@@ -50,12 +50,8 @@ pub trait Progressive {
     fn set_light_paths_per_pixel(&mut self, _l: f32) -> bool {
         false
     }
-    /// True when the renderer can restrict its steps to some tiles (`set_active_tiles`).
-    fn renders_tiles(&self) -> bool {
-        false
-    }
-    /// Renders only `tiles`' active tiles from the next step on; renderers that cannot ignore it.
-    fn set_active_tiles(&mut self, _tiles: &ActiveTiles) {}
+    /// Renders only `tiles`' active tiles from the next step on.
+    fn set_active_tiles(&mut self, tiles: &ActiveTiles);
 }
 
 impl Progressive for Engine<'_> {
@@ -81,9 +77,6 @@ impl Progressive for Engine<'_> {
         Engine::set_light_paths_per_pixel(self, l);
         true
     }
-    fn renders_tiles(&self) -> bool {
-        true
-    }
     fn set_active_tiles(&mut self, tiles: &ActiveTiles) {
         Engine::set_active_tiles(self, tiles);
     }
@@ -99,7 +92,8 @@ pub enum ErrorOver {
     All,
 }
 
-/// When to stop; the first rule met wins. `phases` counts the phases every pixel has received. With no rule at all the run would never end, so callers set one.
+/// When to stop; the first rule met wins. `phases` counts the phases every pixel has received, or with adaptive
+/// tiles the pixels' mean phases (`phases_done`). With no rule at all the run would never end, so callers set one.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StopRule {
     pub time: Option<Duration>,
@@ -146,6 +140,16 @@ pub struct Tracking<'a> {
 }
 
 impl StopRule {
+    /// What the `phases` rule counts: the fewest phases of any pixel, or with adaptive tiles, whose retired
+    /// pixels stop gaining phases, the pixels' mean (the work of that many phases over the whole image).
+    pub fn phases_done(&self, sums: &Accumulator, adaptive_tiles: bool) -> f64 {
+        if adaptive_tiles {
+            sums.image_phases()
+        } else {
+            sums.min_phases() as f64
+        }
+    }
+
     /// The δ of `e` that the target error refers to.
     pub fn delta_of(&self, e: &crate::accumulation::ErrorEstimate) -> f64 {
         match self.error_over {
@@ -176,7 +180,8 @@ pub fn run<R: Progressive + ?Sized>(
         balance = None;
     }
     // Tiles only retire towards a target; a resumed run starts from what its sums already say.
-    let target = stop.target_error.filter(|_| engine.renders_tiles());
+    let target = stop.target_error.filter(|_| tiles.is_some());
+    let adaptive = target.is_some();
     let decide = |engine: &mut R, tiles: &mut Option<&mut ActiveTiles>| {
         if let (Some(t), Some(target)) = (tiles.as_deref_mut(), target) {
             if t.update(engine.sums(), lit, stop.error_over, target) {
@@ -189,10 +194,8 @@ pub fn run<R: Progressive + ?Sized>(
         if interrupted.load(Ordering::Relaxed) {
             return StopReason::Interrupted;
         }
-        if let Some(n) = stop.phases {
-            if engine.sums().min_phases() as u64 >= n {
-                return StopReason::Phases;
-            }
+        if stop.phases.is_some_and(|n| stop.phases_done(engine.sums(), adaptive) >= n as f64) {
+            return StopReason::Phases;
         }
         let deadline = stop.time.map(|t| start + t.saturating_sub(elapsed_before));
         if let Some(b) = &balance {
@@ -234,7 +237,7 @@ pub fn run<R: Progressive + ?Sized>(
                 return StopReason::Time;
             }
         }
-        if stop.phases.is_some_and(|n| e.min_phases as u64 >= n) {
+        if stop.phases.is_some_and(|n| stop.phases_done(engine.sums(), adaptive) >= n as f64) {
             return StopReason::Phases;
         }
         decide(engine, &mut tiles);

@@ -377,10 +377,6 @@ impl Progressive for ParallelEngine<'_> {
         Some(ParallelEngine::stage_seconds(self))
     }
 
-    fn renders_tiles(&self) -> bool {
-        true
-    }
-
     fn set_active_tiles(&mut self, tiles: &ActiveTiles) {
         ParallelEngine::set_active_tiles(self, tiles);
     }
