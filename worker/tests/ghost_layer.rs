@@ -144,10 +144,10 @@ fn ghost_light_gathered_also_into_other_groups_maps_gives_the_single_threaded_gh
     check(&scene, 600, 4, "room behind a window");
 }
 
-/// Buffers of gathered light a group holds per pixel it covers: its plain one, and its map's atomic one when
-/// other groups or several threads add into the map.
+/// Buffers of gathered light a group holds per pixel it covers: a plain one per thread, and its map's atomic
+/// one when other groups add into the map.
 fn gather_buffers(config: &EngineConfig) -> usize {
-    1 + (config.shared_maps || config.threads_per_group > 1) as usize
+    config.threads_per_group + config.shared_maps as usize
 }
 
 /// `EngineConfig::bytes_per_pixel` as it was before auxiliary layers: the merged sums, and per pixel a group
