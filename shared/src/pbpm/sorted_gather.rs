@@ -59,6 +59,13 @@ impl SortedGathers {
         self.points.push(point);
     }
 
+    /// Makes room for a whole batch at once, so that the buffers hold exactly a batch instead of growing by
+    /// doubling past it.
+    pub fn reserve_batch(&mut self) {
+        self.points.reserve_exact(self.batch.saturating_sub(self.points.len()));
+        self.keys.reserve_exact(self.batch.saturating_sub(self.keys.len()));
+    }
+
     /// Vertices that can still be held back before the batch is full.
     pub fn room(&self) -> usize {
         self.batch.saturating_sub(self.points.len())

@@ -101,8 +101,7 @@ impl EngineConfig {
         // Gathered light: a plain buffer per thread of the group for its own paths, and the map's atomic one
         // where other groups add into it; each holds (indirect, caustic) RGB in f32 and the auxiliary channels,
         // and with a ghost layer the visible light registered on the sensor. A group with a mask then also
-        // holds the sensor's image-pixel-to-mask table. The light vertices held back for sorted gathers are a
-        // fixed few MB, not per pixel (`thread_gathers::batch_per_map`).
+        // holds the sensor's image-pixel-to-mask table.
         let sensor = aux.offset(photonfarm::ghost::GHOST_LAYER).is_some();
         let gather_buffers = self.threads_per_group + self.shared_maps as usize;
         let gathered = gather_buffers * (6 * 4 + aux.phase_bytes_per_pixel() + if sensor { 12 } else { 0 });
@@ -117,7 +116,9 @@ impl EngineConfig {
             + backward_diffuse_depth as usize * photon
             + aux.phase_bytes_per_pixel()
             + aux.sum_bytes_per_pixel();
-        (Accumulator::bytes_per_pixel(aux) + sensor_tables + coverage * per_pixel) as f64
+        // The light vertices held back for sorted gathers: at most one per image pixel over the whole engine.
+        let held_back = super::thread_gathers::HELD_BACK_BYTES_PER_PIXEL;
+        (Accumulator::bytes_per_pixel(aux) + sensor_tables + held_back + coverage * per_pixel) as f64
     }
 
     /// The layout in words, e.g. "2 groups × 1 thread, 32-pixel tile masks, shared maps".

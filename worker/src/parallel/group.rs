@@ -373,7 +373,7 @@ impl Group {
         let sole = ctx.sole_foreign_writer;
         let threads = rayon::current_num_threads();
         let maps = if ctx.shared_maps { ctx.slots.len() } else { 1 };
-        let batch_size = batch_per_map(threads * ctx.slots.len(), maps);
+        let batch_size = batch_per_map(ctx.scene.camera.pixel_count(), threads * ctx.slots.len(), maps);
         for t in &mut self.threads {
             thread_mut(t).prepare(ctx.slots.len(), batch_size);
         }

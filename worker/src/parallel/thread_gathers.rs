@@ -29,15 +29,18 @@ impl<'a> GatherRules<'a> {
     }
 }
 
-/// Fewest vertices a thread holds back for one map: below this a sorted batch walks too few runs of a bucket's
-/// photons to pay for its sort.
-const MIN_BATCH: usize = 256;
+/// Bytes a held-back vertex takes: the vertex, its copy in gather order and its sort key.
+const VERTEX_BYTES: usize = 2 * std::mem::size_of::<GatherPoint>() + 8;
 
-/// Vertices one thread holds back for one map when `threads` threads each gather into `maps` maps: the engine
-/// holds at most twice the single-threaded engine's batch in all (7.9 MB, 120 bytes a vertex) unless the
-/// floor of `MIN_BATCH` vertices per thread and map lifts it.
-pub fn batch_per_map(threads: usize, maps: usize) -> usize {
-    (2 * SORTED_GATHER_BATCH / (threads * maps).max(1)).clamp(MIN_BATCH, SORTED_GATHER_BATCH)
+/// Most bytes the held-back vertices of an engine take per image pixel (`batch_per_map`): at most one vertex
+/// per pixel.
+pub const HELD_BACK_BYTES_PER_PIXEL: usize = VERTEX_BYTES;
+
+/// Vertices one thread holds back for one map when `threads` threads each gather into `maps` maps of an image
+/// of `pixels` pixels: the engine holds at most twice the single-threaded engine's batch in all (7.9 MB) and
+/// at most one vertex per image pixel, so that the memory estimate can count it per pixel.
+pub fn batch_per_map(pixels: usize, threads: usize, maps: usize) -> usize {
+    (pixels.min(2 * SORTED_GATHER_BATCH) / (threads * maps).max(1)).clamp(1, SORTED_GATHER_BATCH)
 }
 
 /// A thread's plain buffer for its group's own light paths and its held-back vertices, one batch per map.
@@ -77,6 +80,9 @@ impl ThreadGathers {
     /// into the plain buffer once it is full. Returns the merges made.
     #[inline]
     pub fn push_own(&mut self, map: &PhotonMap, v: GatherPoint, rules: GatherRules) -> u64 {
+        if self.own.is_empty() {
+            self.own.reserve_batch();
+        }
         self.own.push(map, v);
         if self.own.room() == 0 {
             self.flush_own(map, rules)
@@ -104,6 +110,9 @@ impl ThreadGathers {
         v: GatherPoint,
         rules: GatherRules,
     ) {
+        if self.foreign[k].is_empty() {
+            self.foreign[k].reserve_batch();
+        }
         self.foreign[k].push(map, v);
         if self.foreign[k].room() == 0 {
             self.flush_foreign(k, map, buffer, sole, rules);
@@ -295,11 +304,38 @@ mod tests {
     }
 
     #[test]
-    fn batches_per_map_shrink_with_threads_and_maps_within_their_bounds() {
-        assert_eq!(batch_per_map(1, 1), SORTED_GATHER_BATCH);
-        assert_eq!(batch_per_map(2, 1), SORTED_GATHER_BATCH);
-        assert_eq!(batch_per_map(2, 2), SORTED_GATHER_BATCH / 2);
-        assert_eq!(batch_per_map(64, 16), MIN_BATCH);
-        assert_eq!(batch_per_map(0, 0), SORTED_GATHER_BATCH);
+    fn batches_per_map_shrink_with_threads_maps_and_pixels_within_their_bounds() {
+        let big = 1 << 20;
+        assert_eq!(batch_per_map(big, 1, 1), SORTED_GATHER_BATCH);
+        assert_eq!(batch_per_map(big, 2, 1), SORTED_GATHER_BATCH);
+        assert_eq!(batch_per_map(big, 2, 2), SORTED_GATHER_BATCH / 2);
+        assert_eq!(batch_per_map(big, 64, 16), 64);
+        assert_eq!(batch_per_map(64 * 64, 4, 1), 1024, "one vertex per pixel at most");
+        assert_eq!(batch_per_map(0, 0, 0), 1);
+    }
+
+    #[test]
+    fn held_back_vertices_take_exactly_their_batch() {
+        let map = corner_map(&mut Sampler::new(6, Pass::Camera, 1, 1), 100);
+        let phase = PhaseSpectrum::RGB;
+        let rules = GatherRules { spectrum: &phase, max_depth: 8, backward_diffuse_depth: 2 };
+        let mut t = ThreadGathers::default();
+        t.reset(PIXELS as usize, &AuxLayout::default());
+        t.prepare(1, 1000);
+        let empty = t.capacity_bytes();
+        let v = GatherPoint {
+            p: Vec3::ZERO,
+            ng: Vec3::Z,
+            wi: Vec3::Z,
+            flux: Rgb::ONE,
+            m: 2,
+            all_specular: false,
+            spectrum: 0,
+        };
+        for _ in 0..2500 {
+            t.push_own(&map, v, rules);
+        }
+        t.flush_own(&map, rules);
+        assert_eq!(t.capacity_bytes() - empty, 1000 * HELD_BACK_BYTES_PER_PIXEL);
     }
 }
