@@ -144,13 +144,14 @@ fn ghost_light_gathered_also_into_other_groups_maps_gives_the_single_threaded_gh
     check(&scene, 600, 4, "room behind a window");
 }
 
-/// Buffers of gathered light a group holds per pixel it covers: its plain one, and its map's atomic one when
-/// other groups or several threads add into the map.
+/// Buffers of gathered light a group holds per pixel it covers: a plain one per thread, and its map's atomic
+/// one when other groups add into the map.
 fn gather_buffers(config: &EngineConfig) -> usize {
-    1 + (config.shared_maps || config.threads_per_group > 1) as usize
+    config.threads_per_group + config.shared_maps as usize
 }
 
-/// `EngineConfig::bytes_per_pixel` as it was before auxiliary layers: the merged sums, and per pixel a group
+/// `EngineConfig::bytes_per_pixel` as it was before auxiliary layers: the merged sums, the held-back light
+/// vertices, and per pixel a group
 /// covers its phase values, sums, mask and phase count entries, gathered light, and its photons (held twice,
 /// eight grid entries each in buffers with room to double, half a hash bucket, a u32 of its place in grid order).
 fn estimate_without_auxiliary_layers(config: &EngineConfig, backward_diffuse_depth: u32) -> f64 {
@@ -163,7 +164,9 @@ fn estimate_without_auxiliary_layers(config: &EngineConfig, backward_diffuse_dep
         + 8
         + 24 * gather_buffers(config)
         + backward_diffuse_depth as usize * photon;
-    (std::mem::size_of::<PixelSums>() + coverage * per_pixel) as f64
+    // The light vertices held back for sorted gathers, at most one per image pixel.
+    let held_back = worker::parallel::thread_gathers::HELD_BACK_BYTES_PER_PIXEL;
+    (std::mem::size_of::<PixelSums>() + held_back + coverage * per_pixel) as f64
 }
 
 #[test]

@@ -110,6 +110,19 @@ impl GatherBuffer {
         other.clean = true;
     }
 
+    /// Adds what another thread's plain buffer gathered into this one and zeroes it, with the threads of the
+    /// current rayon pool. Both buffers must have the same size and layout.
+    pub fn absorb_plain(&mut self, other: &mut GatherBuffer) {
+        assert_eq!(
+            (self.values.len(), self.stride),
+            (other.values.len(), other.stride),
+            "absorbing gathered light of another size"
+        );
+        self.values.par_iter_mut().zip(other.values.par_iter_mut()).with_min_len(1 << 12).for_each(|(a, b)| {
+            *a += std::mem::take(b);
+        });
+    }
+
     /// Bytes held.
     pub fn capacity_bytes(&self) -> usize {
         self.values.capacity() * 4
@@ -374,6 +387,21 @@ mod tests {
         b.reset(3, &ghost_layout());
         assert!(b.capacity_bytes() >= 3 * 10 * 4);
         assert_eq!((b.get(2), [0, 1, 2, 3].map(|c| b.get_aux(2, c))), ([Rgb::ZERO; 2], [0.0; 4]));
+    }
+
+    #[test]
+    fn absorbing_a_plain_buffer_adds_it_and_leaves_it_zero() {
+        let (mut a, mut b) = (GatherBuffer::default(), GatherBuffer::default());
+        a.reset(3, &ghost_layout());
+        b.reset(3, &ghost_layout());
+        a.add(0, Layer::Indirect, false, Rgb::new(1.0, 2.0, 3.0));
+        b.add(0, Layer::Indirect, true, Rgb::new(0.5, 0.25, 0.125));
+        b.add(2, Layer::Caustic, false, Rgb::ONE);
+        a.absorb_plain(&mut b);
+        assert_eq!(a.get(0), [Rgb::new(1.5, 2.25, 3.125), Rgb::ZERO]);
+        assert_eq!(a.get(2), [Rgb::ZERO, Rgb::ONE]);
+        assert_eq!([1, 2, 3].map(|c| a.get_aux(0, c)), [0.5, 0.25, 0.125], "the ghost layer's channels too");
+        assert!(b.values.iter().all(|&v| v == 0.0));
     }
 
     #[test]

@@ -15,7 +15,7 @@ pub const SORTED_GATHER_BATCH: usize = 1 << 15;
 
 /// Light vertices waiting for one sorted gather into one map, with their buckets; every buffer keeps its room
 /// from batch to batch.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct SortedGathers {
     /// The vertices in the order they came.
     points: Vec<GatherPoint>,
@@ -24,25 +24,51 @@ pub struct SortedGathers {
     /// The vertices in gather order: copied there first, so that the gathers read them front to back instead
     /// of waiting on each one.
     ordered: Vec<GatherPoint>,
+    /// Vertices a batch holds.
+    batch: usize,
+}
+
+impl Default for SortedGathers {
+    fn default() -> Self {
+        Self::with_batch(SORTED_GATHER_BATCH)
+    }
 }
 
 impl SortedGathers {
-    /// No vertex waiting.
+    /// No vertex waiting, batches of `SORTED_GATHER_BATCH` vertices.
     pub fn new() -> Self {
         Self::default()
     }
 
+    /// No vertex waiting, batches of `batch` vertices (at least one): for threads that hold vertices back for
+    /// several maps at once, whose batches together must stay bounded.
+    pub fn with_batch(batch: usize) -> Self {
+        SortedGathers { points: Vec::new(), keys: Vec::new(), ordered: Vec::new(), batch: batch.max(1) }
+    }
+
+    /// Vertices a batch holds.
+    pub fn batch(&self) -> usize {
+        self.batch
+    }
+
     /// Holds back a vertex that will gather into `map`. Call `gather_into` before `room` runs out: the
-    /// buffers never grow past `SORTED_GATHER_BATCH` vertices.
+    /// buffers never grow past the batch.
     #[inline]
     pub fn push(&mut self, map: &PhotonMap, point: GatherPoint) {
         self.keys.push((map.bucket_of(point.p) as u64) << 32 | self.points.len() as u64);
         self.points.push(point);
     }
 
+    /// Makes room for a whole batch at once, so that the buffers hold exactly a batch instead of growing by
+    /// doubling past it.
+    pub fn reserve_batch(&mut self) {
+        self.points.reserve_exact(self.batch.saturating_sub(self.points.len()));
+        self.keys.reserve_exact(self.batch.saturating_sub(self.keys.len()));
+    }
+
     /// Vertices that can still be held back before the batch is full.
     pub fn room(&self) -> usize {
-        SORTED_GATHER_BATCH.saturating_sub(self.points.len())
+        self.batch.saturating_sub(self.points.len())
     }
 
     /// Vertices waiting.
@@ -66,11 +92,12 @@ impl SortedGathers {
         backward_diffuse_depth: u32,
         sink: &mut impl Gather,
     ) -> u64 {
-        let Self { points, keys, ordered } = self;
+        let Self { points, keys, ordered, .. } = self;
         keys.sort_unstable();
         ordered.clear();
-        // Room for a whole batch at once: `extend` would grow by doubling when a batch outgrows the last one.
-        ordered.reserve_exact(SORTED_GATHER_BATCH.max(points.len()));
+        // Room for exactly this batch: `extend` would grow by doubling when a batch outgrows the last one, and
+        // room for a whole batch would be held by threads and images that never fill one.
+        ordered.reserve_exact(points.len());
         ordered.extend(keys.iter().map(|&k| points[k as u32 as usize]));
         let merges = keys
             .iter()

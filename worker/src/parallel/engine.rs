@@ -98,12 +98,12 @@ impl EngineConfig {
         // plus the build's u64 (cell, photon) pair, in buffers that grow by doubling as the count varies from
         // phase to phase, with a table of half a bucket per photon and the u32 of its place in grid order.
         let photon = 2 * std::mem::size_of::<photonfarm::pbpm::BackwardPhoton>() + 2 * 8 * (4 + 8) + 2 + 4;
-        // Gathered light: the group's plain buffer, and the map's atomic one where other groups or several
-        // threads add into it; each holds (indirect, caustic) RGB in f32 and the auxiliary channels, and with a
-        // ghost layer the visible light registered on the sensor. A group with a mask then also holds the
-        // sensor's image-pixel-to-mask table.
+        // Gathered light: a plain buffer per thread of the group for its own paths, and the map's atomic one
+        // where other groups add into it; each holds (indirect, caustic) RGB in f32 and the auxiliary channels,
+        // and with a ghost layer the visible light registered on the sensor. A group with a mask then also
+        // holds the sensor's image-pixel-to-mask table.
         let sensor = aux.offset(photonfarm::ghost::GHOST_LAYER).is_some();
-        let gather_buffers = 1 + (self.shared_maps || self.threads_per_group > 1) as usize;
+        let gather_buffers = self.threads_per_group + self.shared_maps as usize;
         let gathered = gather_buffers * (6 * 4 + aux.phase_bytes_per_pixel() + if sensor { 12 } else { 0 });
         let sensor_tables = if sensor && self.masks { self.groups * 4 } else { 0 };
         // The camera pass's values and replicate, and the sums; the mask and the phases before the deal take 8
@@ -116,7 +116,9 @@ impl EngineConfig {
             + backward_diffuse_depth as usize * photon
             + aux.phase_bytes_per_pixel()
             + aux.sum_bytes_per_pixel();
-        (Accumulator::bytes_per_pixel(aux) + sensor_tables + coverage * per_pixel) as f64
+        // The light vertices held back for sorted gathers: at most one per image pixel over the whole engine.
+        let held_back = super::thread_gathers::HELD_BACK_BYTES_PER_PIXEL;
+        (Accumulator::bytes_per_pixel(aux) + sensor_tables + held_back + coverage * per_pixel) as f64
     }
 
     /// The layout in words, e.g. "2 groups × 1 thread, 32-pixel tile masks, shared maps".

@@ -2,18 +2,16 @@
 //! of a phase over the group's mask, with rayon's joins as the barriers between stages.
 
 use super::map_slot::{Guard, MapSlot, OwnerToken};
+use super::thread_gathers::{batch_per_map, GatherRules, ThreadGathers};
 use photonfarm::accumulation::AuxLayout;
 use photonfarm::accumulation::{AuxSums, PixelSums};
-use photonfarm::color::Rgb;
-use photonfarm::integrator::Layer;
 use photonfarm::pbpm::{
-    AtomicGatherBuffer, AtomicSink, Executor, ForwardStats, Gather, GatherBuffer, LocalPixels, Phase, PhaseBuffers,
-    PhaseNumbering, PhotonMap,
+    AtomicGatherBuffer, Executor, ForwardStats, LightEvent, LocalPixels, Phase, PhaseBuffers, PhaseNumbering, PhotonMap,
 };
 use photonfarm::render::RenderSettings;
 use photonfarm::scene::Scene;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Instant;
 
 /// Light paths traced per acquisition of the other groups' maps.
@@ -31,8 +29,8 @@ const STOP_FRACTION: f64 = 0.25;
 #[derive(Default)]
 pub struct GroupMap {
     pub photons: PhotonMap,
-    /// Light gathered by other groups' paths, and by the group's own paths when it has several threads; the
-    /// owner's paths of a one-thread group add into its plain buffer instead, without atomics.
+    /// Light gathered by other groups' paths; the group's own paths add into its threads' plain buffers
+    /// instead, without atomics.
     pub shared: AtomicGatherBuffer,
     /// Which local pixel of the owner's phase an image pixel is, for light paths registering on the sensor.
     pub pixels: LocalPixels,
@@ -146,24 +144,6 @@ pub struct RoundContext<'a> {
     pub numbering: PhaseNumbering,
 }
 
-/// Where a group's own light paths add their gathered light.
-enum OwnSink<'a> {
-    /// The group's plain buffer: one thread traces all its paths.
-    Plain(&'a mut GatherBuffer),
-    /// The map's atomic buffer: several threads trace them.
-    Shared(AtomicSink<'a>),
-}
-
-impl Gather for OwnSink<'_> {
-    #[inline]
-    fn add(&mut self, pixel: u32, layer: Layer, ghost: bool, value: Rgb) {
-        match self {
-            OwnSink::Plain(b) => b.add(pixel, layer, ghost, value),
-            OwnSink::Shared(s) => s.add(pixel, layer, ghost, value),
-        }
-    }
-}
-
 /// One synchronous group and its buffers over its current mask.
 pub struct Group {
     pub index: usize,
@@ -174,8 +154,10 @@ pub struct Group {
     /// Phases each pixel of the mask had before this deal (the radius schedule's j).
     phases_before: Vec<u32>,
     buffers: PhaseBuffers,
-    /// Light gathered by the group's own paths when it has one thread, and where the phase closes from.
-    gathered: GatherBuffer,
+    /// Each thread's plain buffer for the group's own paths and its held-back vertices, by the thread's index
+    /// in the pool; the phase closes from thread 0's buffer once the others and the map's shared buffer are
+    /// added into it. A thread locks its own entry once per forward pass, so the locks are never contended.
+    threads: Vec<Mutex<ThreadGathers>>,
     sums: Vec<PixelSums>,
     aux_sums: AuxSums,
     phases_this_deal: u64,
@@ -195,6 +177,7 @@ impl Group {
         token: OwnerToken,
         aux: AuxLayout,
     ) -> Result<Self, rayon::ThreadPoolBuildError> {
+        let threads = (0..cores.len().max(1)).map(|_| Mutex::default()).collect();
         let pinned = Arc::new(AtomicUsize::new(0));
         let pin_count = pinned.clone();
         let pool = rayon::ThreadPoolBuilder::new()
@@ -217,7 +200,7 @@ impl Group {
             mask: Vec::new(),
             phases_before: Vec::new(),
             buffers: PhaseBuffers::new(aux.clone(), Executor::CurrentPool),
-            gathered: GatherBuffer::default(),
+            threads,
             sums: Vec::new(),
             aux_sums: AuxSums::new(aux, 0),
             phases_this_deal: 0,
@@ -252,7 +235,7 @@ impl Group {
         let own = self.mask.capacity() * 4
             + self.phases_before.capacity() * 4
             + self.buffers.capacity_bytes()
-            + self.gathered.capacity_bytes()
+            + self.threads.iter_mut().map(|t| thread_mut(t).capacity_bytes()).sum::<usize>()
             + self.sums.capacity() * std::mem::size_of::<PixelSums>()
             + self.aux_sums.capacity_bytes();
         // Asked between rounds, when every map is closed.
@@ -264,7 +247,9 @@ impl Group {
     pub fn start_deal(&mut self, mask: Vec<u32>, phases_before: Vec<u32>, groups_per_pixel: u32) {
         self.groups_per_pixel = groups_per_pixel.max(1);
         self.buffers.resize(mask.len());
-        self.gathered.reset(mask.len(), self.buffers.aux());
+        for t in &mut self.threads {
+            thread_mut(t).reset(mask.len(), self.buffers.aux());
+        }
         self.sums.clear();
         self.sums.resize(mask.len(), PixelSums::default());
         self.aux_sums.reset(mask.len());
@@ -330,16 +315,13 @@ impl Group {
         // Where tiles retired, the round's light shrinks with its camera paths.
         let required = ctx.settings.light_paths_per_phase(ctx.rendered_pixels);
         let t0 = Instant::now();
-        // One thread adds its own paths' light without atomics; several share the map's atomic buffer.
-        let one_thread = rayon::current_num_threads() == 1;
-        let uses_shared = ctx.shared_maps || !one_thread;
         {
             let data = slot.data_mut(&mut self.token);
             if std::mem::take(&mut self.new_mask) {
                 data.pixels = LocalPixels::of_mask(&self.mask, ctx.scene.camera.pixel_count(), phase.sensor_ghosts);
             }
             self.buffers.build_map(exec, &mut data.photons);
-            if uses_shared {
+            if ctx.shared_maps {
                 data.shared.reset(self.mask.len(), self.buffers.aux());
             }
             data.start_phase(required);
@@ -348,7 +330,7 @@ impl Group {
 
         // 3. Forward pass with the map open to every group.
         let t0 = Instant::now();
-        let tally = self.forward_pass(ctx, &phase, required, one_thread);
+        let tally = self.forward_pass(ctx, &phase, required);
         self.stats.nanos.forward += nanos_since(t0);
         let t0 = Instant::now();
         self.stats.light_paths += tally.traced;
@@ -360,25 +342,26 @@ impl Group {
         let counted = slot.light_paths();
         self.stats.light_paths_counted += counted;
         let data = slot.data_mut(&mut self.token);
-        self.stats.merges += tally.own_merges + data.shared.merges();
-        if uses_shared {
-            self.gathered.absorb(&mut data.shared);
+        self.stats.merges += tally.own_merges;
+        let (first, others) = self.threads.split_first_mut().expect("a group has at least one thread");
+        let gathered = &mut thread_mut(first).gathered;
+        for t in others {
+            gathered.absorb_plain(&mut thread_mut(t).gathered);
         }
-        self.buffers.close(exec, &phase, &mut self.gathered, counted, &mut self.sums, &mut self.aux_sums);
+        if ctx.shared_maps {
+            self.stats.merges += data.shared.merges();
+            gathered.absorb(&mut data.shared);
+        }
+        self.buffers.close(exec, &phase, gathered, counted, &mut self.sums, &mut self.aux_sums);
         self.stats.nanos.closing += nanos_since(t0);
         self.stats.phases += 1;
     }
 
     /// Stage 3 with the map open: traces the phase's light paths on the group's threads until the quota is met
     /// (and, while another group's map still lacks light, helps it), then keeps tracing until no other group is
-    /// inside the map, and closes it.
-    fn forward_pass<'c>(
-        &mut self,
-        ctx: &RoundContext<'c>,
-        phase: &Phase,
-        required: u64,
-        one_thread: bool,
-    ) -> ForwardTally {
+    /// inside the map, and closes it. Every vertex is held back per map and gathered in that map's bucket order
+    /// (`ThreadGathers`); none is left held back when the pass returns.
+    fn forward_pass<'c>(&mut self, ctx: &RoundContext<'c>, phase: &Phase, required: u64) -> ForwardTally {
         let me = self.index;
         let slot = &ctx.slots[me];
         slot.open(&self.token);
@@ -386,49 +369,80 @@ impl Group {
         // its camera paths, and its gathered light's variance grows as 1 / paths (see STOP_FRACTION).
         let minimum = ((required as f64 * STOP_FRACTION) as u64).max(1);
         let own = slot.owner_data(&self.token);
-        // Light paths are traced in batches: foreign maps are acquired once per batch and each batch's paths
-        // are counted in them at once, so the counters' cache lines move between cores once per batch, not per
-        // path. The group's own tallies stay with each thread until the pass ends, and `guards` and `merges`
-        // are per-thread scratch, reused from batch to batch. Returns whether the stop cut the batch short and
-        // whether a foreign map it served still lacks light.
+        let rules = GatherRules::of(phase);
+        let sole = ctx.sole_foreign_writer;
+        let threads = rayon::current_num_threads();
+        let maps = if ctx.shared_maps { ctx.slots.len() } else { 1 };
+        let batch_size = batch_per_map(ctx.scene.camera.pixel_count(), threads * ctx.slots.len(), maps);
+        for t in &mut self.threads {
+            thread_mut(t).prepare(ctx.slots.len(), batch_size);
+        }
+        // Gathers what `thread` held back for map k and releases the map.
+        let release = |thread: &mut ThreadGathers, k: usize, held: &mut Option<Guard<'c, GroupMap>>| {
+            if let Some(g) = held.take() {
+                thread.flush_foreign(k, &g.data().photons, &g.data().shared, sole, rules);
+            }
+        };
+        // Light paths are traced in batches: foreign maps are acquired for a batch and each batch's paths are
+        // counted in them at once, so the counters' cache lines move between cores once per batch, not per
+        // path. A thread keeps an acquired map from batch to batch while it still lacks light (its owner is
+        // still tracing towards its quota, so the hold delays nobody), so that the vertices held back for it
+        // gather in large sorted batches; it gathers them and releases the map once the map's quota is met or
+        // the round stops, so that the owner can close. `held` is the thread's maps by slot index, and its
+        // tallies stay with it until the pass ends. Returns whether the stop cut the batch short and whether a
+        // foreign map it served still lacks light.
         let trace_batch = |batch: Batch,
-                           sink: &mut OwnSink,
-                           guards: &mut Vec<Guard<'c, GroupMap>>,
-                           merges: &mut Vec<u64>,
+                           thread: &mut ThreadGathers,
+                           held: &mut [Option<Guard<'c, GroupMap>>],
                            tally: &mut ForwardTally| {
             // While closing, the owner takes no other map: two closing owners never wait on each other.
-            guards.clear();
             if ctx.shared_maps && !batch.closing {
-                guards.extend(
-                    ctx.slots.iter().enumerate().filter(|&(k, _)| k != me).filter_map(|(_, sl)| sl.try_acquire()),
-                );
+                for (k, (h, sl)) in held.iter_mut().zip(ctx.slots).enumerate() {
+                    if k != me && h.is_none() {
+                        *h = sl.try_acquire();
+                    }
+                }
             }
-            merges.clear();
-            merges.resize(guards.len() + 1, 0);
-            let mut done = 0;
+            let (mut done, mut own_merges) = (0, 0);
             for index in batch.first..batch.first + batch.count {
                 if index >= batch.stop_from && ctx.stop.load(Ordering::Relaxed) {
                     break;
                 }
-                phase.trace_light_path(index, &mut tally.stats, &mut |v| {
-                    merges[0] += phase.gather(&own.photons, &own.pixels, v, sink);
-                    for (g, m) in guards.iter().zip(merges[1..].iter_mut()) {
-                        let shared = &g.data().shared;
-                        let mut sink = if ctx.sole_foreign_writer { shared.sole_writer_sink() } else { shared.sink() };
-                        *m += phase.gather(&g.data().photons, &g.data().pixels, v, &mut sink);
+                phase.trace_light_path(index, &mut tally.stats, &mut |e| match e {
+                    LightEvent::Vertex(v) => {
+                        let point = v.point();
+                        own_merges += thread.push_own(&own.photons, point, rules);
+                        for (k, g) in held.iter().enumerate() {
+                            if let Some(g) = g {
+                                thread.push_foreign(k, &g.data().photons, &g.data().shared, sole, point, rules);
+                            }
+                        }
+                    }
+                    LightEvent::Sensor(hit) => {
+                        phase.register(&own.pixels, hit, &mut thread.gathered);
+                        for g in held.iter().flatten() {
+                            let shared = &g.data().shared;
+                            let mut sink = if sole { shared.sole_writer_sink() } else { shared.sink() };
+                            phase.register(&g.data().pixels, hit, &mut sink);
+                        }
                     }
                 });
                 done += 1;
             }
-            for (g, &m) in guards.iter().zip(&merges[1..]) {
-                g.data().shared.add_merges(m);
+            let stopping = ctx.stop.load(Ordering::Relaxed);
+            let mut others_lack = false;
+            for (k, h) in held.iter_mut().enumerate() {
+                let Some(g) = h else { continue };
                 g.count_light_paths(done);
+                tally.foreign += done;
+                if !stopping && g.data().lacking(g.light_paths()) > 0 {
+                    others_lack = true;
+                } else {
+                    release(thread, k, h);
+                }
             }
-            let others_lack = guards.iter().any(|g| g.data().lacking(g.light_paths()) > 0);
-            tally.own_merges += merges[0];
-            tally.foreign += guards.len() as u64 * done;
+            tally.own_merges += own_merges;
             tally.traced += done;
-            guards.clear();
             (done < batch.count, others_lack)
         };
         // Every thread of the group claims batches of path indices until the paths counted against the map
@@ -438,8 +452,9 @@ impl Group {
         // costs no more thread time than the owner tracing it alone, and adds light to this phase too.
         // Groups then leave their forward passes together, so their next forward passes overlap again instead
         // of drifting apart by the differences in their backward passes.
-        let thread_pass = |sink: &mut OwnSink| {
-            let (mut guards, mut merges, mut tally) = (Vec::new(), Vec::new(), ForwardTally::default());
+        let thread_pass = |thread: &mut ThreadGathers| {
+            let mut held: Vec<Option<Guard<'c, GroupMap>>> = ctx.slots.iter().map(|_| None).collect();
+            let mut tally = ForwardTally::default();
             let mut others_lack = false;
             loop {
                 let foreign = slot.light_paths();
@@ -453,30 +468,44 @@ impl Group {
                     None => break,
                 };
                 let cut;
-                (cut, others_lack) = trace_batch(batch, sink, &mut guards, &mut merges, &mut tally);
+                (cut, others_lack) = trace_batch(batch, thread, &mut held, &mut tally);
                 if cut {
                     break;
                 }
             }
+            for (k, h) in held.iter_mut().enumerate() {
+                release(thread, k, h);
+            }
+            tally.own_merges += thread.flush_own(&own.photons, rules);
             tally
         };
-        let mut sink = if one_thread { OwnSink::Plain(&mut self.gathered) } else { OwnSink::Shared(own.shared.sink()) };
-        let mut tally = if one_thread {
-            thread_pass(&mut sink)
+        let mut tally = if threads == 1 {
+            thread_pass(thread_mut(&mut self.threads[0]))
         } else {
-            rayon::broadcast(|_| thread_pass(&mut OwnSink::Shared(own.shared.sink())))
+            let states = &self.threads;
+            rayon::broadcast(|b| thread_pass(&mut states[b.index()].lock().unwrap_or_else(PoisonError::into_inner)))
                 .into_iter()
                 .fold(ForwardTally::default(), ForwardTally::add)
         };
         // Keep tracing useful paths until no other group is inside the map (paper Fig. 9).
-        let (mut guards, mut merges) = (Vec::new(), Vec::new());
+        let thread = thread_mut(&mut self.threads[0]);
+        let mut held: Vec<Option<Guard<'c, GroupMap>>> = Vec::new();
         while !slot.try_close(&self.token) {
             let batch = Batch { first: own.claim_beyond_quota(1), count: 1, stop_from: u64::MAX, closing: true };
-            trace_batch(batch, &mut sink, &mut guards, &mut merges, &mut tally);
+            trace_batch(batch, thread, &mut held, &mut tally);
         }
+        // The owner's own photons stay as they are until the phase closes: its last vertices may gather after
+        // the map closed to other groups.
+        tally.own_merges += thread.flush_own(&own.photons, rules);
+        debug_assert!(self.threads.iter_mut().all(|t| thread_mut(t).is_empty()));
         slot.count_owner_paths(&self.token, tally.traced);
         tally
     }
+}
+
+/// A thread's gathers, from a group that holds `&mut` to them (no other thread locks them then).
+fn thread_mut(t: &mut Mutex<ThreadGathers>) -> &mut ThreadGathers {
+    t.get_mut().unwrap_or_else(PoisonError::into_inner)
 }
 
 /// Light-path indices a thread traces in one go: `first..first + count`, of which those from `stop_from` on
