@@ -9,7 +9,7 @@ use super::path::RecordedPath;
 use super::RayMapError;
 use std::cell::RefCell;
 use std::fs::File;
-use std::io::{BufReader, Read};
+use std::io::Read;
 use std::path::{Path, PathBuf};
 
 /// A portion as it lies in the file, not yet decompressed (decompression is the part worth parallelising).
@@ -79,7 +79,8 @@ impl RawPortion {
 /// One stream file, read portion by portion.
 pub struct StreamReader {
     path: PathBuf,
-    file: BufReader<File>,
+    /// Unbuffered: portions are read whole, most of a MiB each, and a buffer would only copy them twice.
+    file: File,
     header: MapHeader,
     offset: u64,
     length: u64,
@@ -91,9 +92,8 @@ impl StreamReader {
     pub fn open(path: &Path) -> Result<Self, RayMapError> {
         let name = path.display().to_string();
         let io = |source| RayMapError::Io { path: name.clone(), source };
-        let file = File::open(path).map_err(io)?;
+        let mut file = File::open(path).map_err(io)?;
         let length = file.metadata().map_err(io)?.len();
-        let mut file = BufReader::with_capacity(1 << 20, file);
         let mut start = [0u8; 16];
         if length < 16 {
             return Err(RayMapError::NotAMap(name));
