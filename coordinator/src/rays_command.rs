@@ -265,3 +265,54 @@ impl Merger {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use photonfarm::ray_map::PathKind;
+
+    /// Portion `n`'s outcome: `matches` matches numbered after the portion, or a damaged portion or a cut stream.
+    fn outcome(n: usize, matches: usize) -> Outcome {
+        match n % 5 {
+            3 => Outcome::Damaged(format!("portion {n}")),
+            4 => Outcome::Truncated(PathBuf::from(format!("stream-{n}")), n as u64),
+            _ => Outcome::Tested(Tested {
+                paths: 10,
+                segments: 30,
+                matched_paths: matches as u64,
+                matched_segments: 3 * matches as u64,
+                kept: (0..matches).map(|i| RecordedPath::new(PathKind::Camera, 1, (100 * n + i) as u32, 0)).collect(),
+            }),
+        }
+    }
+
+    fn merged(order: &[usize], limit: usize) -> (String, usize) {
+        let (mut merger, unneeded_from) = (Merger { limit, ..Merger::default() }, AtomicUsize::new(usize::MAX));
+        for &n in order {
+            merger.add(n, outcome(n, 4), &unneeded_from);
+        }
+        assert!(merger.waiting.is_empty() && merger.next == order.len());
+        (format!("{:?}", merger.selection), unneeded_from.into_inner())
+    }
+
+    #[test]
+    fn outcomes_arriving_in_any_order_are_combined_in_map_order_up_to_the_limit() {
+        let in_order: Vec<usize> = (0..12).collect();
+        let shuffled = [5, 0, 11, 2, 1, 9, 3, 4, 10, 7, 6, 8];
+        let (first, unneeded) = merged(&in_order, 6);
+        assert_eq!(merged(&shuffled, 6), (first.clone(), unneeded));
+        assert_eq!(merged(&in_order.iter().rev().copied().collect::<Vec<_>>(), 6).0, first);
+        // Portions 0 and 1 hold the first 8 matches: from portion 2 on, none needs keeping.
+        assert_eq!(unneeded, 2);
+        let mut merger = Merger { limit: 6, ..Merger::default() };
+        for n in shuffled {
+            merger.add(n, outcome(n, 4), &AtomicUsize::new(usize::MAX));
+        }
+        let sel = merger.selection;
+        let items: Vec<u32> = sel.paths.iter().map(|p| p.item).collect();
+        assert_eq!(items, [0, 1, 2, 3, 100, 101]);
+        assert_eq!((sel.total_paths, sel.matched_paths, sel.matched_segments), (80, 32, 96));
+        assert_eq!(sel.damaged, ["portion 3", "portion 8"]);
+        assert_eq!(sel.truncated.iter().map(|t| t.1).collect::<Vec<_>>(), [4, 9]);
+    }
+}
