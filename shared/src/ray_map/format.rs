@@ -27,6 +27,12 @@ pub const LIGHT_PATH_BYTES: usize = CAMERA_PATH_BYTES + 8;
 /// Bytes of every vertex after the origin (one per segment): point (3 × f32), normal (u32), object (u16),
 /// primitive (u32), events (u8).
 pub const VERTEX_BYTES: usize = 12 + 4 + 2 + 4 + 1;
+/// Where a vertex's normal, object, primitive and events start in its bytes (its point starts at 0).
+const NORMAL_AT: usize = 12;
+const OBJECT_AT: usize = 16;
+const PRIMITIVE_AT: usize = 18;
+const EVENTS_AT: usize = 22;
+const _: () = assert!(EVENTS_AT + 1 == VERTEX_BYTES);
 /// Most vertices a path may have (its count has 15 bits).
 pub const MAX_VERTICES: usize = (1 << 15) - 1;
 /// The kind's bit in the vertex count.
@@ -143,8 +149,10 @@ impl<'a> PathView<'a> {
     /// Each vertex's object and events, the origin first (on no object), without decoding the rest.
     #[inline]
     pub fn objects_and_events(&self) -> impl Iterator<Item = (u16, Events)> + 'a {
-        let stored =
-            self.vertex_bytes.chunks_exact(VERTEX_BYTES).map(|v| (u16::from_le_bytes([v[16], v[17]]), Events(v[22])));
+        let stored = self
+            .vertex_bytes
+            .chunks_exact(VERTEX_BYTES)
+            .map(|v| (u16::from_le_bytes([v[OBJECT_AT], v[OBJECT_AT + 1]]), Events(v[EVENTS_AT])));
         std::iter::once((NO_OBJECT, self.origin_events())).chain(stored)
     }
 
@@ -152,7 +160,7 @@ impl<'a> PathView<'a> {
     #[inline]
     pub fn last_events(&self) -> Events {
         match self.vertex_bytes.len().checked_sub(VERTEX_BYTES) {
-            Some(at) => Events(self.vertex_bytes[at + 22]),
+            Some(at) => Events(self.vertex_bytes[at + EVENTS_AT]),
             None => self.origin_events(),
         }
     }
@@ -173,10 +181,10 @@ impl<'a> PathView<'a> {
             let u = |i: usize| u32::from_le_bytes([v[i], v[i + 1], v[i + 2], v[i + 3]]);
             vertices.push(Vertex {
                 point: [f(0), f(4), f(8)],
-                normal: u(12),
-                object: u16::from_le_bytes([v[16], v[17]]),
-                primitive: u(18),
-                events: Events(v[22]),
+                normal: u(NORMAL_AT),
+                object: u16::from_le_bytes([v[OBJECT_AT], v[OBJECT_AT + 1]]),
+                primitive: u(PRIMITIVE_AT),
+                events: Events(v[EVENTS_AT]),
             });
         }
         RecordedPath {
