@@ -1,18 +1,25 @@
-//! `coordinator rays select`: streams a ray map's portions, decompresses and tests them in parallel against a
-//! selection expression, and hands the first `--limit` matches to `rays_outputs`.
+//! `coordinator rays select`: one thread streams a ray map's portions while the rayon threads decompress and
+//! test them against a selection expression, each path read in place; the portions' results are combined in map
+//! order, and the first `--limit` matches go to `rays_outputs`.
 
 use crate::cli::RaysSelectArgs;
 use crate::rays_outputs;
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
-use photonfarm::ray_map::reader::{open_streams, RawPortion};
+use photonfarm::ray_map::format::PORTION_HEADER_BYTES;
+use photonfarm::ray_map::reader::{open_streams, RawPortion, StreamReader};
 use photonfarm::ray_map::select::{parse, Expr};
 use photonfarm::ray_map::{MapHeader, RecordedPath};
 use rayon::prelude::*;
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::mpsc::{channel, sync_channel, Receiver, SyncSender};
+use std::sync::{Mutex, PoisonError};
 
-/// Portions read ahead per thread before a batch is tested: enough to keep every thread busy.
-const BATCH_PER_THREAD: usize = 4;
+/// Portions the reader may be ahead of the testing, per thread: enough that no thread waits for a read, few
+/// enough that memory stays a few MiB per thread.
+const READ_AHEAD_PER_THREAD: usize = 4;
 
 /// What a selection found.
 #[derive(Debug, Default)]
@@ -91,74 +98,221 @@ pub fn render_folder(map: &Path) -> PathBuf {
 }
 
 /// Reads every stream of the map at `map`, tests each path against `expr` and keeps the first `limit` matches
-/// in map order. Runs on the current rayon pool.
+/// in map order, whatever the number of threads. Runs on the current rayon pool, with one more thread reading.
 pub fn run_selection(map: &Path, expr: &str, limit: usize, bar: &ProgressBar) -> Result<(MapHeader, Selection)> {
-    let mut streams = open_streams(map)?;
+    let streams = open_streams(map)?;
     let header = streams[0].header().clone();
     let expr = parse(expr, &header).map_err(|e| anyhow::anyhow!("--where: {e}"))?;
     bar.set_length(streams.iter().map(|s| s.len()).sum());
-    let batch = BATCH_PER_THREAD * rayon::current_num_threads();
-    let mut selection = Selection::default();
-    for stream in &mut streams {
-        let mut portions: Vec<RawPortion> = Vec::with_capacity(batch);
+    let (to_test, read) = sync_channel(READ_AHEAD_PER_THREAD * rayon::current_num_threads());
+    let merger = Mutex::new(Merger { limit, ..Merger::default() });
+    // Portions from this number on need not keep their matches: the first `limit` are in before them.
+    let unneeded_from = AtomicUsize::new(if limit == 0 { 0 } else { usize::MAX });
+    // Frames go back to the reader once tested, so that it reads into buffers already in memory.
+    let (give_back, returned) = channel();
+    std::thread::scope(|scope| {
+        scope.spawn(|| read_streams(streams, bar, to_test, returned));
+        read.into_iter().par_bridge().for_each(|(number, item)| {
+            let keep = if number < unneeded_from.load(Ordering::Relaxed) { limit } else { 0 };
+            let (outcome, frame) = test_item(item, &expr, header.width, keep);
+            if let Some(frame) = frame {
+                // The reader may have finished: the buffer is then simply freed.
+                let _ = give_back.send(frame);
+            }
+            let mut merger = merger.lock().unwrap_or_else(PoisonError::into_inner);
+            merger.add(number, outcome, &unneeded_from);
+            bar.set_message(format!("{} matching paths", merger.selection.matched_paths));
+        });
+    });
+    let merger = merger.into_inner().unwrap_or_else(PoisonError::into_inner);
+    Ok((header, merger.selection))
+}
+
+/// What the reader hands on, numbered in map order: a portion, or how a stream ended before its end.
+enum Item {
+    Portion(RawPortion),
+    /// A damaged portion header, which ends its stream: why.
+    Damaged(String),
+    /// A stream that ends inside a portion: the file and the bytes after its last whole portion.
+    Truncated(PathBuf, u64),
+}
+
+/// Reads the streams' portions in map order and sends them on, numbered, until the testing stops taking them.
+/// File reads only, into the frames `returned` hands back when there are any: decompressing is the testing
+/// threads' part.
+fn read_streams(
+    streams: Vec<StreamReader>,
+    bar: &ProgressBar,
+    to_test: SyncSender<(usize, Item)>,
+    returned: Receiver<Vec<u8>>,
+) {
+    let mut number = 0;
+    let mut send = |item| {
+        number += 1;
+        to_test.send((number - 1, item)).is_ok()
+    };
+    for mut stream in streams {
         loop {
-            // A damaged portion header leaves no way to find the next portion: the stream ends there.
-            let next = stream.next_portion().unwrap_or_else(|e| {
-                selection.damaged.push(format!("{e}; the rest of this stream was not read"));
-                None
-            });
-            let end = next.is_none();
-            if let Some(p) = next {
-                bar.inc((p.frame.len() + photonfarm::ray_map::format::PORTION_HEADER_BYTES) as u64);
-                portions.push(p);
-            }
-            if portions.len() == batch || (end && !portions.is_empty()) {
-                test_batch(&portions, &expr, header.width, limit, &mut selection);
-                bar.set_message(format!("{} matching paths", selection.matched_paths));
-                portions.clear();
-            }
-            if end {
-                break;
+            match stream.next_portion_into(returned.try_recv().unwrap_or_default()) {
+                Ok(Some(p)) => {
+                    bar.inc((p.frame.len() + PORTION_HEADER_BYTES) as u64);
+                    if !send(Item::Portion(p)) {
+                        return;
+                    }
+                }
+                Ok(None) => break,
+                // A damaged portion header leaves no way to find the next portion: the stream ends there.
+                Err(e) => {
+                    if !send(Item::Damaged(format!("{e}; the rest of this stream was not read"))) {
+                        return;
+                    }
+                    break;
+                }
             }
         }
         if let Some(bytes) = stream.truncated_bytes() {
-            selection.truncated.push((stream.path().to_path_buf(), bytes));
+            if !send(Item::Truncated(stream.path().to_path_buf(), bytes)) {
+                return;
+            }
         }
     }
-    Ok((header, selection))
 }
 
-/// Decompresses and tests a batch of portions in parallel, then adds their results in map order; a portion
-/// whose frame is damaged is skipped and noted.
-fn test_batch(portions: &[RawPortion], expr: &Expr, width: u32, limit: usize, sel: &mut Selection) {
-    let results: Vec<_> = portions
-        .par_iter()
-        .map(|p| -> Result<_, photonfarm::ray_map::RayMapError> {
-            let paths = p.decode()?;
-            let mut matched = Vec::new();
-            let mut matched_segments = 0;
-            for path in paths {
-                if expr.matches(&path, width) {
-                    matched_segments += path.segments() as u64;
-                    matched.push(path);
+/// What testing one portion found.
+#[derive(Default)]
+struct Tested {
+    paths: u64,
+    segments: u64,
+    matched_paths: u64,
+    matched_segments: u64,
+    /// The portion's first matches, up to the number asked for.
+    kept: Vec<RecordedPath>,
+}
+
+/// An item's result, to be combined in map order.
+enum Outcome {
+    Tested(Tested),
+    Damaged(String),
+    Truncated(PathBuf, u64),
+}
+
+/// Decompresses a portion and tests its paths in place, decoding only its first `keep` matches; a portion whose
+/// frame is damaged is skipped and noted. Also gives back the portion's frame, for reuse.
+fn test_item(item: Item, expr: &Expr, width: u32, keep: usize) -> (Outcome, Option<Vec<u8>>) {
+    let portion = match item {
+        Item::Portion(p) => p,
+        Item::Damaged(why) => return (Outcome::Damaged(why), None),
+        Item::Truncated(file, bytes) => return (Outcome::Truncated(file, bytes), None),
+    };
+    let tested = portion.with_paths(|views| {
+        let mut t = Tested {
+            paths: portion.header.paths as u64,
+            segments: portion.header.segments as u64,
+            ..Tested::default()
+        };
+        for view in views {
+            let view = view?;
+            if expr.matches(&view, width) {
+                t.matched_paths += 1;
+                t.matched_segments += view.segments() as u64;
+                if t.kept.len() < keep {
+                    t.kept.push(view.to_path());
                 }
             }
-            Ok((p.header.paths as u64, p.header.segments as u64, matched, matched_segments))
-        })
-        .collect();
-    for r in results {
-        let (paths, segments, matched, matched_segments) = match r {
-            Ok(r) => r,
-            Err(e) => {
-                sel.damaged.push(format!("{e}; it was skipped"));
-                continue;
+        }
+        Ok(t)
+    });
+    let outcome = match tested {
+        Ok(t) => Outcome::Tested(t),
+        Err(e) => Outcome::Damaged(format!("{e}; it was skipped")),
+    };
+    (outcome, Some(portion.frame))
+}
+
+/// Combines the portions' outcomes in map order, whatever order they arrive in.
+#[derive(Default)]
+struct Merger {
+    limit: usize,
+    /// The number of the next outcome to combine.
+    next: usize,
+    waiting: BTreeMap<usize, Outcome>,
+    selection: Selection,
+}
+
+impl Merger {
+    /// Adds outcome `number`, combines every outcome now in order, and lowers `unneeded_from` once the first
+    /// `limit` matches are in.
+    fn add(&mut self, number: usize, outcome: Outcome, unneeded_from: &AtomicUsize) {
+        self.waiting.insert(number, outcome);
+        while let Some(outcome) = self.waiting.remove(&self.next) {
+            self.next += 1;
+            let sel = &mut self.selection;
+            match outcome {
+                Outcome::Tested(t) => {
+                    sel.total_paths += t.paths;
+                    sel.total_segments += t.segments;
+                    sel.matched_paths += t.matched_paths;
+                    sel.matched_segments += t.matched_segments;
+                    let room = self.limit.saturating_sub(sel.paths.len());
+                    sel.paths.extend(t.kept.into_iter().take(room));
+                }
+                Outcome::Damaged(why) => sel.damaged.push(why),
+                Outcome::Truncated(file, bytes) => sel.truncated.push((file, bytes)),
             }
-        };
-        sel.total_paths += paths;
-        sel.total_segments += segments;
-        sel.matched_paths += matched.len() as u64;
-        sel.matched_segments += matched_segments;
-        let room = limit.saturating_sub(sel.paths.len());
-        sel.paths.extend(matched.into_iter().take(room));
+            if sel.paths.len() >= self.limit {
+                unneeded_from.fetch_min(self.next, Ordering::Relaxed);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use photonfarm::ray_map::PathKind;
+
+    /// Portion `n`'s outcome: `matches` matches numbered after the portion, or a damaged portion or a cut stream.
+    fn outcome(n: usize, matches: usize) -> Outcome {
+        match n % 5 {
+            3 => Outcome::Damaged(format!("portion {n}")),
+            4 => Outcome::Truncated(PathBuf::from(format!("stream-{n}")), n as u64),
+            _ => Outcome::Tested(Tested {
+                paths: 10,
+                segments: 30,
+                matched_paths: matches as u64,
+                matched_segments: 3 * matches as u64,
+                kept: (0..matches).map(|i| RecordedPath::new(PathKind::Camera, 1, (100 * n + i) as u32, 0)).collect(),
+            }),
+        }
+    }
+
+    fn merged(order: &[usize], limit: usize) -> (String, usize) {
+        let (mut merger, unneeded_from) = (Merger { limit, ..Merger::default() }, AtomicUsize::new(usize::MAX));
+        for &n in order {
+            merger.add(n, outcome(n, 4), &unneeded_from);
+        }
+        assert!(merger.waiting.is_empty() && merger.next == order.len());
+        (format!("{:?}", merger.selection), unneeded_from.into_inner())
+    }
+
+    #[test]
+    fn outcomes_arriving_in_any_order_are_combined_in_map_order_up_to_the_limit() {
+        let in_order: Vec<usize> = (0..12).collect();
+        let shuffled = [5, 0, 11, 2, 1, 9, 3, 4, 10, 7, 6, 8];
+        let (first, unneeded) = merged(&in_order, 6);
+        assert_eq!(merged(&shuffled, 6), (first.clone(), unneeded));
+        assert_eq!(merged(&in_order.iter().rev().copied().collect::<Vec<_>>(), 6).0, first);
+        // Portions 0 and 1 hold the first 8 matches: from portion 2 on, none needs keeping.
+        assert_eq!(unneeded, 2);
+        let mut merger = Merger { limit: 6, ..Merger::default() };
+        for n in shuffled {
+            merger.add(n, outcome(n, 4), &AtomicUsize::new(usize::MAX));
+        }
+        let sel = merger.selection;
+        let items: Vec<u32> = sel.paths.iter().map(|p| p.item).collect();
+        assert_eq!(items, [0, 1, 2, 3, 100, 101]);
+        assert_eq!((sel.total_paths, sel.matched_paths, sel.matched_segments), (80, 32, 96));
+        assert_eq!(sel.damaged, ["portion 3", "portion 8"]);
+        assert_eq!(sel.truncated.iter().map(|t| t.1).collect::<Vec<_>>(), [4, 9]);
     }
 }

@@ -5,7 +5,7 @@
 mod common;
 
 use common::{scene, settings};
-use photonfarm::ray_map::format::{MapHeader, VERSION};
+use photonfarm::ray_map::format::{decode_paths, encode_path, path_views, MapHeader, VERSION};
 use photonfarm::ray_map::reader::{read_all, StreamReader};
 use photonfarm::ray_map::select::{parse, Expr};
 use photonfarm::ray_map::writer::stream_file;
@@ -286,6 +286,7 @@ enum Tree {
     Light(usize),
     Pixel(u32, u32, u32, u32),
     Camera,
+    Escaped,
     Not(Box<Tree>),
     And(Box<Tree>, Box<Tree>),
     Or(Box<Tree>, Box<Tree>),
@@ -313,6 +314,7 @@ fn tree() -> impl Strategy<Value = Tree> {
         (0..2usize).prop_map(Tree::Light),
         (0..8u32, 0..8u32, 0..9u32, 0..9u32).prop_map(|(a, b, c, d)| Tree::Pixel(a, b, c, d)),
         Just(Tree::Camera),
+        Just(Tree::Escaped),
     ];
     leaf.prop_recursive(4, 24, 2, |inner| {
         prop_oneof![
@@ -330,6 +332,7 @@ fn text(t: &Tree) -> String {
         Tree::Light(l) => format!("light(\"{}\")", ["lamp", "lights[0]"][*l]),
         Tree::Pixel(a, b, c, d) => format!("pixel({a}, {b}, {c}, {d})"),
         Tree::Camera => "camera".into(),
+        Tree::Escaped => "escaped".into(),
         Tree::Not(a) => format!("not ({})", text(a)),
         Tree::And(a, b) => format!("({}) and ({})", text(a), text(b)),
         Tree::Or(a, b) => format!("({}) OR ({})", text(a), text(b)),
@@ -366,6 +369,7 @@ fn brute(t: &Tree, p: &RecordedPath) -> bool {
             p.kind == PathKind::Camera && x >= *a as f32 && x < *c as f32 && y >= *b as f32 && y < *d as f32
         }
         Tree::Camera => p.kind == PathKind::Camera,
+        Tree::Escaped => p.vertices.last().is_some_and(|v| v.events.0 & Events::ESCAPED.0 != 0),
         Tree::Not(a) => !brute(a, p),
         Tree::And(a, b) => brute(a, p) && brute(b, p),
         Tree::Or(a, b) => brute(a, p) || brute(b, p),
@@ -382,5 +386,39 @@ proptest! {
         for p in &paths {
             prop_assert_eq!(e.matches(p, h.width), brute(&t, p), "{} on {:?}", text(&t), p);
         }
+        // The same paths read in place from their bytes, as a selection tests them.
+        let mut raw = Vec::new();
+        for p in &paths {
+            encode_path(p, &mut raw);
+        }
+        let views: Vec<_> = path_views(&raw, paths.len()).collect::<Result<_, _>>().map_err(TestCaseError::fail)?;
+        prop_assert_eq!(views.len(), paths.len());
+        for (v, p) in views.iter().zip(&paths) {
+            prop_assert_eq!(e.matches(v, h.width), brute(&t, p), "{} on {:?} read in place", text(&t), p);
+        }
     }
+}
+
+#[test]
+fn paths_read_in_place_decode_to_the_recorded_paths_and_a_cut_or_padded_portion_is_an_error() {
+    let paths = fabricated(500);
+    let mut raw = Vec::new();
+    for p in &paths {
+        encode_path(p, &mut raw);
+    }
+    for (v, p) in path_views(&raw, paths.len()).zip(&paths) {
+        let v = v.unwrap();
+        assert_eq!(v.segments(), p.segments());
+        assert!(v.to_path() == *p, "{p:?} changed");
+    }
+    assert!(decode_paths(&raw, paths.len()).unwrap() == paths);
+    let cut = decode_paths(&raw[..raw.len() - 3], paths.len()).unwrap_err();
+    assert!(cut.contains("ends"), "{cut}");
+    let mut padded = raw.clone();
+    padded.push(0);
+    let padded = decode_paths(&padded, paths.len()).unwrap_err();
+    assert!(padded.contains("1 bytes follow"), "{padded}");
+    // The error is the iteration's last item.
+    let items: Vec<_> = path_views(&raw[..raw.len() - 3], paths.len()).collect();
+    assert!(items.len() == paths.len() && items.last().unwrap().is_err());
 }

@@ -1,6 +1,6 @@
 //! Ray maps through the real program: `render --ray-map` writes a map that `rays select` reads, selects from
 //! and shows (overlay, OBJ polylines, report); bad expressions and methods the recorder cannot reach are
-//! refused with clear errors.
+//! refused with clear errors; the thread count changes neither a selection nor what a damaged map reports.
 
 use end_to_end::{binary, cornell_at, render_output, repo_root, scratch_dir};
 use std::path::Path;
@@ -119,4 +119,107 @@ fn ghost_pairs_carry_the_ghost_layers_light_and_a_coated_surface_is_in_none() {
     let coated = ghosts(&dir, true);
     let pairs = coated["pairs"].as_array().unwrap();
     assert!(!pairs.is_empty() && !pairs.iter().any(has_s10), "{coated}");
+}
+
+/// `rays select MAP --where EXPR --threads T --limit LIMIT --out OUT --quiet`: its output and its report.
+fn select_with(map: &Path, expr: &str, threads: usize, limit: usize, out: &Path) -> (Output, String) {
+    let o = rays(&[
+        "select",
+        map.to_str().unwrap(),
+        "--where",
+        expr,
+        "--threads",
+        &threads.to_string(),
+        "--limit",
+        &limit.to_string(),
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
+    let report = std::fs::read_to_string(out.join("report.json")).unwrap_or_default();
+    (o, report)
+}
+
+/// A path-traced lens whose every path was recorded, in `dir/run`: a map of several portions.
+fn recorded_lens(dir: &Path) -> std::path::PathBuf {
+    let scene = lens_at(dir, false);
+    let run = dir.join("run");
+    let o = render_output(&scene, &run, &["--method", "path", "--phases", "3", "--ray-map", "--ray-map-fraction", "1"]);
+    assert!(o.status.success(), "{}", text(&o));
+    run
+}
+
+/// The (offset, compressed length, paths) of every portion of a stream file, read from its portion headers.
+fn portions_of(stream: &[u8]) -> Vec<(usize, usize, u64)> {
+    let u32_at = |at: usize| u32::from_le_bytes(stream[at..at + 4].try_into().unwrap()) as usize;
+    let mut at = 16 + u32_at(12);
+    let mut out = Vec::new();
+    while at + 20 <= stream.len() {
+        assert_eq!(&stream[at..at + 4], b"PRTN");
+        let compressed = u32_at(at + 4);
+        out.push((at, compressed, u32_at(at + 12) as u64));
+        at += 20 + compressed;
+    }
+    out
+}
+
+#[test]
+fn one_two_and_three_threads_keep_the_same_first_matches_in_map_order() {
+    let dir = scratch_dir("ray-maps-threads");
+    let run = recorded_lens(&dir);
+    let stream = std::fs::read(run.join("raymap/stream-0.pfrm")).unwrap();
+    assert!(portions_of(&stream).len() >= 3, "{} portions", portions_of(&stream).len());
+    let expr = "camera and reflect(*) >= 2";
+    let (o, all) = select_with(&run, expr, 1, usize::MAX, &dir.join("all"));
+    assert!(o.status.success(), "{}", text(&o));
+    let all: serde_json::Value = serde_json::from_str(&all).unwrap();
+    let every = all["paths"].as_array().unwrap();
+    assert!(every.len() > 100 && every.len() as u64 == all["matched_paths"].as_u64().unwrap());
+    // A limit that ends inside a later portion, so that the kept matches come from several portions.
+    let limit = every.len() * 2 / 3;
+    let mut reports = Vec::new();
+    for threads in [1, 2, 3] {
+        let (o, report) = select_with(&run, expr, threads, limit, &dir.join(format!("t{threads}")));
+        assert!(o.status.success(), "{}", text(&o));
+        reports.push(report);
+    }
+    assert!(reports[0] == reports[1] && reports[1] == reports[2], "the thread count changed the selection");
+    let limited: serde_json::Value = serde_json::from_str(&reports[0]).unwrap();
+    assert_eq!(limited["matched_paths"], all["matched_paths"]);
+    assert_eq!(limited["matched_segments"], all["matched_segments"]);
+    assert_eq!(limited["paths"].as_array().unwrap()[..], every[..limit], "not the first matches in map order");
+}
+
+#[test]
+fn a_damaged_and_truncated_map_skips_the_damaged_portion_and_reads_every_whole_one_on_any_thread_count() {
+    let dir = scratch_dir("ray-maps-damaged");
+    let run = recorded_lens(&dir);
+    let file = run.join("raymap/stream-0.pfrm");
+    let mut stream = std::fs::read(&file).unwrap();
+    let portions = portions_of(&stream);
+    assert!(portions.len() >= 3 && portions.last().unwrap().1 > 200, "{portions:?}");
+    // Damage the second portion's frame in its middle, and cut the last portion short.
+    let (at, compressed, _) = portions[1];
+    stream[at + 20 + compressed / 2] ^= 0x5a;
+    let cut = 100;
+    stream.truncate(stream.len() - cut);
+    std::fs::write(&file, &stream).unwrap();
+    let whole: u64 = portions[..portions.len() - 1].iter().enumerate().filter(|(i, _)| *i != 1).map(|(_, p)| p.2).sum();
+    let left = portions.last().map(|p| (p.1 + 20 - cut) as u64).unwrap();
+
+    let mut reports = Vec::new();
+    for threads in [1, 2] {
+        let (o, report) = select_with(&run, "camera or lightpath", threads, 10, &dir.join(format!("t{threads}")));
+        assert!(o.status.success(), "{}", text(&o));
+        let says = text(&o);
+        assert!(says.contains(&format!("byte {} is corrupt", at)) && says.contains("it was skipped"), "{says}");
+        assert!(says.contains(&format!("its last {left} bytes were left")), "{says}");
+        reports.push(report);
+    }
+    assert!(reports[0] == reports[1], "the thread count changed the report of a damaged map");
+    let report: serde_json::Value = serde_json::from_str(&reports[0]).unwrap();
+    assert_eq!(report["total_paths"].as_u64(), Some(whole));
+    assert_eq!(report["matched_paths"].as_u64(), Some(whole));
+    assert_eq!(report["damaged"].as_array().unwrap().len(), 1, "{report}");
+    assert_eq!(report["truncated"][0]["bytes_left"].as_u64(), Some(left), "{report}");
 }

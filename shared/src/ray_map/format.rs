@@ -27,6 +27,12 @@ pub const LIGHT_PATH_BYTES: usize = CAMERA_PATH_BYTES + 8;
 /// Bytes of every vertex after the origin (one per segment): point (3 × f32), normal (u32), object (u16),
 /// primitive (u32), events (u8).
 pub const VERTEX_BYTES: usize = 12 + 4 + 2 + 4 + 1;
+/// Where a vertex's normal, object, primitive and events start in its bytes (its point starts at 0).
+const NORMAL_AT: usize = 12;
+const OBJECT_AT: usize = 16;
+const PRIMITIVE_AT: usize = 18;
+const EVENTS_AT: usize = 22;
+const _: () = assert!(EVENTS_AT + 1 == VERTEX_BYTES);
 /// Most vertices a path may have (its count has 15 bits).
 pub const MAX_VERTICES: usize = (1 << 15) - 1;
 /// The kind's bit in the vertex count.
@@ -109,11 +115,107 @@ impl<'a> Bytes<'a> {
     }
 }
 
-/// Decodes a portion's raw bytes into `paths` paths; the error says what is wrong.
-pub fn decode_paths(raw: &[u8], paths: usize) -> Result<Vec<RecordedPath>, String> {
-    let mut b = Bytes { data: raw, at: 0 };
-    let mut out = Vec::with_capacity(paths.min(raw.len() / CAMERA_PATH_BYTES + 1));
-    for _ in 0..paths {
+/// One path of a portion's raw bytes, read in place: its header decoded, its vertices left as bytes, so that a
+/// selection can test it without allocating and decode (`to_path`) only the paths it keeps.
+#[derive(Clone, Copy, Debug)]
+pub struct PathView<'a> {
+    pub kind: PathKind,
+    /// As `RecordedPath::source`.
+    pub source: u32,
+    pub phase: u32,
+    pub item: u32,
+    pub wavelength_nm: f32,
+    pub weight: [f32; 3],
+    origin: [f32; 3],
+    origin_normal: u32,
+    /// The vertices after the origin, `VERTEX_BYTES` each.
+    vertex_bytes: &'a [u8],
+}
+
+impl<'a> PathView<'a> {
+    /// The path's segments (its vertices after the origin).
+    pub fn segments(&self) -> usize {
+        self.vertex_bytes.len() / VERTEX_BYTES
+    }
+
+    /// The origin's events: the sensor for a camera path, emission for a light path.
+    fn origin_events(&self) -> Events {
+        match self.kind {
+            PathKind::Camera => Events::SENSOR,
+            PathKind::Light => Events::EMISSION,
+        }
+    }
+
+    /// Each vertex's object and events, the origin first (on no object), without decoding the rest.
+    #[inline]
+    pub fn objects_and_events(&self) -> impl Iterator<Item = (u16, Events)> + 'a {
+        let stored = self
+            .vertex_bytes
+            .chunks_exact(VERTEX_BYTES)
+            .map(|v| (u16::from_le_bytes([v[OBJECT_AT], v[OBJECT_AT + 1]]), Events(v[EVENTS_AT])));
+        std::iter::once((NO_OBJECT, self.origin_events())).chain(stored)
+    }
+
+    /// The last vertex's events.
+    #[inline]
+    pub fn last_events(&self) -> Events {
+        match self.vertex_bytes.len().checked_sub(VERTEX_BYTES) {
+            Some(at) => Events(self.vertex_bytes[at + EVENTS_AT]),
+            None => self.origin_events(),
+        }
+    }
+
+    /// The path decoded, exactly as `decode_paths` returns it.
+    pub fn to_path(&self) -> RecordedPath {
+        let mut vertices = Vec::with_capacity(1 + self.segments());
+        let origin = Vertex {
+            point: self.origin,
+            normal: self.origin_normal,
+            object: NO_OBJECT,
+            primitive: u32::MAX,
+            events: self.origin_events(),
+        };
+        vertices.push(origin);
+        for v in self.vertex_bytes.chunks_exact(VERTEX_BYTES) {
+            let f = |i: usize| f32::from_le_bytes([v[i], v[i + 1], v[i + 2], v[i + 3]]);
+            let u = |i: usize| u32::from_le_bytes([v[i], v[i + 1], v[i + 2], v[i + 3]]);
+            vertices.push(Vertex {
+                point: [f(0), f(4), f(8)],
+                normal: u(NORMAL_AT),
+                object: u16::from_le_bytes([v[OBJECT_AT], v[OBJECT_AT + 1]]),
+                primitive: u(PRIMITIVE_AT),
+                events: Events(v[EVENTS_AT]),
+            });
+        }
+        RecordedPath {
+            kind: self.kind,
+            source: self.source,
+            phase: self.phase,
+            item: self.item,
+            wavelength_nm: self.wavelength_nm,
+            weight: self.weight,
+            vertices,
+        }
+    }
+}
+
+/// The paths of a portion's raw bytes in order, read in place (`path_views`).
+pub struct PathViews<'a> {
+    bytes: Bytes<'a>,
+    paths: usize,
+    left: usize,
+    done: bool,
+}
+
+/// The `paths` paths of a portion's raw bytes, in order, read in place. The first thing wrong (a path cut
+/// short, a path without vertices, bytes after the last path) is an error item that ends the iteration.
+pub fn path_views(raw: &[u8], paths: usize) -> PathViews<'_> {
+    PathViews { bytes: Bytes { data: raw, at: 0 }, paths, left: paths, done: false }
+}
+
+impl<'a> PathViews<'a> {
+    fn next_path(&mut self) -> Result<PathView<'a>, String> {
+        let b = &mut self.bytes;
         let tagged = u16::from_le_bytes(b.take::<2>("vertex count")?);
         let count = (tagged & !LIGHT_BIT) as usize;
         let kind = if tagged & LIGHT_BIT != 0 { PathKind::Light } else { PathKind::Camera };
@@ -123,28 +225,44 @@ pub fn decode_paths(raw: &[u8], paths: usize) -> Result<Vec<RecordedPath>, Strin
         let (phase, item) = (b.u32("phase")?, b.u32("item")?);
         let wavelength_nm = b.f32("wavelength")?;
         let weight = [b.f32("weight")?, b.f32("weight")?, b.f32("weight")?];
-        let point = [b.f32("origin")?, b.f32("origin")?, b.f32("origin")?];
-        let (source, normal, events) = match kind {
-            PathKind::Camera => (item, 0, Events::SENSOR),
-            PathKind::Light => (b.u32("emitter")?, b.u32("origin normal")?, Events::EMISSION),
+        let origin = [b.f32("origin")?, b.f32("origin")?, b.f32("origin")?];
+        let (source, origin_normal) = match kind {
+            PathKind::Camera => (item, 0),
+            PathKind::Light => (b.u32("emitter")?, b.u32("origin normal")?),
         };
-        if raw.len() - b.at < (count - 1) * VERTEX_BYTES {
-            return Err(format!("a path of {count} vertices ends after {} bytes", raw.len() - b.at));
-        }
-        let mut vertices = Vec::with_capacity(count);
-        vertices.push(Vertex { point, normal, object: NO_OBJECT, primitive: u32::MAX, events });
-        for _ in 1..count {
-            let point = [b.f32("point")?, b.f32("point")?, b.f32("point")?];
-            let normal = b.u32("normal")?;
-            let object = u16::from_le_bytes(b.take::<2>("object")?);
-            let primitive = b.u32("primitive")?;
-            let events = Events(b.take::<1>("events")?[0]);
-            vertices.push(Vertex { point, normal, object, primitive, events });
-        }
-        out.push(RecordedPath { kind, source, phase, item, wavelength_nm, weight, vertices });
+        let len = (count - 1) * VERTEX_BYTES;
+        let Some(vertex_bytes) = b.data.get(b.at..b.at + len) else {
+            return Err(format!("a path of {count} vertices ends after {} bytes", b.data.len() - b.at));
+        };
+        b.at += len;
+        Ok(PathView { kind, source, phase, item, wavelength_nm, weight, origin, origin_normal, vertex_bytes })
     }
-    if b.at != raw.len() {
-        return Err(format!("{} bytes follow the portion's {paths} paths", raw.len() - b.at));
+}
+
+impl<'a> Iterator for PathViews<'a> {
+    type Item = Result<PathView<'a>, String>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.done {
+            return None;
+        }
+        if self.left == 0 {
+            self.done = true;
+            let after = self.bytes.data.len() - self.bytes.at;
+            return (after != 0).then(|| Err(format!("{after} bytes follow the portion's {} paths", self.paths)));
+        }
+        self.left -= 1;
+        let path = self.next_path();
+        self.done = path.is_err();
+        Some(path)
+    }
+}
+
+/// Decodes a portion's raw bytes into `paths` paths; the error says what is wrong.
+pub fn decode_paths(raw: &[u8], paths: usize) -> Result<Vec<RecordedPath>, String> {
+    let mut out = Vec::with_capacity(paths.min(raw.len() / CAMERA_PATH_BYTES + 1));
+    for view in path_views(raw, paths) {
+        out.push(view?.to_path());
     }
     Ok(out)
 }

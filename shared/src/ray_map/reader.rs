@@ -2,11 +2,14 @@
 //! a portion (a killed run) reads up to its last whole portion and says how many bytes it left; a portion that
 //! is damaged is an error that names the file and the byte.
 
-use super::format::{decode_paths, MapHeader, PortionHeader, MAGIC, MAX_BLOCK_BYTES, PORTION_HEADER_BYTES, VERSION};
+use super::format::{
+    path_views, MapHeader, PathViews, PortionHeader, MAGIC, MAX_BLOCK_BYTES, PORTION_HEADER_BYTES, VERSION,
+};
 use super::path::RecordedPath;
 use super::RayMapError;
+use std::cell::RefCell;
 use std::fs::File;
-use std::io::{BufReader, Read};
+use std::io::Read;
 use std::path::{Path, PathBuf};
 
 /// A portion as it lies in the file, not yet decompressed (decompression is the part worth parallelising).
@@ -19,27 +22,65 @@ pub struct RawPortion {
     pub offset: u64,
 }
 
+/// A thread's decompressor and raw buffer, reused from portion to portion so that reading a portion allocates
+/// nothing once the thread has read one.
+struct Scratch {
+    decompressor: zstd::bulk::Decompressor<'static>,
+    raw: Vec<u8>,
+}
+
+/// A raw buffer above this is not kept for the next portion (the writer's portions are 1 MiB).
+const KEPT_RAW_BYTES: usize = 16 << 20;
+
+thread_local! {
+    static SCRATCH: RefCell<Option<Scratch>> = const { RefCell::new(None) };
+}
+
 impl RawPortion {
     /// Decompresses and decodes the portion's paths.
     pub fn decode(&self) -> Result<Vec<RecordedPath>, RayMapError> {
+        self.with_paths(|views| views.map(|v| v.map(|v| v.to_path())).collect())
+    }
+
+    /// Decompresses the portion into this thread's reusable buffer and hands `f` its paths, read in place. The
+    /// views' error items and `f`'s error say what is wrong with the portion, and become a `Corrupt` error
+    /// naming its file and byte.
+    pub fn with_paths<R>(&self, f: impl FnOnce(PathViews<'_>) -> Result<R, String>) -> Result<R, RayMapError> {
         let corrupt = |reason: String| RayMapError::Corrupt {
             path: self.file.display().to_string(),
             offset: self.offset,
             reason,
         };
-        let raw = zstd::bulk::decompress(&self.frame, self.header.raw as usize)
-            .map_err(|e| corrupt(format!("its compressed data does not decompress ({e})")))?;
-        if raw.len() != self.header.raw as usize {
-            return Err(corrupt(format!("it holds {} bytes, its header says {}", raw.len(), self.header.raw)));
+        // Taken out of the cell rather than borrowed, so that `f` may read another portion.
+        let mut scratch = match SCRATCH.with(|s| s.borrow_mut().take()) {
+            Some(s) => s,
+            None => Scratch {
+                decompressor: zstd::bulk::Decompressor::new()
+                    .map_err(|e| corrupt(format!("no zstd decompressor could be made ({e})")))?,
+                raw: Vec::new(),
+            },
+        };
+        let want = self.header.raw as usize;
+        scratch.raw.clear();
+        scratch.raw.reserve(want);
+        let result = match scratch.decompressor.decompress_to_buffer(&self.frame, &mut scratch.raw) {
+            Err(e) => Err(corrupt(format!("its compressed data does not decompress ({e})"))),
+            Ok(n) if n != want => Err(corrupt(format!("it holds {n} bytes, its header says {want}"))),
+            Ok(_) => f(path_views(&scratch.raw, self.header.paths as usize)).map_err(corrupt),
+        };
+        if scratch.raw.capacity() > KEPT_RAW_BYTES {
+            scratch.raw = Vec::new();
         }
-        decode_paths(&raw, self.header.paths as usize).map_err(corrupt)
+        SCRATCH.with(|s| *s.borrow_mut() = Some(scratch));
+        result
     }
 }
 
 /// One stream file, read portion by portion.
 pub struct StreamReader {
     path: PathBuf,
-    file: BufReader<File>,
+    /// Unbuffered: portions are read whole, most of a MiB each, and a buffer would only copy them twice.
+    file: File,
     header: MapHeader,
     offset: u64,
     length: u64,
@@ -51,9 +92,8 @@ impl StreamReader {
     pub fn open(path: &Path) -> Result<Self, RayMapError> {
         let name = path.display().to_string();
         let io = |source| RayMapError::Io { path: name.clone(), source };
-        let file = File::open(path).map_err(io)?;
+        let mut file = File::open(path).map_err(io)?;
         let length = file.metadata().map_err(io)?.len();
-        let mut file = BufReader::with_capacity(1 << 20, file);
         let mut start = [0u8; 16];
         if length < 16 {
             return Err(RayMapError::NotAMap(name));
@@ -104,6 +144,12 @@ impl StreamReader {
 
     /// The next whole portion, None at the end (or at a cut, which `truncated_bytes` then reports).
     pub fn next_portion(&mut self) -> Result<Option<RawPortion>, RayMapError> {
+        self.next_portion_into(Vec::new())
+    }
+
+    /// `next_portion`, reading the frame into `frame` (an earlier portion's, handed back so that streaming a map
+    /// does not allocate and fault in a fresh buffer per portion).
+    pub fn next_portion_into(&mut self, mut frame: Vec<u8>) -> Result<Option<RawPortion>, RayMapError> {
         let left = self.length - self.offset;
         if left == 0 {
             return Ok(None);
@@ -121,7 +167,8 @@ impl StreamReader {
             self.truncated = Some(left);
             return Ok(None);
         }
-        let mut frame = vec![0u8; header.compressed as usize];
+        frame.clear();
+        frame.resize(header.compressed as usize, 0);
         self.file.read_exact(&mut frame).map_err(io)?;
         let portion = RawPortion { header, frame, file: self.path.clone(), offset: self.offset };
         self.offset += (PORTION_HEADER_BYTES + header.compressed as usize) as u64;

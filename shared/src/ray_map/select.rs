@@ -17,7 +17,7 @@
 //! Names are bare (letters, digits, `_ - . [ ]`) or in double quotes.
 
 use super::events::Events;
-use super::format::MapHeader;
+use super::format::{MapHeader, PathView};
 use super::path::{PathKind, RecordedPath};
 
 /// A parse error: what is wrong and the byte range of the offending token in the expression.
@@ -104,33 +104,81 @@ pub enum Expr {
     Escaped,
 }
 
+/// What a selection tests of a path: its kind, its source and each vertex's object and events. A decoded
+/// `RecordedPath` and a `PathView` over a portion's raw bytes both provide them, so one `Expr::matches` tests
+/// either.
+pub trait Selectable {
+    fn kind(&self) -> PathKind;
+    /// As `RecordedPath::source`.
+    fn source(&self) -> u32;
+    /// Each vertex's object and events, the origin first.
+    fn objects_and_events(&self) -> impl Iterator<Item = (u16, Events)> + '_;
+    /// The last vertex's events (none for a path without vertices).
+    fn last_events(&self) -> Events;
+}
+
+impl Selectable for RecordedPath {
+    fn kind(&self) -> PathKind {
+        self.kind
+    }
+    fn source(&self) -> u32 {
+        self.source
+    }
+    fn objects_and_events(&self) -> impl Iterator<Item = (u16, Events)> + '_ {
+        self.vertices.iter().map(|v| (v.object, v.events))
+    }
+    fn last_events(&self) -> Events {
+        self.vertices.last().map_or(Events::default(), |v| v.events)
+    }
+}
+
+impl Selectable for PathView<'_> {
+    #[inline]
+    fn kind(&self) -> PathKind {
+        self.kind
+    }
+    #[inline]
+    fn source(&self) -> u32 {
+        self.source
+    }
+    #[inline]
+    fn objects_and_events(&self) -> impl Iterator<Item = (u16, Events)> + '_ {
+        PathView::objects_and_events(self)
+    }
+    #[inline]
+    fn last_events(&self) -> Events {
+        PathView::last_events(self)
+    }
+}
+
 impl Expr {
     /// True when `path` satisfies the expression; `width` is the image's, to find a pixel's column and row.
-    pub fn matches(&self, path: &RecordedPath, width: u32) -> bool {
+    pub fn matches<P: Selectable>(&self, path: &P, width: u32) -> bool {
         match self {
             Expr::And(a, b) => a.matches(path, width) && b.matches(path, width),
             Expr::Or(a, b) => a.matches(path, width) || b.matches(path, width),
             Expr::Not(a) => !a.matches(path, width),
-            Expr::Emitted { emitters, objects } => match path.kind {
-                PathKind::Light => emitters.contains(&path.source),
-                PathKind::Camera => {
-                    path.vertices.iter().any(|v| v.events.contains(Events::EMISSION) && objects.contains(&v.object))
-                }
+            Expr::Emitted { emitters, objects } => match path.kind() {
+                PathKind::Light => emitters.contains(&path.source()),
+                PathKind::Camera => path
+                    .objects_and_events()
+                    .any(|(object, events)| events.contains(Events::EMISSION) && objects.contains(&object)),
             },
             Expr::Count { objects, events, cmp, n } => {
                 let count = path
-                    .vertices
-                    .iter()
-                    .filter(|v| objects.as_ref().is_none_or(|o| o.contains(&v.object)))
-                    .filter(|v| events.0 == 0 || v.events.contains(*events))
+                    .objects_and_events()
+                    .filter(|(object, _)| objects.as_ref().is_none_or(|o| o.contains(object)))
+                    .filter(|(_, e)| events.0 == 0 || e.contains(*events))
                     .count();
                 cmp.holds(count.min(u32::MAX as usize) as u32, *n)
             }
             Expr::Pixel(region) => {
-                path.kind == PathKind::Camera && width > 0 && region.contains(path.source % width, path.source / width)
+                path.kind() == PathKind::Camera
+                    && width > 0
+                    && region.contains(path.source() % width, path.source() / width)
             }
-            Expr::Kind(k) => path.kind == *k,
-            Expr::Escaped => path.vertices.last().is_some_and(|v| v.events.contains(Events::ESCAPED)),
+            Expr::Kind(k) => path.kind() == *k,
+            Expr::Escaped => path.last_events().contains(Events::ESCAPED),
         }
     }
 }
