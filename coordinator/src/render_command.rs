@@ -413,7 +413,9 @@ fn start_engine<'s>(
                 let aux = photonfarm::accumulation::AuxLayout::for_scene(scene, settings.spectral_bands);
                 let need = |t: usize| -> Result<u64> {
                     let c = EngineConfig::for_method(method, t, args.group_size, cores.clone())?;
-                    Ok(base + (c.bytes_per_pixel(settings.backward_diffuse_depth, &aux) * pixels as f64) as u64)
+                    Ok(base
+                        + (c.bytes_per_pixel(pixels as usize, settings.backward_diffuse_depth, &aux) * pixels as f64)
+                            as u64)
                 };
                 threads = fit_memory(limit, method, threads, base, need, notes)?;
             }

@@ -167,7 +167,8 @@ fn a_memory_limit_makes_async_give_up_threads_and_other_methods_refuse_up_front(
     // process has in use after loading a scene.
     let scene = cornell_at(&scratch_dir("memory-limit"), 512);
     let scene = scene.to_str().unwrap();
-    // Async needs about 948 bytes per pixel at one thread and 1752 at two: 249 and 459 MB over what is in use.
+    // Async's estimate is about 1.1 kB per pixel at one thread and 2 kB at two: about 270 and 490 MiB over what is
+    // in use.
     let out = scratch_dir("memory-limit-async");
     let result = render(
         &[scene, "--method", "async", "--threads", "2", "--phases", "2", "--memory-limit", "300M", "--quiet"],

@@ -154,7 +154,7 @@ fn gather_buffers(config: &EngineConfig) -> usize {
 /// vertices, and per pixel a group
 /// covers its phase values, sums, mask and phase count entries, gathered light, and its photons (held twice,
 /// eight grid entries each in buffers with room to double, half a hash bucket, a u32 of its place in grid order).
-fn estimate_without_auxiliary_layers(config: &EngineConfig, backward_diffuse_depth: u32) -> f64 {
+fn estimate_without_auxiliary_layers(config: &EngineConfig, pixels: usize, backward_diffuse_depth: u32) -> f64 {
     let coverage = if config.masks { 1 } else { config.groups };
     let photon = 2 * std::mem::size_of::<photonfarm::pbpm::BackwardPhoton>() + 2 * 8 * (4 + 8) + 2 + 4;
     // The camera pass's values and replicate, the sums, the mask and the phases before the deal.
@@ -165,8 +165,8 @@ fn estimate_without_auxiliary_layers(config: &EngineConfig, backward_diffuse_dep
         + 24 * gather_buffers(config)
         + backward_diffuse_depth as usize * photon;
     // The light vertices held back for sorted gathers, at most one per image pixel.
-    let held_back = worker::parallel::thread_gathers::HELD_BACK_BYTES_PER_PIXEL;
-    (std::mem::size_of::<PixelSums>() + held_back + coverage * per_pixel) as f64
+    let held_back = worker::parallel::thread_gathers::held_back_bytes_per_pixel(pixels);
+    (std::mem::size_of::<PixelSums>() + coverage * per_pixel) as f64 + held_back
 }
 
 #[test]
@@ -177,14 +177,16 @@ fn the_memory_estimate_adds_exactly_the_ghost_planes_and_covers_what_an_engine_w
     let bdd = settings.backward_diffuse_depth;
     for method in [ParallelMethod::Sync, ParallelMethod::Async, ParallelMethod::TwoLevel] {
         let config = EngineConfig::for_method(method, 2, 1, vec![0, 1]).unwrap();
-        let before = estimate_without_auxiliary_layers(&config, bdd);
+        // Per pixel of an image of the lens's size, for both scenes.
+        let pixels = 72 * 48;
+        let before = estimate_without_auxiliary_layers(&config, pixels, bdd);
         // No ghost planes: the estimate is what it was.
-        assert_eq!(config.bytes_per_pixel(bdd, &AuxLayout::for_scene(&cornell, 0)), before, "{method:?}");
+        assert_eq!(config.bytes_per_pixel(pixels, bdd, &AuxLayout::for_scene(&cornell, 0)), before, "{method:?}");
         // Ghost planes: 3 f64 sums in the merged image, and per pixel a group covers 3 f64 sums and f32 buffers
         // of the camera pass and of each buffer of gathered light, twice there (the ghost layer and the visible
         // light registered on the sensor); a group with a mask holds a u32 per image pixel for the sensor.
         let coverage = if config.masks { 1 } else { config.groups } as f64;
-        let estimate = config.bytes_per_pixel(bdd, &AuxLayout::for_scene(&lens, 0));
+        let estimate = config.bytes_per_pixel(pixels, bdd, &AuxLayout::for_scene(&lens, 0));
         let gathered = 2.0 * 4.0 * gather_buffers(&config) as f64;
         let tables = if config.masks { 4.0 * config.groups as f64 } else { 0.0 };
         assert_eq!(estimate, before + tables + 3.0 * (8.0 + coverage * (8.0 + 4.0 + gathered)), "{method:?}");

@@ -89,9 +89,11 @@ fn async_memory_grows_with_threads_and_the_other_methods_do_not() {
     let settings = RenderSettings::for_scene(&sc, Method::Pbpm, 4);
     let bytes = |method: ParallelMethod, threads: usize| {
         let config = EngineConfig::for_method(method, threads, 2, vec![0, 1]).unwrap();
-        let estimate = config
-            .bytes_per_pixel(settings.backward_diffuse_depth, &AuxLayout::for_scene(&sc, settings.spectral_bands))
-            * (64 * 64) as f64;
+        let estimate = config.bytes_per_pixel(
+            64 * 64,
+            settings.backward_diffuse_depth,
+            &AuxLayout::for_scene(&sc, settings.spectral_bands),
+        ) * (64 * 64) as f64;
         let mut engine = ParallelEngine::new(&sc, settings, config).unwrap();
         let never = AtomicBool::new(false);
         engine.run_round(&never, None);

@@ -84,11 +84,11 @@ impl EngineConfig {
         self.groups * self.threads_per_group
     }
 
-    /// Bytes per image pixel of an engine with this configuration and the auxiliary layers of `aux`: the merged
-    /// sums, plus each group's per-pixel buffers over the pixels it renders (its mask, or the whole image
-    /// without masks) and its photons. Known before anything is allocated, so `--memory-limit` can be checked
-    /// up front.
-    pub fn bytes_per_pixel(&self, backward_diffuse_depth: u32, aux: &AuxLayout) -> f64 {
+    /// Bytes per image pixel of an engine with this configuration over an image of `pixels` pixels and the
+    /// auxiliary layers of `aux`: the merged sums, plus each group's per-pixel buffers over the pixels it renders
+    /// (its mask, or the whole image without masks) and its photons. Known before anything is allocated, so
+    /// `--memory-limit` can be checked up front.
+    pub fn bytes_per_pixel(&self, pixels: usize, backward_diffuse_depth: u32, aux: &AuxLayout) -> f64 {
         use photonfarm::accumulation::PixelSums;
         use photonfarm::integrator::LayerValues;
         // Masks partition the image among the groups; without masks every group covers all of it.
@@ -116,9 +116,9 @@ impl EngineConfig {
             + backward_diffuse_depth as usize * photon
             + aux.phase_bytes_per_pixel()
             + aux.sum_bytes_per_pixel();
-        // The light vertices held back for sorted gathers: at most one per image pixel over the whole engine.
-        let held_back = super::thread_gathers::HELD_BACK_BYTES_PER_PIXEL;
-        (Accumulator::bytes_per_pixel(aux) + sensor_tables + held_back + coverage * per_pixel) as f64
+        // The light vertices held back for sorted gathers: bounded over the whole engine, not per group.
+        let held_back = super::thread_gathers::held_back_bytes_per_pixel(pixels);
+        (Accumulator::bytes_per_pixel(aux) + sensor_tables + coverage * per_pixel) as f64 + held_back
     }
 
     /// The layout in words, e.g. "2 groups × 1 thread, 32-pixel tile masks, shared maps".
@@ -359,7 +359,8 @@ impl Progressive for ParallelEngine<'_> {
 
     fn bytes_per_pixel(&self) -> f64 {
         // A formula, not a measurement: exact capacities need the owner tokens (`capacity_bytes`, between rounds).
-        self.config.bytes_per_pixel(self.settings.backward_diffuse_depth, self.sums.aux.layout())
+        let pixels = self.scene.camera.pixel_count();
+        self.config.bytes_per_pixel(pixels, self.settings.backward_diffuse_depth, self.sums.aux.layout())
     }
 
     fn threads(&self) -> usize {

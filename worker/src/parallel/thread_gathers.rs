@@ -36,6 +36,13 @@ const VERTEX_BYTES: usize = 2 * std::mem::size_of::<GatherPoint>() + 8;
 /// per pixel.
 pub const HELD_BACK_BYTES_PER_PIXEL: usize = VERTEX_BYTES;
 
+/// Bytes per image pixel the held-back vertices of an engine over `pixels` pixels take at most: one vertex per
+/// pixel on small images, twice the single-threaded engine's batch in all on large ones.
+pub fn held_back_bytes_per_pixel(pixels: usize) -> f64 {
+    let pixels = pixels.max(1);
+    (HELD_BACK_BYTES_PER_PIXEL * pixels.min(2 * SORTED_GATHER_BATCH)) as f64 / pixels as f64
+}
+
 /// Vertices one thread holds back for one map when `threads` threads each gather into `maps` maps of an image
 /// of `pixels` pixels: the engine holds at most twice the single-threaded engine's batch in all (7.9 MB) and
 /// at most one vertex per image pixel, so that the memory estimate can count it per pixel.
