@@ -162,21 +162,7 @@ fn an_adaptive_single_threaded_run_converges_to_the_image_of_a_uniform_one() {
         let mut adaptive = Engine::new(&sc, RenderSettings::for_scene(&sc, method, 22));
         let (reason, history) = run_adaptive(&mut adaptive, &lit, 0.02, 16, Duration::from_secs(60));
         assert_eq!(reason, StopReason::TargetError, "{method:?}");
-        let sums = adaptive.sums();
-        let (fewest, most) = (sums.min_phases(), sums.pixels.iter().map(|p| p.phases).max().unwrap());
-        let least_active = history.iter().filter_map(|h| h.active_tiles).min().unwrap();
-        eprintln!("{method:?}: {fewest}..{most} phases per pixel, down to {least_active} of 16 tiles active");
-        assert!(least_active < 16 && most >= 2 * fewest, "{method:?}: tiles did not retire: {fewest}..{most}");
-        let z = z2(sums, uniform.sums());
-        let n = z.len() as f64;
-        let mean = z.iter().sum::<f64>() / n;
-        let sem = (z.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt();
-        eprintln!("{method:?}: mean z² {mean:.3} ± {sem:.3}");
-        assert!(mean <= 1.0 + 4.0 * sem, "{method:?}: mean z² {mean:.3} above 1 + 4 × {sem:.3}");
-        let ratio = variance_ratio(sums, uniform.sums(), &lit);
-        let (r, se) = (ratio.value, ratio.standard_error);
-        eprintln!("{method:?}: difference² / SEM² {r:.3} ± {se:.3}");
-        assert!((r - 1.0).abs() <= 4.0 * se, "{method:?}: difference² / SEM² = {r:.3} ± {se:.3}, not 1 within 4 SE");
+        assert_retired_and_converged(&format!("{method:?}"), adaptive.sums(), &history, uniform.sums(), &lit);
     }
 }
 
@@ -222,24 +208,35 @@ fn an_adaptive_run_converges_to_the_image_of_a_uniform_one() {
     let mut adaptive = engine(&sc, ParallelMethod::TwoLevel, 12);
     let (reason, history) = run_adaptive(&mut adaptive, &lit, 0.02, 16, Duration::from_secs(60));
     assert_eq!(reason, StopReason::TargetError);
-    let sums = adaptive.sums();
+    assert_retired_and_converged("two-level", adaptive.sums(), &history, uniform.sums(), &lit);
+}
+
+/// Checks that an adaptive run to a target over 16 tiles retired some (fewer than 16 active in some step, at
+/// least twice the phases in some pixels as in others) and converged to the uniform run's image.
+fn assert_retired_and_converged(
+    label: &str,
+    sums: &Accumulator,
+    history: &[HistoryEntry],
+    uniform: &Accumulator,
+    lit: &LitMask,
+) {
     let (fewest, most) = (sums.min_phases(), sums.pixels.iter().map(|p| p.phases).max().unwrap());
     let least_active = history.iter().filter_map(|h| h.active_tiles).min().unwrap();
-    eprintln!("adaptive: {fewest}..{most} phases per pixel, down to {least_active} of 16 tiles active");
-    assert!(least_active < 16 && most >= 2 * fewest, "tiles did not retire: {fewest}..{most} phases");
+    eprintln!("{label}: {fewest}..{most} phases per pixel, down to {least_active} of 16 tiles active");
+    assert!(least_active < 16 && most >= 2 * fewest, "{label}: tiles did not retire: {fewest}..{most} phases");
     // z² is 1 on average for two unbiased estimates of the same image (less with quasi-random phases, whose
     // mean eq. 7 overstates); a bias of the adaptive run shows as a mean above 1 by more than its spread allows.
-    let z = z2(sums, uniform.sums());
+    let z = z2(sums, uniform);
     let n = z.len() as f64;
     let mean = z.iter().sum::<f64>() / n;
     let sem = (z.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt();
-    eprintln!("mean z² {mean:.3} ± {sem:.3}");
-    assert!(mean <= 1.0 + 4.0 * sem, "mean z² {mean:.3} above 1 + 4 × {sem:.3}");
+    eprintln!("{label}: mean z² {mean:.3} ± {sem:.3}");
+    assert!(mean <= 1.0 + 4.0 * sem, "{label}: mean z² {mean:.3} above 1 + 4 × {sem:.3}");
     // Summed over unlit pixels, the replicate SEMs that δ uses account for the whole difference.
-    let ratio = variance_ratio(sums, uniform.sums(), &lit);
+    let ratio = variance_ratio(sums, uniform, lit);
     let (r, se) = (ratio.value, ratio.standard_error);
-    eprintln!("difference² / SEM² {r:.3} ± {se:.3}");
-    assert!((r - 1.0).abs() <= 4.0 * se, "difference² / SEM² = {r:.3} ± {se:.3}, not 1 within 4 SE");
+    eprintln!("{label}: difference² / SEM² {r:.3} ± {se:.3}");
+    assert!((r - 1.0).abs() <= 4.0 * se, "{label}: difference² / SEM² = {r:.3} ± {se:.3}, not 1 within 4 SE");
 }
 
 #[test]

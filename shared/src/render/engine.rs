@@ -45,6 +45,19 @@ struct TilePixels {
     aux: AuxSums,
 }
 
+/// The sensor's lookup of a phase over the whole image.
+static WHOLE_IMAGE: LocalPixels = LocalPixels::Image;
+
+impl TilePixels {
+    /// The local pixels of a phase with `tiles` (None: the whole image) and how many there are.
+    fn rendered<'a>(tiles: &'a Option<TilePixels>, scene: &Scene) -> (&'a LocalPixels, usize) {
+        match tiles {
+            Some(t) => (&t.local, t.mask.len()),
+            None => (&WHOLE_IMAGE, scene.camera.pixel_count()),
+        }
+    }
+}
+
 impl<'s> Engine<'s> {
     /// An engine with empty sums.
     pub fn new(scene: &'s Scene, settings: RenderSettings) -> Self {
@@ -226,11 +239,7 @@ impl<'s> Engine<'s> {
         let light = LightSettings { max_depth: self.settings.max_depth, sensor: true, vertices: false };
         let mut stats = ForwardStats::default();
         let gathered = &mut self.gathered;
-        let whole = LocalPixels::Image;
-        let (pixels, rendered) = match &self.tiles {
-            Some(t) => (&t.local, t.mask.len()),
-            None => (&whole, scene.camera.pixel_count()),
-        };
+        let (pixels, rendered) = TilePixels::rendered(&self.tiles, scene);
         let mut log = RecordedPath::new(PathKind::Light, phase as u32, 0, 0);
         for index in 0..self.settings.light_paths_per_phase(rendered) {
             let mut s = Sampler::light(self.settings.seed, p.key, index);
@@ -260,11 +269,7 @@ impl<'s> Engine<'s> {
         let next_phase = |local: usize| pixels[mask.map_or(local, |m| m[local] as usize)].phases as u64 + 1;
         let backward = self.buffers.camera_pass(exec, &phase, mask, next_phase, &mut self.map);
         self.buffers.build_map(exec, &mut self.map);
-        let whole = LocalPixels::Image;
-        let (local, rendered) = match &self.tiles {
-            Some(t) => (&t.local, t.mask.len()),
-            None => (&whole, self.scene.camera.pixel_count()),
-        };
+        let (local, rendered) = TilePixels::rendered(&self.tiles, self.scene);
         // Light per rendered pixel: where tiles retired, the phase's light shrinks with its camera paths.
         let n = self.settings.light_paths_per_phase(rendered);
         let recorder = self.recorder.as_deref().map(|r| (r, number));
