@@ -250,7 +250,7 @@ impl<'s> ParallelEngine<'s> {
             let before = m.iter().map(|&p| self.sums.pixels[p as usize].phases).collect();
             g.start_deal(m, before, if self.config.masks { 1 } else { self.config.groups as u32 });
         }
-        let stop = AtomicBool::new(false);
+        let (stop, cut) = (AtomicBool::new(false), AtomicBool::new(false));
         let ctx = RoundContext {
             scene: self.scene,
             settings: &self.settings,
@@ -258,6 +258,7 @@ impl<'s> ParallelEngine<'s> {
             shared_maps: self.config.shared_maps,
             sole_foreign_writer: self.config.groups == 2 && self.config.threads_per_group == 1,
             stop: &stop,
+            cut: &cut,
             deal: self.deals,
             rendered_pixels,
             numbering: PhaseNumbering {
@@ -288,6 +289,7 @@ impl<'s> ParallelEngine<'s> {
                     Ok(_) | Err(RecvTimeoutError::Disconnected) => break,
                     Err(RecvTimeoutError::Timeout) => {
                         if interrupted.load(Ordering::Relaxed) || deadline.is_some_and(|d| Instant::now() >= d) {
+                            cut.store(true, Ordering::Release);
                             break;
                         }
                     }

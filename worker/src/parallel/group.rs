@@ -134,7 +134,10 @@ pub struct RoundContext<'a> {
     /// Two groups of one thread each: the other group's thread is the only one adding into a group's open map,
     /// so it adds without compare-and-swap.
     pub sole_foreign_writer: bool,
+    /// The round is over: a group stops after its current phase, once it has rendered one this round.
     pub stop: &'a AtomicBool,
+    /// The user interrupted or the deadline passed: a group stops even before its first phase of the round.
+    pub cut: &'a AtomicBool,
     pub deal: u64,
     /// Pixels the round renders over all groups (every pixel unless tiles retired): the light-path quota is
     /// L per rendered pixel.
@@ -260,7 +263,9 @@ impl Group {
     }
 
     /// Runs phases until the round's stop flag is set; reports on `done` when it has finished
-    /// `phases_per_deal` phases, the signal for the main thread to stop every group.
+    /// `phases_per_deal` phases, the signal for the main thread to stop every group. A group renders at least
+    /// one phase per round unless the round is cut: on a small mask another group can finish its phases before
+    /// this group's thread is even scheduled, and the work would then fall to one group round after round.
     pub fn run_round(&mut self, ctx: &RoundContext, phases_per_deal: u64, done: &std::sync::mpsc::Sender<usize>) {
         if self.mask.is_empty() {
             // More groups than tiles: nothing to render this deal.
@@ -271,7 +276,8 @@ impl Group {
         }
         let pool = self.pool.clone();
         pool.install(|| {
-            while !ctx.stop.load(Ordering::Acquire) {
+            while !ctx.cut.load(Ordering::Acquire) && (self.phases_this_deal == 0 || !ctx.stop.load(Ordering::Acquire))
+            {
                 self.run_phase(ctx);
                 self.phases_this_deal += 1;
                 if self.phases_this_deal == phases_per_deal {
