@@ -15,7 +15,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         return Err("usage: run_spread A.exr B.exr [C.exr …] (two or more independent runs)".into());
     }
     let runs = paths.iter().map(|p| read_exr(p)).collect::<Result<Vec<_>, _>>()?;
-    for name in ["total", "visible_lights", "ghost"] {
+    for name in ["total", "visible_lights", "direct", "indirect", "caustic", "ghost"] {
         let layers = runs.iter().zip(&paths).map(|(r, p)| find_layer(r, p, name)).collect::<Result<Vec<_>, _>>()?;
         let (w, h) = (layers[0].width, layers[0].height);
         if layers.iter().any(|l| (l.width, l.height) != (w, h)) {

@@ -6,6 +6,7 @@
 
 use crate::camera::{Camera, Lens, RearElement};
 use crate::geometry::{LensSurface, SurfaceHit};
+use crate::light::{Light, AIMED_FRACTION};
 use crate::material::Material;
 use crate::scene::Scene;
 use glam::Vec3;
@@ -41,6 +42,51 @@ pub fn front_element(camera: &Camera, lens_surfaces: impl IntoIterator<Item = Le
             let depth = |d: &RearElement| (d.center - camera.position).dot(forward);
             depth(a).total_cmp(&depth(b))
         })
+}
+
+/// Aimed light paths per phase that each pixel of a light's image through the lens must be able to expect (at
+/// one light path per image pixel, before the lens's losses) for light paths to bring that image.
+pub const LENS_IMAGE_PATHS_PER_PIXEL: f32 = 16.0;
+
+/// Which lights' images through the lens light paths bring to the sensor, parallel to `scene.lights.all()`.
+///
+/// A camera path finds a small bright light through the lens only when its sample of the aperture happens to
+/// hit the light, once per pixel and phase and at one wavelength; the light's own paths aimed at the front
+/// element land on its image many times per phase. The light side therefore takes an area light's image when
+/// the light faces the front element and its share of the aimed paths, spread over its image's pixels (its
+/// solid angle from the front element over a pixel's), gives each pixel at least
+/// `LENS_IMAGE_PATHS_PER_PIXEL`; large or dim lights stay with the camera paths, which see their images
+/// without noise. Point and spot lights have no image a camera path could hit and stay out of both.
+pub fn lens_images_by_light_paths(scene: &Scene, front: &RearElement) -> Vec<bool> {
+    let lights = &scene.lights;
+    let pixels = scene.camera.pixel_count() as f32;
+    let pixel_solid_angle = scene.camera.pixel_angle().powi(2);
+    lights
+        .all()
+        .iter()
+        .enumerate()
+        .map(|(l, light)| {
+            let Light::Area { triangle, area, normal, .. } = *light else { return false };
+            let v = scene.geometry.triangle(triangle).v;
+            let to_front = front.center - (v[0] + v[1] + v[2]) / 3.0;
+            let d2 = to_front.length_squared();
+            let cos = normal.dot(to_front) / d2.sqrt();
+            if !(cos > 0.0 && d2 > 0.0) {
+                return false;
+            }
+            let image_pixels = area * cos / d2 / pixel_solid_angle;
+            let aimed_paths = pixels * lights.selection_pmf(l) * AIMED_FRACTION;
+            aimed_paths >= LENS_IMAGE_PATHS_PER_PIXEL * image_pixels
+        })
+        .collect()
+}
+
+/// True when a camera path that reached the emitter at `hit` through specular vertices only, in `segments`
+/// segments, leaves that light to the light paths of a scene where they register on the sensor: a ghost, or
+/// the lens image (two segments or more) of a light whose image light paths bring.
+#[inline]
+pub fn light_side_owns(scene: &Scene, hit: &SurfaceHit, ghost: bool, segments: u32) -> bool {
+    ghost || (segments >= 2 && scene.lights.lens_image_by_light_paths_at(hit))
 }
 
 /// True when the direction `wi` sampled at `material` for outgoing `wo` is a reflection at a dielectric: the

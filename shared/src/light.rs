@@ -124,6 +124,9 @@ pub struct Lights {
     textures: Vec<Option<EmissionTexture>>,
     /// The disc area lights aim part of their light paths at (a lens's front element), if any.
     aim: Option<RearElement>,
+    /// Lights whose image through the lens light paths bring to the sensor, parallel to `lights`
+    /// (`crate::ghost::lens_images_by_light_paths`); empty when light paths register ghosts only.
+    lens_image_by_light_paths: Vec<bool>,
 }
 
 /// The share of an area light's light paths aimed at the disc of `Lights::aim_at`, when the disc is in front of
@@ -186,7 +189,14 @@ impl Lights {
                 _ => l.power(),
             })
             .collect();
-        Lights { by_power: Discrete::new(&powers), lights, light_of_triangle, textures, aim: None }
+        Lights {
+            by_power: Discrete::new(&powers),
+            lights,
+            light_of_triangle,
+            textures,
+            aim: None,
+            lens_image_by_light_paths: Vec::new(),
+        }
     }
 
     /// The emission texture's factor for light `l` at barycentrics `b` (one when it has none).
@@ -212,6 +222,31 @@ impl Lights {
     /// The disc light paths aim at, if any.
     pub fn aim(&self) -> Option<RearElement> {
         self.aim
+    }
+
+    /// The probability with which a light path starts at light `l`.
+    pub fn selection_pmf(&self, l: usize) -> f32 {
+        self.by_power.as_ref().map_or(0.0, |d| d.pmf(l))
+    }
+
+    /// Hands the image through the lens of each light flagged in `by_light_paths` (parallel to `all()`) to
+    /// light paths: they register it on the sensor and camera paths leave it to them.
+    pub fn set_lens_images_by_light_paths(&mut self, by_light_paths: Vec<bool>) {
+        assert_eq!(by_light_paths.len(), self.lights.len(), "one flag per light");
+        self.lens_image_by_light_paths = by_light_paths;
+    }
+
+    /// True when light paths bring light `l`'s image through the lens to the sensor.
+    #[inline]
+    pub fn lens_image_by_light_paths(&self, l: u32) -> bool {
+        self.lens_image_by_light_paths.get(l as usize).copied().unwrap_or(false)
+    }
+
+    /// True when the emitter at `hit` is a light whose image through the lens light paths bring.
+    #[inline]
+    pub fn lens_image_by_light_paths_at(&self, hit: &SurfaceHit) -> bool {
+        !self.lens_image_by_light_paths.is_empty()
+            && self.light_of_triangle.get(hit.triangle as usize).is_some_and(|&l| self.lens_image_by_light_paths(l))
     }
 
     /// True when the scene has at least one light with power.

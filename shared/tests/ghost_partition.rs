@@ -1,7 +1,8 @@
 //! The split of a lens's ghosts between light and camera paths (docs/estimator.md, "The ghost layer"): with
 //! light paths registering the all-specular ghost chains on the sensor and camera paths leaving those chains to
 //! them, both PBPM and the path tracer converge per pixel to the image of camera paths alone, ghost layer
-//! included, on a scene where both halves of the ghost layer carry light.
+//! included, on a scene where both halves of the ghost layer carry light; and so they do when light paths also
+//! bring a light's image through the lens.
 
 mod common;
 
@@ -152,30 +153,24 @@ fn light_half(scene: &Scene, paths: u64) -> f64 {
     let (mut stats, mut sum) = (ForwardStats::default(), 0.0);
     for index in 0..paths {
         let mut s = Sampler::light(5, 1, index);
-        trace_light_path(scene, settings, &PhaseSpectrum::RGB, index, &mut s, &mut stats, &mut |e| {
-            if let LightEvent::Sensor(hit) = e {
-                sum += luminance_f64([hit.value.x as f64, hit.value.y as f64, hit.value.z as f64]);
+        trace_light_path(scene, settings, &PhaseSpectrum::RGB, index, &mut s, &mut stats, &mut |e| match e {
+            LightEvent::Sensor(hit) if hit.ghost => {
+                sum += luminance_f64([hit.value.x as f64, hit.value.y as f64, hit.value.z as f64])
             }
+            _ => {}
         });
     }
     sum / paths as f64
 }
 
-#[test]
-fn ghosts_from_light_and_camera_paths_converge_per_pixel_to_the_camera_only_image_with_both_methods() {
-    let (split, camera_only) = (scene(true), scene(false));
-    // Both halves of the ghost layer carry light: the lamp's chains (light side) and the room in the window's
-    // reflections (camera side).
-    let reference = render(&camera_only, Method::Pbpm, 1, 40, 100);
-    let ghost: f64 = reference.ghost.iter().map(|g| g.0).sum();
-    let light = light_half(&split, 200_000);
-    println!("ghost layer over the image {ghost:.4e}, of which the lamp's chains from light paths {light:.4e}");
-    assert!(light > 0.05 * ghost && light < 0.95 * ghost, "one half of the ghost layer is empty: {light} of {ghost}");
+/// Asserts that PBPM and the path tracer on `split` converge per pixel, in the total and in the ghost layer, to
+/// the camera-only `reference` (mean z² within 4 standard deviations of 1), and that the image sums agree.
+fn assert_converges_to_camera_only(split: &Scene, reference: &PixelEstimates) {
     // Over n pixels, a mean z² within 4 standard deviations of its expectation 1 (z² has variance 2).
     let n = reference.total.len() as f64;
     let bound = 1.0 + 4.0 * (2.0 / n).sqrt();
     for (method, seed) in [(Method::Pbpm, 2), (Method::Path, 3)] {
-        let estimate = render(&split, method, seed, 40, 25);
+        let estimate = render(split, method, seed, 40, 25);
         for (what, a, b) in [("total", &estimate.total, &reference.total), ("ghost", &estimate.ghost, &reference.ghost)]
         {
             let (z2, pixels) = mean_z2(a, b);
@@ -191,6 +186,26 @@ fn ghosts_from_light_and_camera_paths_converge_per_pixel_to_the_camera_only_imag
             assert!(z2 < bound, "{method:?}, {what}: mean z² {z2} against the camera-only image exceeds {bound}");
         }
     }
+}
+
+#[test]
+fn ghosts_and_a_lights_lens_image_from_light_paths_converge_per_pixel_to_the_camera_only_image_with_both_methods() {
+    let (split, camera_only) = (scene(true), scene(false));
+    // Both halves of the ghost layer carry light: the lamp's chains (light side) and the room in the window's
+    // reflections (camera side). A flat window images nothing, so no light's image is the light side's here.
+    let lights = split.lights.all().len();
+    assert!((0..lights as u32).all(|l| !split.lights.lens_image_by_light_paths(l)));
+    let reference = render(&camera_only, Method::Pbpm, 1, 40, 100);
+    let ghost: f64 = reference.ghost.iter().map(|g| g.0).sum();
+    let light = light_half(&split, 200_000);
+    println!("ghost layer over the image {ghost:.4e}, of which the lamp's chains from light paths {light:.4e}");
+    assert!(light > 0.05 * ghost && light < 0.95 * ghost, "one half of the ghost layer is empty: {light} of {ghost}");
+    assert_converges_to_camera_only(&split, &reference);
+    // The split holds whichever lights' images go to the light paths: here the lamp's (its two triangles, after
+    // the ceiling light's), which covers most pixels, so that both halves of the image are checked everywhere.
+    let mut lamp_image = split;
+    lamp_image.lights.set_lens_images_by_light_paths((0..lights).map(|l| l == 2 || l == 3).collect());
+    assert_converges_to_camera_only(&lamp_image, &reference);
 }
 
 /// Mean and standard error over `n` emitted light paths of their flux, and of their flux leaving toward the

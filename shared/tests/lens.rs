@@ -12,6 +12,7 @@ use photonfarm::geometry::{ray::offset_origin, Ray};
 use photonfarm::ghost::GHOST_LAYER;
 use photonfarm::integrator::Layer;
 use photonfarm::integrator::LayerValues;
+use photonfarm::light::Light;
 use photonfarm::material::{Material, Transport};
 use photonfarm::pbpm::PhotonMap;
 use photonfarm::render::{Engine, Method};
@@ -319,6 +320,21 @@ fn both_methods_render_the_lens_scene_finite_with_ghosts_outside_the_direct_imag
         assert!(ghost_pixels.len() >= 10, "{method:?}: only {} ghost pixels", ghost_pixels.len());
     }
     assert_eq!(renders.dropped, 0, "non-finite values were dropped");
+}
+
+#[test]
+fn light_paths_bring_the_lens_image_of_the_small_bright_light_and_leave_the_large_ceiling_light_to_camera_paths() {
+    let scene = lens_scene(None, false);
+    let bright = |l: &Light| matches!(l, Light::Area { emission, .. } if emission.x > 1000.0);
+    let lights = scene.lights.all();
+    assert!(lights.iter().any(bright) && !lights.iter().all(bright));
+    for (l, light) in lights.iter().enumerate() {
+        assert_eq!(scene.lights.lens_image_by_light_paths(l as u32), bright(light), "light {l}: {light:?}");
+    }
+    // Camera paths alone (`ghost_light_paths = false`) keep every image.
+    let text = lens_scene_text(None, false).replace("max_depth = 32\n", "max_depth = 32\nghost_light_paths = false\n");
+    let camera_only = scene_from_text(&text);
+    assert!((0..lights.len() as u32).all(|l| !camera_only.lights.lens_image_by_light_paths(l)));
 }
 
 /// Luminance of a pixel's mean ghost layer.

@@ -126,7 +126,10 @@ fn trace_in<const S: bool>(
             }
             let le = path.quantity(le);
             match previous {
-                Previous::Specular if diffuse_vertices == 0 && ghost.is_some() && sensor_ghosts => {}
+                Previous::Specular
+                    if diffuse_vertices == 0
+                        && sensor_ghosts
+                        && crate::ghost::light_side_owns(scene, &hit, ghost.is_some(), segments) => {}
                 Previous::Specular => add_contribution(
                     &mut out,
                     &mut ghost,

@@ -139,7 +139,9 @@ fn camera_path<const S: bool>(
             }
             let le = path.quantity(le);
             match (k, from_diffuse) {
-                (0, _) if ghost.is_some() && settings.sensor_ghosts => {}
+                (0, _)
+                    if settings.sensor_ghosts
+                        && crate::ghost::light_side_owns(scene, &hit, ghost.is_some(), segments) => {}
                 (0, _) => add_contribution(&mut out, &mut ghost, Layer::VisibleLights, path.to_image(beta * le)),
                 (_, Some((p, pdf))) => {
                     let w = power_heuristic(pdf, scene.lights.pdf_incident(p, &hit));

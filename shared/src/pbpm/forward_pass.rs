@@ -88,6 +88,9 @@ pub struct SensorHit<'a> {
     pub spectrum: u8,
     /// The phase's wavelengths.
     pub phase: &'a PhaseSpectrum,
+    /// The chain took a reflection at a dielectric: a ghost, for the ghost layer. Otherwise it is the lens image
+    /// of a light whose image light paths bring (`crate::ghost::lens_images_by_light_paths`).
+    pub ghost: bool,
 }
 
 /// What a light path hands its phase: a diffuse vertex to gather into photon maps, or a ghost reaching the
@@ -169,6 +172,9 @@ fn light_path<const S: bool>(
     // Set once the all-specular chain so far took a reflection at a dielectric: from then on, until a diffuse
     // vertex, a segment that crosses the sensor is a ghost the light side owns.
     let mut ghost_chain = false;
+    // The light's image through the lens is the light side's too: a segment after at least one specular vertex
+    // that crosses the sensor registers, as a camera path of two segments or more would have hit the light.
+    let lens_image = settings.sensor && scene.lights.lens_image_by_light_paths(e.light);
     // What the path registered on the sensor, for its recording.
     let mut registered = Rgb::ZERO;
     let mut m = 0u32;
@@ -180,12 +186,18 @@ fn light_path<const S: bool>(
         stats.rays += 1;
         let hit = scene.geometry.intersect(&ray);
         // Segment m + 1 reaches the sensor within max_depth segments, as a camera path's emitter hit does.
-        if ghost_chain && all_specular && m < max_depth {
+        if (ghost_chain || (lens_image && m >= 1)) && all_specular && m < max_depth {
             let t_max = hit.as_ref().map_or(f32::INFINITY, |h| h.t);
             if let Some((pixel, importance)) = scene.camera.sensor_pixel(ray.origin, ray.direction, t_max) {
                 let value = beta * importance;
                 if value != Rgb::ZERO {
-                    visit(&LightEvent::Sensor(SensorHit { pixel, value, spectrum: path.tag(), phase: spectrum }));
+                    visit(&LightEvent::Sensor(SensorHit {
+                        pixel,
+                        value,
+                        spectrum: path.tag(),
+                        phase: spectrum,
+                        ghost: ghost_chain,
+                    }));
                     if let Some(l) = log.as_deref_mut() {
                         let cam = &scene.camera;
                         let t = (cam.position - ray.origin).dot(cam.forward()) / ray.direction.dot(cam.forward());

@@ -129,7 +129,8 @@ impl Phase<'_> {
         }
     }
 
-    /// Adds a ghost chain's light to its pixel's visible lights and ghost layer, if the phase renders the pixel.
+    /// Adds a chain's light registered on the sensor to its pixel's visible lights (and a ghost's to the ghost
+    /// layer), if the phase renders the pixel.
     #[inline]
     pub fn register(&self, pixels: &LocalPixels, hit: &SensorHit, sink: &mut impl Gather) {
         let Some(local) = pixels.local(hit.pixel) else { return };
@@ -137,7 +138,7 @@ impl Phase<'_> {
         // its own wavelength class only, as a photon does.
         let tag = if self.spectrum.from_start { PhaseSpectrum::class_of(local as u64) + 1 } else { 0 };
         let value = join(Rgb::ONE, tag, hit.value, hit.spectrum, &self.spectrum);
-        sink.add(local, Layer::VisibleLights, true, value);
+        sink.add(local, Layer::VisibleLights, hit.ghost, value);
     }
 
     /// Traces light paths `indices` into one map and its buffer: the forward pass of a map nobody shares, over

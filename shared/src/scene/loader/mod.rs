@@ -75,6 +75,8 @@ impl Loader<'_> {
         let mut scene = self.assemble(render, camera, materials, parts, lights)?;
         if let Some(front) = front.filter(|_| crate::ghost::sensor_ghosts(&scene)) {
             scene.lights.aim_at(front);
+            let lens_images = crate::ghost::lens_images_by_light_paths(&scene, &front);
+            scene.lights.set_lens_images_by_light_paths(lens_images);
         }
         Ok(scene)
     }
