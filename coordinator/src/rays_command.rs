@@ -1,6 +1,7 @@
-//! `coordinator rays select`: one thread streams a ray map's portions while the rayon threads decompress and
-//! test them against a selection expression, each path read in place; the portions' results are combined in map
-//! order, and the first `--limit` matches go to `rays_outputs`.
+//! `coordinator rays select`: the rayon threads take a ray map's portions in map order, one at a time, and each
+//! decompresses its portion straight from the stream's mapping and tests it against a selection expression, each
+//! path read in place; the portions' results are combined in map order, and the first `--limit` matches go to
+//! `rays_outputs`.
 
 use crate::cli::RaysSelectArgs;
 use crate::rays_outputs;
@@ -10,16 +11,10 @@ use photonfarm::ray_map::format::PORTION_HEADER_BYTES;
 use photonfarm::ray_map::reader::{open_streams, RawPortion, StreamReader};
 use photonfarm::ray_map::select::{parse, Expr};
 use photonfarm::ray_map::{MapHeader, RecordedPath};
-use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::mpsc::{channel, sync_channel, Receiver, SyncSender};
 use std::sync::{Mutex, PoisonError};
-
-/// Portions the reader may be ahead of the testing, per thread: enough that no thread waits for a read, few
-/// enough that memory stays a few MiB per thread.
-const READ_AHEAD_PER_THREAD: usize = 4;
 
 /// What a selection found.
 #[derive(Debug, Default)]
@@ -98,37 +93,41 @@ pub fn render_folder(map: &Path) -> PathBuf {
 }
 
 /// Reads every stream of the map at `map`, tests each path against `expr` and keeps the first `limit` matches
-/// in map order, whatever the number of threads. Runs on the current rayon pool, with one more thread reading.
+/// in map order, whatever the number of threads. Runs on every thread of the current rayon pool.
 pub fn run_selection(map: &Path, expr: &str, limit: usize, bar: &ProgressBar) -> Result<(MapHeader, Selection)> {
     let streams = open_streams(map)?;
     let header = streams[0].header().clone();
     let expr = parse(expr, &header).map_err(|e| anyhow::anyhow!("--where: {e}"))?;
     bar.set_length(streams.iter().map(|s| s.len()).sum());
-    let (to_test, read) = sync_channel(READ_AHEAD_PER_THREAD * rayon::current_num_threads());
+    let walk = Mutex::new(Walk { streams: streams.into_iter(), current: None, number: 0, bar });
     let merger = Mutex::new(Merger { limit, ..Merger::default() });
     // Portions from this number on need not keep their matches: the first `limit` are in before them.
     let unneeded_from = AtomicUsize::new(if limit == 0 { 0 } else { usize::MAX });
-    // Frames go back to the reader once tested, so that it reads into buffers already in memory.
-    let (give_back, returned) = channel();
-    std::thread::scope(|scope| {
-        scope.spawn(|| read_streams(streams, bar, to_test, returned));
-        read.into_iter().par_bridge().for_each(|(number, item)| {
+    // No reader thread: taking the next portion of a mapped stream is reading its 20-byte header, so each thread
+    // takes its own and decompresses it from the mapping, and the work stays in map order.
+    rayon::broadcast(|_| {
+        // An unmapped stream's frames are read into this thread's buffer, reused from portion to portion.
+        let mut buffer = Vec::new();
+        loop {
+            let next = walk.lock().unwrap_or_else(PoisonError::into_inner).next(&mut buffer);
+            let Some((number, item)) = next else { break };
             let keep = if number < unneeded_from.load(Ordering::Relaxed) { limit } else { 0 };
             let (outcome, frame) = test_item(item, &expr, header.width, keep);
             if let Some(frame) = frame {
-                // The reader may have finished: the buffer is then simply freed.
-                let _ = give_back.send(frame);
+                buffer = frame;
             }
             let mut merger = merger.lock().unwrap_or_else(PoisonError::into_inner);
             merger.add(number, outcome, &unneeded_from);
-            bar.set_message(format!("{} matching paths", merger.selection.matched_paths));
-        });
+            if !bar.is_hidden() {
+                bar.set_message(format!("{} matching paths", merger.selection.matched_paths));
+            }
+        }
     });
     let merger = merger.into_inner().unwrap_or_else(PoisonError::into_inner);
     Ok((header, merger.selection))
 }
 
-/// What the reader hands on, numbered in map order: a portion, or how a stream ended before its end.
+/// What the walk hands on, numbered in map order: a portion, or how a stream ended before its end.
 enum Item {
     Portion(RawPortion),
     /// A damaged portion header, which ends its stream: why.
@@ -137,43 +136,44 @@ enum Item {
     Truncated(PathBuf, u64),
 }
 
-/// Reads the streams' portions in map order and sends them on, numbered, until the testing stops taking them.
-/// File reads only, into the frames `returned` hands back when there are any: decompressing is the testing
-/// threads' part.
-fn read_streams(
-    streams: Vec<StreamReader>,
-    bar: &ProgressBar,
-    to_test: SyncSender<(usize, Item)>,
-    returned: Receiver<Vec<u8>>,
-) {
-    let mut number = 0;
-    let mut send = |item| {
-        number += 1;
-        to_test.send((number - 1, item)).is_ok()
-    };
-    for mut stream in streams {
+/// The streams' portions in map order, handed out one at a time to whichever thread asks next.
+struct Walk<'b> {
+    streams: std::vec::IntoIter<StreamReader>,
+    current: Option<StreamReader>,
+    number: usize,
+    bar: &'b ProgressBar,
+}
+
+impl Walk<'_> {
+    /// The next item and its number, None once every stream is done. An unmapped stream's frame is read into
+    /// `buffer`'s allocation.
+    fn next(&mut self, buffer: &mut Vec<u8>) -> Option<(usize, Item)> {
         loop {
-            match stream.next_portion_into(returned.try_recv().unwrap_or_default()) {
+            let stream = match &mut self.current {
+                Some(stream) => stream,
+                None => self.current.insert(self.streams.next()?),
+            };
+            let item = match stream.next_portion_into(buffer) {
                 Ok(Some(p)) => {
-                    bar.inc((p.frame.len() + PORTION_HEADER_BYTES) as u64);
-                    if !send(Item::Portion(p)) {
-                        return;
+                    self.bar.inc((p.frame.len() + PORTION_HEADER_BYTES) as u64);
+                    Item::Portion(p)
+                }
+                Ok(None) => {
+                    let (file, cut) = (stream.path().to_path_buf(), stream.truncated_bytes());
+                    self.current = None;
+                    match cut {
+                        Some(bytes) => Item::Truncated(file, bytes),
+                        None => continue,
                     }
                 }
-                Ok(None) => break,
                 // A damaged portion header leaves no way to find the next portion: the stream ends there.
                 Err(e) => {
-                    if !send(Item::Damaged(format!("{e}; the rest of this stream was not read"))) {
-                        return;
-                    }
-                    break;
+                    self.current = None;
+                    Item::Damaged(format!("{e}; the rest of this stream was not read"))
                 }
-            }
-        }
-        if let Some(bytes) = stream.truncated_bytes() {
-            if !send(Item::Truncated(stream.path().to_path_buf(), bytes)) {
-                return;
-            }
+            };
+            self.number += 1;
+            return Some((self.number - 1, item));
         }
     }
 }
@@ -197,7 +197,7 @@ enum Outcome {
 }
 
 /// Decompresses a portion and tests its paths in place, decoding only its first `keep` matches; a portion whose
-/// frame is damaged is skipped and noted. Also gives back the portion's frame, for reuse.
+/// frame is damaged is skipped and noted. Also gives back the buffer of a frame that was read, for reuse.
 fn test_item(item: Item, expr: &Expr, width: u32, keep: usize) -> (Outcome, Option<Vec<u8>>) {
     let portion = match item {
         Item::Portion(p) => p,
@@ -226,7 +226,7 @@ fn test_item(item: Item, expr: &Expr, width: u32, keep: usize) -> (Outcome, Opti
         Ok(t) => Outcome::Tested(t),
         Err(e) => Outcome::Damaged(format!("{e}; it was skipped")),
     };
-    (outcome, Some(portion.frame))
+    (outcome, portion.into_buffer())
 }
 
 /// Combines the portions' outcomes in map order, whatever order they arrive in.

@@ -8,7 +8,7 @@ use anyhow::{bail, Context, Result};
 use photonfarm::color::luminance;
 use photonfarm::material::Material;
 use photonfarm::ray_map::reader::open_streams;
-use photonfarm::ray_map::{Events, PathKind, RecordedPath, Vertex};
+use photonfarm::ray_map::{Events, PathKind};
 use photonfarm::scene::Scene;
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -28,29 +28,41 @@ struct PairTotals {
     footprint: Vec<f32>,
 }
 
-/// The ghost pair of a recorded path and the pixel its ghost light lands on, or None for a path that carries
-/// no ghost light. A camera path's pair is its dielectric reflections before its first diffuse vertex (the ghost
-/// layer's rule); a light path's, one that registered on the sensor (a ghost chain the light side owns), is its
-/// dielectric reflections before the sensor taken from the sensor's side, so that both name a ghost alike.
-fn ghost_pair(path: &RecordedPath, dielectric: &[bool]) -> Option<(Pair, u32)> {
-    let is_reflection =
-        |v: &&Vertex| v.events.contains(Events::REFLECT) && dielectric.get(v.object as usize).copied().unwrap_or(false);
-    match path.kind {
+/// The ghost pair of a path and the pixel its ghost light lands on, or None for a path that carries no ghost
+/// light; `vertices` are the path's (object, events, primitive), the origin first. A camera path's pair is its
+/// dielectric reflections before its first diffuse vertex (the ghost layer's rule); a light path's, one that
+/// registered on the sensor (a ghost chain the light side owns), is its dielectric reflections before the sensor
+/// taken from the sensor's side, so that both name a ghost alike.
+fn ghost_pair(
+    kind: PathKind,
+    source: u32,
+    vertices: impl Iterator<Item = (u16, Events, u32)>,
+    dielectric: &[bool],
+) -> Option<(Pair, u32)> {
+    let is_reflection = |object: u16, events: Events| {
+        events.contains(Events::REFLECT) && dielectric.get(object as usize) == Some(&true)
+    };
+    match kind {
         PathKind::Camera => {
-            let mut reflections = path
-                .vertices
-                .iter()
-                .take_while(|v| !v.events.contains(Events::DIFFUSE))
-                .filter(is_reflection)
-                .map(|v| v.object);
+            let mut reflections = vertices
+                .take_while(|v| !v.1.contains(Events::DIFFUSE))
+                .filter(|v| is_reflection(v.0, v.1))
+                .map(|v| v.0);
             let first = reflections.next()?;
-            Some(((first, reflections.next()), path.source))
+            Some(((first, reflections.next()), source))
         }
         PathKind::Light => {
-            let sensor = path.vertices.iter().skip(1).position(|v| v.events.contains(Events::SENSOR))? + 1;
-            let mut reflections = path.vertices[..sensor].iter().rev().filter(is_reflection).map(|v| v.object);
-            let first = reflections.next()?;
-            Some(((first, reflections.next()), path.vertices[sensor].primitive))
+            // The last two reflections before the first sensor vertex after the origin, the later one first.
+            let (mut last, mut before) = (None, None);
+            for (i, (object, events, primitive)) in vertices.enumerate() {
+                if i > 0 && events.contains(Events::SENSOR) {
+                    return Some(((last?, before), primitive));
+                }
+                if is_reflection(object, events) {
+                    (before, last) = (last, Some(object));
+                }
+            }
+            None
         }
     }
 }
@@ -74,6 +86,7 @@ pub fn ghosts(args: RaysGhostsArgs) -> Result<()> {
     let mut total = 0.0f64;
     let mut portions = Vec::new();
     for s in &mut streams {
+        // A mapped stream's portions are ranges of its mapping: holding them all costs no memory.
         while let Some(p) = s.next_portion()? {
             portions.push(p);
         }
@@ -85,23 +98,34 @@ pub fn ghosts(args: RaysGhostsArgs) -> Result<()> {
     // of the render says how many each phase traced, once a light path is found that needs it.
     let light_paths_per_phase = std::sync::OnceLock::new();
     let pixels = w * h;
+    // Paths are read in place, as `rays select` reads them: only a ghost's pair, weight and pixel are taken.
     let per_portion: Vec<Vec<(Pair, f64, u32)>> = portions
         .par_iter()
         .map(|p| -> Result<_> {
-            p.decode()?
-                .iter()
-                .filter_map(|path| {
-                    let (pair, pixel) = ghost_pair(path, &dielectric)?;
-                    let energy = luminance(glam::Vec3::from_array(path.weight)) as f64;
-                    Some(match path.kind {
-                        PathKind::Camera => Ok((pair, energy, pixel)),
-                        PathKind::Light => {
-                            match light_paths_per_phase.get_or_init(|| light_paths_per_phase_of(&args.map, pixels)) {
-                                Ok(n) => Ok((pair, energy / n.of(path.phase), pixel)),
-                                Err(e) => Err(anyhow::anyhow!("{e}")),
-                            }
+            let found = p.with_paths(|views| {
+                let mut found = Vec::new();
+                for view in views {
+                    let view = view?;
+                    let Some((pair, pixel)) =
+                        ghost_pair(view.kind, view.source, view.objects_events_primitives(), &dielectric)
+                    else {
+                        continue;
+                    };
+                    let energy = luminance(glam::Vec3::from_array(view.weight)) as f64;
+                    found.push((pair, energy, pixel, view.kind, view.phase));
+                }
+                Ok(found)
+            })?;
+            found
+                .into_iter()
+                .map(|(pair, energy, pixel, kind, phase)| match kind {
+                    PathKind::Camera => Ok((pair, energy, pixel)),
+                    PathKind::Light => {
+                        match light_paths_per_phase.get_or_init(|| light_paths_per_phase_of(&args.map, pixels)) {
+                            Ok(n) => Ok((pair, energy / n.of(phase), pixel)),
+                            Err(e) => Err(anyhow::anyhow!("{e}")),
                         }
-                    })
+                    }
                 })
                 .collect()
         })
@@ -116,7 +140,8 @@ pub fn ghosts(args: RaysGhostsArgs) -> Result<()> {
         total += energy;
     }
     let mut ranked: Vec<(Pair, PairTotals)> = pairs.into_iter().collect();
-    ranked.sort_by(|a, b| b.1.energy.total_cmp(&a.1.energy));
+    // Pairs of equal light (none, often) by their surfaces, so that the ranking does not follow the hash order.
+    ranked.sort_by(|a, b| b.1.energy.total_cmp(&a.1.energy).then(a.0.cmp(&b.0)));
 
     let out = args.out.clone().unwrap_or_else(|| render_folder(&args.map).join("ghosts"));
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
@@ -240,4 +265,77 @@ fn write_footprint(path: &Path, footprint: &[f32], w: usize, h: usize) -> Result
     encoder.set_depth(png::BitDepth::Eight);
     encoder.write_header()?.write_image_data(&grey)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use photonfarm::ray_map::format::{encode_path, path_views};
+    use photonfarm::ray_map::{RecordedPath, Vertex};
+
+    /// The pair as the decoded path states it, written from the rule's words rather than in one pass: the
+    /// reflections before the first diffuse vertex (camera), or before the first sensor vertex after the
+    /// origin, the latest first (light).
+    fn decoded_pair(path: &RecordedPath, dielectric: &[bool]) -> Option<(Pair, u32)> {
+        let is_reflection = |v: &&Vertex| {
+            v.events.contains(Events::REFLECT) && dielectric.get(v.object as usize).copied().unwrap_or(false)
+        };
+        match path.kind {
+            PathKind::Camera => {
+                let before = path.vertices.iter().take_while(|v| !v.events.contains(Events::DIFFUSE));
+                let reflections: Vec<u16> = before.filter(is_reflection).map(|v| v.object).collect();
+                Some(((*reflections.first()?, reflections.get(1).copied()), path.source))
+            }
+            PathKind::Light => {
+                let sensor = path.vertices.iter().skip(1).position(|v| v.events.contains(Events::SENSOR))? + 1;
+                let reflections: Vec<u16> =
+                    path.vertices[..sensor].iter().rev().filter(is_reflection).map(|v| v.object).collect();
+                Some(((*reflections.first()?, reflections.get(1).copied()), path.vertices[sensor].primitive))
+            }
+        }
+    }
+
+    #[test]
+    fn pairs_read_in_place_are_the_decoded_paths_pairs() {
+        // Objects 0, 2 and 3 are dielectric; events drawn from reflect, diffuse and sensor so that every branch of
+        // the rule (no reflection, one, two, more, a diffuse or sensor vertex before or after them) occurs.
+        let dielectric = [true, false, true, true];
+        let choices = [Events::REFLECT, Events::DIFFUSE, Events::SENSOR, Events::REFRACT, Events::default()];
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = |n: usize| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state % n as u64) as usize
+        };
+        let mut paths = Vec::new();
+        for i in 0..4000 {
+            let kind = if i % 2 == 0 { PathKind::Camera } else { PathKind::Light };
+            // A camera path's item is its pixel, which the map stores once for both.
+            let (item, source) = if kind == PathKind::Camera { (i % 64, i % 64) } else { (i, i % 2) };
+            let mut p = RecordedPath::new(kind, 1 + (i % 3) as u32, item as u32, source as u32);
+            p.begin(glam::Vec3::ZERO, glam::Vec3::Y);
+            for _ in 0..next(9) {
+                let events = choices[next(choices.len())] | choices[next(choices.len())];
+                let object = if next(8) == 0 { u16::MAX } else { next(4) as u16 };
+                p.vertices.push(Vertex { point: [0.0; 3], normal: 0, object, primitive: next(1000) as u32, events });
+            }
+            paths.push(p);
+        }
+        let mut raw = Vec::new();
+        for p in &paths {
+            encode_path(p, &mut raw);
+        }
+        // Pairs found per kind, and of them pairs of two reflections.
+        let mut found = [[0; 2]; 2];
+        for (view, path) in path_views(&raw, paths.len()).zip(&paths) {
+            let view = view.unwrap();
+            let expected = decoded_pair(path, &dielectric);
+            if let Some(((_, second), _)) = expected {
+                found[path.kind as usize][second.is_some() as usize] += 1;
+            }
+            assert_eq!(ghost_pair(view.kind, view.source, view.objects_events_primitives(), &dielectric), expected);
+        }
+        assert!(found.iter().flatten().all(|&n| n >= 50), "too few pairs of some kind to compare: {found:?}");
+    }
 }

@@ -247,6 +247,56 @@ fn a_corrupt_portion_is_an_error_naming_its_byte_after_the_whole_portions_before
     assert!(whole > 0);
 }
 
+/// Every portion of the stream at `path` decoded, and the bytes it cut; whether it was mapped. A pipe is opened
+/// while `feed` writes `bytes` into it.
+fn read_stream(path: &Path, feed: Option<Vec<u8>>) -> (bool, Vec<RecordedPath>, Option<u64>) {
+    let writer = feed.map(|bytes| {
+        let path = path.to_path_buf();
+        std::thread::spawn(move || std::fs::write(path, bytes).unwrap())
+    });
+    let mut reader = StreamReader::open(path).unwrap();
+    let (mut paths, mut buffer) = (Vec::new(), Vec::new());
+    while let Some(p) = reader.next_portion_into(&mut buffer).unwrap() {
+        paths.extend(p.decode().unwrap());
+        if let Some(b) = p.into_buffer() {
+            buffer = b;
+        }
+    }
+    if let Some(w) = writer {
+        w.join().unwrap();
+    }
+    (reader.is_mapped(), paths, reader.truncated_bytes())
+}
+
+#[test]
+fn a_stream_that_cannot_be_mapped_is_read_from_a_pipe_with_the_same_paths_and_cut_as_the_mapped_file() {
+    let dir = scratch("pipe");
+    let paths = fabricated(40_000);
+    let file = write_map(&dir, &paths);
+    let bytes = std::fs::read(&file).unwrap();
+    for cut in [0, 100, bytes.len() - 100_000] {
+        let cut_file = dir.join(format!("cut-{cut}.pfrm"));
+        std::fs::write(&cut_file, &bytes[..bytes.len() - cut]).unwrap();
+        let (mapped, from_file, file_cut) = read_stream(&cut_file, None);
+        assert!(mapped, "a regular file was not mapped");
+        assert_eq!(from_file[..], paths[..from_file.len()], "a whole portion changed");
+        assert_eq!((file_cut.is_some(), from_file.len() == paths.len()), (cut > 0, cut == 0), "cut {cut}");
+        let pipe = dir.join(format!("pipe-{cut}"));
+        let made = std::process::Command::new("mkfifo").arg(&pipe).status().unwrap();
+        assert!(made.success());
+        let (mapped, from_pipe, pipe_cut) = read_stream(&pipe, Some(bytes[..bytes.len() - cut].to_vec()));
+        assert!(!mapped, "a pipe was mapped");
+        assert!(from_pipe == from_file && pipe_cut == file_cut, "cut {cut}: {pipe_cut:?} against {file_cut:?}");
+    }
+    // A pipe is a stream in its own right, as a file is.
+    let pipe = dir.join("pipe-all");
+    assert!(std::process::Command::new("mkfifo").arg(&pipe).status().unwrap().success());
+    let writer = std::thread::spawn(move || std::fs::write(dir.join("pipe-all"), bytes).unwrap());
+    let (header, back, cut) = read_all(&pipe).unwrap();
+    writer.join().unwrap();
+    assert!(header == test_header(0) && back == paths && cut == 0);
+}
+
 #[test]
 fn another_format_version_or_a_foreign_file_is_refused_with_a_clear_error() {
     let dir = scratch("version");

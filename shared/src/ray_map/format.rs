@@ -156,6 +156,17 @@ impl<'a> PathView<'a> {
         std::iter::once((NO_OBJECT, self.origin_events())).chain(stored)
     }
 
+    /// Each vertex's object, events and primitive (`Vertex::primitive`), the origin first (on no object and no
+    /// primitive), without decoding the rest.
+    #[inline]
+    pub fn objects_events_primitives(&self) -> impl Iterator<Item = (u16, Events, u32)> + 'a {
+        let stored = self.vertex_bytes.chunks_exact(VERTEX_BYTES).map(|v| {
+            let primitive = [v[PRIMITIVE_AT], v[PRIMITIVE_AT + 1], v[PRIMITIVE_AT + 2], v[PRIMITIVE_AT + 3]];
+            (u16::from_le_bytes([v[OBJECT_AT], v[OBJECT_AT + 1]]), Events(v[EVENTS_AT]), u32::from_le_bytes(primitive))
+        });
+        std::iter::once((NO_OBJECT, self.origin_events(), u32::MAX)).chain(stored)
+    }
+
     /// The last vertex's events.
     #[inline]
     pub fn last_events(&self) -> Events {

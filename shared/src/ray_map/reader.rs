@@ -1,22 +1,53 @@
 //! Reading a map: its stream files, their headers, and their portions one at a time. A stream that ends inside
 //! a portion (a killed run) reads up to its last whole portion and says how many bytes it left; a portion that
-//! is damaged is an error that names the file and the byte.
+//! is damaged is an error that names the file and the byte. A stream file is memory-mapped, so that its portions
+//! are decompressed straight from the page cache by whichever thread tests them; a stream that cannot be mapped
+//! (a pipe, a special file, a file system without mappings) is read portion by portion instead.
 
 use super::format::{
     path_views, MapHeader, PathViews, PortionHeader, MAGIC, MAX_BLOCK_BYTES, PORTION_HEADER_BYTES, VERSION,
 };
 use super::path::RecordedPath;
 use super::RayMapError;
+use memmap2::Mmap;
 use std::cell::RefCell;
 use std::fs::File;
-use std::io::Read;
+use std::io::{ErrorKind, Read};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// A portion's compressed frame: a range of its stream's mapping, or bytes read into a buffer of its own.
+#[derive(Clone, Debug)]
+pub enum Frame {
+    Mapped { map: Arc<Mmap>, start: usize, end: usize },
+    Read(Vec<u8>),
+}
+
+impl Frame {
+    /// The frame's bytes.
+    pub fn bytes(&self) -> &[u8] {
+        match self {
+            Frame::Mapped { map, start, end } => &map[*start..*end],
+            Frame::Read(bytes) => bytes,
+        }
+    }
+
+    /// The frame's length in bytes.
+    pub fn len(&self) -> usize {
+        self.bytes().len()
+    }
+
+    /// True for a frame of no bytes.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
 
 /// A portion as it lies in the file, not yet decompressed (decompression is the part worth parallelising).
 #[derive(Clone, Debug)]
 pub struct RawPortion {
     pub header: PortionHeader,
-    pub frame: Vec<u8>,
+    pub frame: Frame,
     /// The stream file and the byte the portion starts at, for errors.
     pub file: PathBuf,
     pub offset: u64,
@@ -63,7 +94,7 @@ impl RawPortion {
         let want = self.header.raw as usize;
         scratch.raw.clear();
         scratch.raw.reserve(want);
-        let result = match scratch.decompressor.decompress_to_buffer(&self.frame, &mut scratch.raw) {
+        let result = match scratch.decompressor.decompress_to_buffer(self.frame.bytes(), &mut scratch.raw) {
             Err(e) => Err(corrupt(format!("its compressed data does not decompress ({e})"))),
             Ok(n) if n != want => Err(corrupt(format!("it holds {n} bytes, its header says {want}"))),
             Ok(_) => f(path_views(&scratch.raw, self.header.paths as usize)).map_err(corrupt),
@@ -74,13 +105,27 @@ impl RawPortion {
         SCRATCH.with(|s| *s.borrow_mut() = Some(scratch));
         result
     }
+
+    /// The buffer a read frame lies in, for the next portion read from an unmapped stream; None for a mapped one.
+    pub fn into_buffer(self) -> Option<Vec<u8>> {
+        match self.frame {
+            Frame::Read(bytes) => Some(bytes),
+            Frame::Mapped { .. } => None,
+        }
+    }
+}
+
+/// Where a stream's portions come from.
+enum Body {
+    Mapped(Arc<Mmap>),
+    /// Unbuffered: portions are read whole, most of a MiB each, and a buffer would only copy them twice.
+    Read(File),
 }
 
 /// One stream file, read portion by portion.
 pub struct StreamReader {
     path: PathBuf,
-    /// Unbuffered: portions are read whole, most of a MiB each, and a buffer would only copy them twice.
-    file: File,
+    body: Body,
     header: MapHeader,
     offset: u64,
     length: u64,
@@ -88,17 +133,24 @@ pub struct StreamReader {
 }
 
 impl StreamReader {
-    /// Opens a stream and reads its header; a file of another format or version is refused here.
+    /// Opens a stream and reads its header; a file of another format or version is refused here. A regular file
+    /// is mapped; anything else, or a file whose mapping fails, is read.
     pub fn open(path: &Path) -> Result<Self, RayMapError> {
         let name = path.display().to_string();
         let io = |source| RayMapError::Io { path: name.clone(), source };
         let mut file = File::open(path).map_err(io)?;
-        let length = file.metadata().map_err(io)?.len();
+        let metadata = file.metadata().map_err(io)?;
+        // A pipe's length is unknown: its reads say where it ends.
+        let regular = metadata.is_file();
+        let length = metadata.len();
         let mut start = [0u8; 16];
-        if length < 16 {
+        if regular && length < 16 {
             return Err(RayMapError::NotAMap(name));
         }
-        file.read_exact(&mut start).map_err(io)?;
+        file.read_exact(&mut start).map_err(|e| match e.kind() {
+            ErrorKind::UnexpectedEof => RayMapError::NotAMap(name.clone()),
+            _ => io(e),
+        })?;
         if &start[..8] != MAGIC {
             return Err(RayMapError::NotAMap(name));
         }
@@ -107,14 +159,36 @@ impl StreamReader {
             return Err(RayMapError::Version { path: name, found: version, supported: VERSION });
         }
         let json_len = u32::from_le_bytes(start[12..16].try_into().expect("4 bytes")) as u64;
-        if json_len > MAX_BLOCK_BYTES as u64 || 16 + json_len > length {
-            return Err(RayMapError::Header { path: name, reason: "the file ends inside its header".into() });
+        let cut_header =
+            || RayMapError::Header { path: name.clone(), reason: "the file ends inside its header".into() };
+        if json_len > MAX_BLOCK_BYTES as u64 || (regular && 16 + json_len > length) {
+            return Err(cut_header());
         }
         let mut json = vec![0u8; json_len as usize];
-        file.read_exact(&mut json).map_err(io)?;
+        file.read_exact(&mut json).map_err(|e| match e.kind() {
+            ErrorKind::UnexpectedEof => cut_header(),
+            _ => io(e),
+        })?;
         let header: MapHeader = serde_json::from_slice(&json)
             .map_err(|e| RayMapError::Header { path: name.clone(), reason: e.to_string() })?;
-        Ok(StreamReader { path: path.to_path_buf(), file, header, offset: 16 + json_len, length, truncated: None })
+        let body = if regular {
+            // SAFETY: the mapping is only read, and only below the length the file had when it was opened. The
+            // recorder only appends to a stream, so a map still being written stays valid; a stream cut shorter
+            // while it is read (a render started again into the same folder) would end the process with SIGBUS
+            // where a read would have been an error.
+            match unsafe { Mmap::map(&file) } {
+                Ok(map) => Body::Mapped(Arc::new(map)),
+                Err(_) => Body::Read(file),
+            }
+        } else {
+            Body::Read(file)
+        };
+        Ok(StreamReader { path: path.to_path_buf(), body, header, offset: 16 + json_len, length, truncated: None })
+    }
+
+    /// True when the stream is read through a memory mapping, false when it is read portion by portion.
+    pub fn is_mapped(&self) -> bool {
+        matches!(self.body, Body::Mapped(_))
     }
 
     /// The stream file.
@@ -132,55 +206,97 @@ impl StreamReader {
         self.truncated
     }
 
-    /// The stream's size in bytes.
+    /// The stream's size in bytes when it was opened (0 for a pipe, whose size is unknown).
     pub fn len(&self) -> u64 {
         self.length
     }
 
-    /// True for a stream of no bytes (which `open` refuses, so never).
+    /// True for a stream of unknown size (a pipe): `open` refuses a regular file of no bytes.
     pub fn is_empty(&self) -> bool {
         self.length == 0
     }
 
     /// The next whole portion, None at the end (or at a cut, which `truncated_bytes` then reports).
     pub fn next_portion(&mut self) -> Result<Option<RawPortion>, RayMapError> {
-        self.next_portion_into(Vec::new())
+        self.next_portion_into(&mut Vec::new())
     }
 
-    /// `next_portion`, reading the frame into `frame` (an earlier portion's, handed back so that streaming a map
-    /// does not allocate and fault in a fresh buffer per portion).
-    pub fn next_portion_into(&mut self, mut frame: Vec<u8>) -> Result<Option<RawPortion>, RayMapError> {
-        let left = self.length - self.offset;
-        if left == 0 {
-            return Ok(None);
-        }
-        let corrupt = |offset, reason| RayMapError::Corrupt { path: self.path.display().to_string(), offset, reason };
+    /// `next_portion`, reading an unmapped stream's frame into `buffer`'s allocation (taken from it: an earlier
+    /// portion's, from `RawPortion::into_buffer`, so that streaming a map does not allocate per portion). A
+    /// mapped stream's frame is a range of its mapping, and `buffer` is left as it is.
+    pub fn next_portion_into(&mut self, buffer: &mut Vec<u8>) -> Result<Option<RawPortion>, RayMapError> {
+        let offset = self.offset;
+        let corrupt = |reason| RayMapError::Corrupt { path: self.path.display().to_string(), offset, reason };
         let io = |source| RayMapError::Io { path: self.path.display().to_string(), source };
-        if left < PORTION_HEADER_BYTES as u64 {
-            self.truncated = Some(left);
-            return Ok(None);
-        }
-        let mut head = [0u8; PORTION_HEADER_BYTES];
-        self.file.read_exact(&mut head).map_err(io)?;
-        let header = PortionHeader::from_bytes(&head).map_err(|r| corrupt(self.offset, r))?;
-        if left < (PORTION_HEADER_BYTES + header.compressed as usize) as u64 {
-            self.truncated = Some(left);
-            return Ok(None);
-        }
-        frame.clear();
-        frame.resize(header.compressed as usize, 0);
-        self.file.read_exact(&mut frame).map_err(io)?;
-        let portion = RawPortion { header, frame, file: self.path.clone(), offset: self.offset };
+        let (header, frame) = match &mut self.body {
+            Body::Mapped(map) => {
+                let left = map.len() - offset as usize;
+                if left == 0 {
+                    return Ok(None);
+                }
+                if left < PORTION_HEADER_BYTES {
+                    self.truncated = Some(left as u64);
+                    return Ok(None);
+                }
+                let at = offset as usize;
+                let head = map[at..at + PORTION_HEADER_BYTES].try_into().expect("a portion header's bytes");
+                let header = PortionHeader::from_bytes(head).map_err(corrupt)?;
+                let end = at + PORTION_HEADER_BYTES + header.compressed as usize;
+                if end > map.len() {
+                    self.truncated = Some(left as u64);
+                    return Ok(None);
+                }
+                (header, Frame::Mapped { map: Arc::clone(map), start: at + PORTION_HEADER_BYTES, end })
+            }
+            Body::Read(file) => {
+                let mut head = [0u8; PORTION_HEADER_BYTES];
+                let got = read_up_to(file, &mut head).map_err(io)?;
+                if got == 0 {
+                    return Ok(None);
+                }
+                if got < PORTION_HEADER_BYTES {
+                    self.truncated = Some(got as u64);
+                    return Ok(None);
+                }
+                let header = PortionHeader::from_bytes(&head).map_err(corrupt)?;
+                let mut frame = std::mem::take(buffer);
+                frame.clear();
+                let want = header.compressed as u64;
+                // read_to_end fills spare capacity without zeroing it first.
+                let got = file.take(want).read_to_end(&mut frame).map_err(io)?;
+                if (got as u64) < want {
+                    self.truncated = Some((PORTION_HEADER_BYTES + got) as u64);
+                    *buffer = frame;
+                    return Ok(None);
+                }
+                (header, Frame::Read(frame))
+            }
+        };
         self.offset += (PORTION_HEADER_BYTES + header.compressed as usize) as u64;
-        Ok(Some(portion))
+        Ok(Some(RawPortion { header, frame, file: self.path.clone(), offset }))
     }
 }
 
-/// The stream files of a map: `path` is a stream file, a map folder (`raymap/` of a render), or a render's
+/// Reads until `buf` is full or the file ends; the bytes read.
+fn read_up_to(file: &mut File, buf: &mut [u8]) -> std::io::Result<usize> {
+    let mut got = 0;
+    while got < buf.len() {
+        match file.read(&mut buf[got..]) {
+            Ok(0) => break,
+            Ok(n) => got += n,
+            Err(e) if e.kind() == ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(got)
+}
+
+/// The stream files of a map: `path` is a stream file (or a pipe), a map folder (`raymap/` of a render), or a render's
 /// output folder that holds one. Sorted by name; an error when there is none.
 pub fn stream_files(path: &Path) -> Result<Vec<PathBuf>, RayMapError> {
     let name = path.display().to_string();
-    if path.is_file() {
+    // Anything but a folder is taken for a stream: a file, or a pipe that carries one.
+    if path.exists() && !path.is_dir() {
         return Ok(vec![path.to_path_buf()]);
     }
     let dir = if path.join("raymap").is_dir() { path.join("raymap") } else { path.to_path_buf() };
