@@ -190,6 +190,8 @@ fn render(e: &Entry, args: &BenchArgs, out: &Path) -> Result<()> {
         cmd.args(["--target-error", &d.to_string()]);
         if tiles == "uniform" {
             cmd.arg("--uniform");
+        } else if let Some(t) = args.adaptive_tile {
+            cmd.args(["--adaptive-tile", &t.to_string()]);
         }
     }
     let layout = method.layout();
@@ -795,6 +797,7 @@ mod tests {
             repeats: 1,
             seed: 1,
             target_error: None,
+            adaptive_tile: None,
             out: None,
             serve: None,
             secret_file: None,

@@ -168,6 +168,9 @@ pub struct BenchArgs {
     /// both times. D for every scene, or per scene, e.g. cornell=0.03,caustic=0.08.
     #[arg(long, value_name = "D|SCENE=D,…")]
     pub target_error: Option<String>,
+    /// With --target-error, the adaptive runs' tile edge in pixels (`render --adaptive-tile`).
+    #[arg(long, value_name = "PX")]
+    pub adaptive_tile: Option<u32>,
     /// Output folder for results.csv and report.md (default: a new folder under out/).
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
@@ -216,6 +219,10 @@ pub struct RenderArgs {
     /// stops receiving phases (adaptive tiles, in the parallel and distributed methods).
     #[arg(long)]
     pub uniform: bool,
+    /// Tile edge in pixels of adaptive tiles when it should differ from the masks' (--tile-size): smaller
+    /// tiles retire more of a scene whose error is concentrated, but judge each tile from fewer pixels.
+    #[arg(long, value_name = "PX")]
+    pub adaptive_tile: Option<u32>,
     /// Output folder (created if missing). Default: a new folder under out/.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,

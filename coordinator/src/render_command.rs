@@ -430,16 +430,16 @@ fn start_engine<'s>(
     }
 }
 
-/// The tiles of an adaptive run: with a target error, unless `--uniform` (the tile edge is `--tile-size`'s, by
-/// default the masks' 32 pixels).
+/// The tiles of an adaptive run: with a target error, unless `--uniform` (the tile edge is `--adaptive-tile`'s,
+/// else `--tile-size`'s, by default the masks' 32 pixels).
 fn adaptive_tiles(args: &RenderArgs, scene: &Scene, stop: &StopRule) -> Result<Option<ActiveTiles>> {
     if stop.target_error.is_none() || args.uniform {
         return Ok(None);
     }
-    let tile = args.tile_size.unwrap_or(DEFAULT_TILE);
+    let tile = args.adaptive_tile.or(args.tile_size).unwrap_or(DEFAULT_TILE);
     Ok(Some(
         ActiveTiles::all(scene.camera.width, scene.camera.height, tile)
-            .map_err(|e| anyhow::anyhow!("--tile-size: {e}"))?,
+            .map_err(|e| anyhow::anyhow!("--adaptive-tile / --tile-size: {e}"))?,
     ))
 }
 
