@@ -215,8 +215,8 @@ pub struct RenderArgs {
     /// Pixels δ is measured over for --target-error and the progress bar.
     #[arg(long, value_enum, default_value = "unlit")]
     pub error_over: ErrorOverArg,
-    /// With --target-error, render every tile every round: without it, a tile whose own δ is below the target
-    /// stops receiving phases (adaptive tiles, in the parallel and distributed methods).
+    /// With --target-error, render every tile every round: without it, a tile that already has the phases its
+    /// share of the target asks for stops receiving them (adaptive tiles, docs/estimator.md).
     #[arg(long)]
     pub uniform: bool,
     /// Tile edge in pixels of adaptive tiles when it should differ from the masks' (--tile-size): smaller

@@ -773,3 +773,39 @@ fn stop_rule(args: &RenderArgs) -> Result<StopRule> {
         },
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cli::{Cli, Command};
+    use clap::Parser;
+
+    fn render_args(extra: &[&str]) -> RenderArgs {
+        let argv = [&["coordinator", "render", "scene.toml"][..], extra].concat();
+        let Command::Render(args) = Cli::try_parse_from(argv).unwrap().command else { panic!("not a render") };
+        *args
+    }
+
+    #[test]
+    fn adaptive_tiles_take_their_edge_from_adaptive_tile_then_tile_size_then_the_default_and_only_with_a_target() {
+        let scene = Scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/cornell.toml")).unwrap();
+        let tiles = |extra: &[&str]| {
+            let args = render_args(extra);
+            adaptive_tiles(&args, &scene, &stop_rule(&args).unwrap())
+        };
+        let target = ["--target-error", "0.05"];
+        for (extra, edge) in [
+            (&[][..], DEFAULT_TILE),
+            (&["--tile-size", "16"][..], 16),
+            (&["--tile-size", "16", "--adaptive-tile", "8"][..], 8),
+            (&["--adaptive-tile", "8"][..], 8),
+        ] {
+            let t = tiles(&[&target[..], extra].concat()).unwrap().expect("adaptive tiles");
+            assert_eq!(t.tile, edge, "{extra:?}");
+        }
+        assert!(tiles(&["--adaptive-tile", "8"]).unwrap().is_none(), "no target, no adaptive tiles");
+        assert!(tiles(&[&target[..], &["--uniform", "--adaptive-tile", "8"]].concat()).unwrap().is_none());
+        let e = tiles(&[&target[..], &["--adaptive-tile", "0"]].concat()).unwrap_err().to_string();
+        assert!(e.contains("--adaptive-tile"), "{e}");
+    }
+}
