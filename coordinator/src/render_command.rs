@@ -430,13 +430,16 @@ fn start_engine<'s>(
     }
 }
 
-/// The tiles of an adaptive run: with a target error, unless `--uniform` (the tile edge is `--adaptive-tile`'s,
-/// else `--tile-size`'s, by default the masks' 32 pixels).
+/// The tile edge of an adaptive run: with a target error, unless `--uniform`, `--adaptive-tile`'s, else
+/// `--tile-size`'s, by default the masks' 32 pixels.
+fn adaptive_tile_edge(args: &RenderArgs, stop: &StopRule) -> Option<u32> {
+    (stop.target_error.is_some() && !args.uniform)
+        .then(|| args.adaptive_tile.or(args.tile_size).unwrap_or(DEFAULT_TILE))
+}
+
+/// The tiles of an adaptive run (`adaptive_tile_edge`), every one active.
 fn adaptive_tiles(args: &RenderArgs, scene: &Scene, stop: &StopRule) -> Result<Option<ActiveTiles>> {
-    if stop.target_error.is_none() || args.uniform {
-        return Ok(None);
-    }
-    let tile = args.adaptive_tile.or(args.tile_size).unwrap_or(DEFAULT_TILE);
+    let Some(tile) = adaptive_tile_edge(args, stop) else { return Ok(None) };
     Ok(Some(
         ActiveTiles::all(scene.camera.width, scene.camera.height, tile)
             .map_err(|e| anyhow::anyhow!("--adaptive-tile / --tile-size: {e}"))?,
@@ -523,6 +526,7 @@ impl Outputs<'_> {
             bytes_per_pixel: engine.bytes_per_pixel(),
             error: engine.sums().error(self.lit),
             lit_mask: Some(self.lit.record(self.lit_seconds)),
+            adaptive_tile: adaptive_tile_edge(self.args, self.stop),
             forecast: forecast.record(),
             pixel_phases: engine.sums().pixels.iter().map(|p| p.phases as u64).sum(),
             session: self.session,
@@ -800,6 +804,8 @@ mod tests {
             (&["--tile-size", "16", "--adaptive-tile", "8"][..], 8),
             (&["--adaptive-tile", "8"][..], 8),
         ] {
+            let args = render_args(&[&target[..], extra].concat());
+            assert_eq!(adaptive_tile_edge(&args, &stop_rule(&args).unwrap()), Some(edge), "{extra:?}");
             let t = tiles(&[&target[..], extra].concat()).unwrap().expect("adaptive tiles");
             assert_eq!(t.tile, edge, "{extra:?}");
         }

@@ -55,6 +55,7 @@ fn tiles_retire_in_one_process_and_across_workers_and_not_with_uniform() {
         render(&scene, &out, &[args.as_slice(), &target].concat());
         let r = record(&out);
         assert_eq!(r["stop_reason"], "target-error", "{name}");
+        assert!(r["adaptive_tile"].as_u64().is_some_and(|t| t > 0), "{name}: the record has no tile edge");
         let tiles = active_tiles(&out);
         let fewest = tiles.iter().flatten().min().copied();
         assert!(fewest.is_some_and(|n| n < 16), "{name}: tiles per step {tiles:?}");
@@ -68,4 +69,5 @@ fn tiles_retire_in_one_process_and_across_workers_and_not_with_uniform() {
     render(&scene, &uniform, &[runs[0].1.as_slice(), &target, &["--uniform"]].concat());
     assert!(active_tiles(&uniform).iter().all(Option::is_none), "--uniform renders every tile every step");
     assert_eq!(record(&uniform)["stop_reason"], "target-error");
+    assert!(record(&uniform)["adaptive_tile"].is_null(), "a uniform run records no adaptive tile edge");
 }

@@ -215,6 +215,9 @@ pub struct RunRecord {
     /// leave them out.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub lit_mask: Option<LitMaskRecord>,
+    /// The edge in pixels of the tiles a run with a target error retires (none for a run without adaptive tiles).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub adaptive_tile: Option<u32>,
     /// With a target error: the estimate of the time still needed, and the one made when δ first came within
     /// twice the target next to when the target was actually met.
     #[serde(default, skip_serializing_if = "Option::is_none")]
