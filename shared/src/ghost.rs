@@ -44,8 +44,9 @@ pub fn front_element(camera: &Camera, lens_surfaces: impl IntoIterator<Item = Le
         })
 }
 
-/// Aimed light paths per phase that each pixel of a light's image through the lens must be able to expect (at
-/// one light path per image pixel, before the lens's losses) for light paths to bring that image.
+/// Aimed light paths per phase that each pixel of a light's image through the lens must be able to expect (with
+/// as many light paths per phase as the picture has pixels, before the lens's losses) for light paths to bring
+/// that image.
 pub const LENS_IMAGE_PATHS_PER_PIXEL: f32 = 16.0;
 
 /// Which lights' images through the lens light paths bring to the sensor, parallel to `scene.lights.all()`.
@@ -53,8 +54,8 @@ pub const LENS_IMAGE_PATHS_PER_PIXEL: f32 = 16.0;
 /// A camera path finds a small bright light through the lens only when its sample of the aperture happens to
 /// hit the light, once per pixel and phase and at one wavelength; the light's own paths aimed at the front
 /// element land on its image many times per phase. The light side therefore takes an area light's image when
-/// the light faces the front element and its share of the aimed paths, spread over its image's pixels (its
-/// solid angle from the front element over a pixel's), gives each pixel at least
+/// the light faces the front element and its share of the aimed paths, spread over the pixels of its image
+/// (its solid angle from the front element over a pixel's), gives each of them at least
 /// `LENS_IMAGE_PATHS_PER_PIXEL`; large or dim lights stay with the camera paths, which see their images
 /// without noise. Point and spot lights have no image a camera path could hit and stay out of both.
 pub fn lens_images_by_light_paths(scene: &Scene, front: &RearElement) -> Vec<bool> {
