@@ -45,8 +45,12 @@ pub fn run(args: RenderArgs) -> Result<()> {
     }
     // Decided once, before the render, from the scene and the path depth alone: every figure over unlit pixels
     // (δ, the stop on the target error, the true error) measures the same pixels from the first phase on.
+    // It takes as long as some renders through a lens, so the terminal says what is going on meanwhile.
     let deciding = Instant::now();
+    let spinner = progress_bar(args.quiet);
+    spinner.set_message("finding the pixels that see a light (δ unlit leaves them out)");
     let lit = Arc::new(LitMask::of_scene(&scene, settings.max_depth));
+    spinner.finish_and_clear();
     let lit_seconds = deciding.elapsed().as_secs_f64();
     if let (Some(c), Some(from)) = (&checkpoint, &args.resume) {
         check_resume_has_work(c, &stop, args.uniform, from, &lit)?;
