@@ -809,8 +809,9 @@ mod tests {
             (&["--adaptive-tile", "8"][..], 8),
         ] {
             let args = render_args(&[&target[..], extra].concat());
-            assert_eq!(adaptive_tile_edge(&args, &stop_rule(&args).unwrap()), Some(edge), "{extra:?}");
-            let t = tiles(&[&target[..], extra].concat()).unwrap().expect("adaptive tiles");
+            let stop = stop_rule(&args).unwrap();
+            assert_eq!(adaptive_tile_edge(&args, &stop), Some(edge), "{extra:?}");
+            let t = adaptive_tiles(&args, &scene, &stop).unwrap().expect("adaptive tiles");
             assert_eq!(t.tile, edge, "{extra:?}");
         }
         assert!(tiles(&["--adaptive-tile", "8"]).unwrap().is_none(), "no target, no adaptive tiles");

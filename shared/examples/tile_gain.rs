@@ -15,24 +15,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (sem, phases, lit) =
         (find_layer(&layers, &path, "sem")?, find_layer(&layers, &path, "phases")?, find_layer(&layers, &path, "lit")?);
     let (w, h) = (sem.width, sem.height);
-    // The work this render spent against the optimal allocation's at the δ it reached.
-    let (mut spent, mut sem2) = (0.0f64, 0.0f64);
+    // The work this render spent, and over the unlit pixels Σ SEM², Λ = Σ m² and each pixel's SEM².
+    let total = find_layer(&layers, &path, "total")?;
+    let (mut spent, mut sem2, mut lambda, mut shares) = (0.0f64, 0.0f64, 0.0, Vec::new());
     for y in 0..h {
         for x in 0..w {
             spent += phases.get(x, y)[0] as f64;
             if lit.get(x, y)[0] <= 0.5 {
-                sem2 += luminance_of(sem.get(x, y)).powi(2);
-            }
-        }
-    }
-    let total = find_layer(&layers, &path, "total")?;
-    let mut lambda = 0.0;
-    let mut shares = Vec::new();
-    for y in 0..h {
-        for x in 0..w {
-            if lit.get(x, y)[0] <= 0.5 {
+                let e2 = luminance_of(sem.get(x, y)).powi(2);
+                sem2 += e2;
+                shares.push(e2);
                 lambda += luminance_of(total.get(x, y)).powi(2);
-                shares.push(luminance_of(sem.get(x, y)).powi(2));
             }
         }
     }
