@@ -88,7 +88,7 @@ fn light_vertices(scene: &Scene, settings: &RenderSettings) -> Vec<OwnedVertex> 
     let mut stats = ForwardStats::default();
     for i in 0..settings.light_paths_per_phase(scene.camera.pixel_count()) {
         let mut s = Sampler::new(settings.seed, Pass::Light, PHASE, i);
-        let light = LightSettings { max_depth: settings.max_depth, sensor: false, vertices: true };
+        let light = LightSettings { max_depth: settings.max_depth, sensor: false, vertices: true, ghost_paths: 0 };
         trace_light_path(scene, light, &PhaseSpectrum::RGB, i, &mut s, &mut stats, &mut |e: &LightEvent| {
             if let LightEvent::Vertex(v) = e {
                 vertices.push(OwnedVertex { hit: *v.hit, wi: v.wi, flux: v.flux, m: v.m, all_specular: v.all_specular })

@@ -181,6 +181,13 @@ impl Camera {
         }
     }
 
+    /// Where the line `origin + t · direction` meets the sensor's plane (the plane through the camera's position
+    /// across its forward axis), for a ray that `sensor_pixel` registered.
+    pub fn sensor_point(&self, origin: Vec3, direction: Vec3) -> Vec3 {
+        let forward = self.forward();
+        origin + direction * ((self.position - origin).dot(forward) / direction.dot(forward))
+    }
+
     /// Where a light ray registers on a sensor camera: the pixel its segment from `origin` along the unit
     /// `direction` crosses the sensor in (before `t_max`), with the pixel's importance, 1 over the pixel's area.
     /// None for other cameras, for a ray arriving from behind the sensor, and for one whose line back from the

@@ -29,6 +29,23 @@ pub fn sensor_ghosts(scene: &Scene) -> bool {
     scene.render.ghost_light_paths && scene_can_make_ghosts(scene)
 }
 
+/// Ghost paths per light path unless the scene sets `[render] ghost_paths`: a ghost path costs about as much
+/// as a light path, and the ghost layer's light comes from them alone.
+pub const GHOST_PATHS_PER_LIGHT_PATH: u32 = 2;
+
+/// The most ghost paths per light path a scene may ask for.
+pub const MAX_GHOST_PATHS: u32 = 64;
+
+/// Ghost paths traced per light path in a phase of `scene` (`crate::pbpm::trace_ghost_paths`): the scene's
+/// setting where light paths bring the ghost chains, 0 elsewhere.
+pub fn ghost_paths(scene: &Scene) -> u32 {
+    if sensor_ghosts(scene) {
+        scene.render.ghost_paths
+    } else {
+        0
+    }
+}
+
 /// The disc light paths aim at so that ghost chains start often: the clear aperture of the lens surface
 /// farthest in front of a sensor camera (the front element), in the plane of its rim. None for other cameras.
 pub fn front_element(camera: &Camera, lens_surfaces: impl IntoIterator<Item = LensSurface>) -> Option<RearElement> {

@@ -52,16 +52,16 @@ pub struct EmissionSample {
 }
 
 /// A direction leaving `origin` (on a light with `normal`) toward a uniform point of `disc` with probability
-/// `AIMED_FRACTION`, by the cosine otherwise, chosen by `u.x` and rescaled so that `u` stays stratified. None
+/// `aimed` (below 1), by the cosine otherwise, chosen by `u.x` and rescaled so that `u` stays stratified. None
 /// when it points behind the light, which emits nothing there.
-fn aimed_direction(disc: &RearElement, origin: Vec3, normal: Vec3, u: Vec2) -> Option<Vec3> {
-    let direction = if u.x < AIMED_FRACTION {
-        let d = concentric_disk(Vec2::new(u.x / AIMED_FRACTION, u.y)) * disc.radius;
+fn aimed_direction(disc: &RearElement, origin: Vec3, normal: Vec3, u: Vec2, aimed: f32) -> Option<Vec3> {
+    let direction = if u.x < aimed {
+        let d = concentric_disk(Vec2::new(u.x / aimed, u.y)) * disc.radius;
         let frame = Frame::from_normal(disc.axis);
         let to = disc.center + frame.s * d.x + frame.t * d.y - origin;
         to.try_normalize()?
     } else {
-        let local = cosine_hemisphere(Vec2::new((u.x - AIMED_FRACTION) / (1.0 - AIMED_FRACTION), u.y));
+        let local = cosine_hemisphere(Vec2::new((u.x - aimed) / (1.0 - aimed), u.y));
         Frame::from_normal(normal).to_world(local)
     };
     (direction.dot(normal) > 0.0).then_some(direction)
@@ -338,6 +338,19 @@ impl Lights {
         u_pos: Vec2,
         u_dir: Vec2,
     ) -> Option<EmissionSample> {
+        self.sample_emission_aimed(geometry, u_select, u_pos, u_dir, AIMED_FRACTION)
+    }
+
+    /// `sample_emission` with `aimed` (in (0, 1)) of an area light's paths aimed at the disc of `aim_at`
+    /// instead of `AIMED_FRACTION`.
+    pub fn sample_emission_aimed(
+        &self,
+        geometry: &SceneGeometry,
+        u_select: f32,
+        u_pos: Vec2,
+        u_dir: Vec2,
+        aimed: f32,
+    ) -> Option<EmissionSample> {
         let (index, pmf) = self.by_power.as_ref()?.sample(u_select);
         let sample = match self.lights[index] {
             Light::Area { triangle, emission, area, normal } => {
@@ -345,10 +358,10 @@ impl Lights {
                 let b = uniform_triangle(u_pos);
                 let origin = tri.v[0] * (1.0 - b.x - b.y) + tri.v[1] * b.x + tri.v[2] * b.y;
                 if let Some(disc) = self.aim.filter(|d| (d.center - tri.v[0]).dot(normal) > 0.0) {
-                    let direction = aimed_direction(&disc, origin, normal, u_dir)?;
+                    let direction = aimed_direction(&disc, origin, normal, u_dir, aimed)?;
                     let cos = direction.dot(normal);
-                    let pdf = (1.0 - AIMED_FRACTION) * cos * std::f32::consts::FRAC_1_PI
-                        + AIMED_FRACTION * disc_pdf(&disc, origin, direction);
+                    let pdf =
+                        (1.0 - aimed) * cos * std::f32::consts::FRAC_1_PI + aimed * disc_pdf(&disc, origin, direction);
                     return Some(EmissionSample {
                         origin,
                         normal,

@@ -73,6 +73,20 @@ impl Material {
     /// Samples an incident direction for outgoing direction `wo` (unit, pointing away from the surface).
     /// Returns None when the path is absorbed or would leave through the wrong side of the geometry.
     pub fn sample(&self, hit: &SurfaceHit, wo: Vec3, u: Vec2, mode: Transport) -> Option<ScatterSample> {
+        self.sample_reflecting(hit, wo, u, mode, 0.0)
+    }
+
+    /// `sample` that reflects at a dielectric with probability at least `min_reflection` (below total internal
+    /// reflection), weighting the choice by F / q or (1 − F) / (1 − q) so that the estimate stays unbiased: a
+    /// sampler that looks for reflections inside a lens finds them without changing what they are worth.
+    pub fn sample_reflecting(
+        &self,
+        hit: &SurfaceHit,
+        wo: Vec3,
+        u: Vec2,
+        mode: Transport,
+        min_reflection: f32,
+    ) -> Option<ScatterSample> {
         let front = wo.dot(hit.ng) >= 0.0;
         // Normals turned to the side wo lies on: every material here is two-sided or handles sides itself.
         let (ng, ns) = if front { (hit.ng, hit.ns) } else { (-hit.ng, -hit.ns) };
@@ -103,8 +117,10 @@ impl Material {
             }
             Material::Dielectric { ior, ext_ior, anti_reflection } => {
                 let (eta_o, eta_t, cos_o, f) = dielectric_reflectance(ior, ext_ior, anti_reflection, front, wo, ns);
-                if u.x < f {
-                    ScatterSample::specular(reflect(wo, ns), Rgb::ONE)
+                let q = if f < 1.0 { f.max(min_reflection) } else { f };
+                if u.x < q {
+                    let weight = if q == f { Rgb::ONE } else { Rgb::splat(f / q) };
+                    ScatterSample::specular(reflect(wo, ns), weight)
                 } else {
                     let eta = eta_o / eta_t;
                     let sin2_t = eta * eta * (1.0 - cos_o * cos_o);
@@ -116,7 +132,8 @@ impl Material {
                         Transport::Radiance => eta * eta,
                         Transport::Importance => 1.0,
                     };
-                    ScatterSample { radiance_scale: scale, ..ScatterSample::specular(wi, Rgb::splat(scale)) }
+                    let choice = if q == f { 1.0 } else { (1.0 - f) / (1.0 - q) };
+                    ScatterSample { radiance_scale: scale, ..ScatterSample::specular(wi, Rgb::splat(scale * choice)) }
                 }
             }
         };
@@ -274,6 +291,43 @@ mod tests {
         assert!((s.weight.x - 1.0 / 2.25).abs() < 1e-5);
         let s = glass.sample(&hit, wo, Vec2::new(0.999, 0.0), Transport::Importance).unwrap();
         assert!((s.weight.x - 1.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn a_raised_reflection_probability_keeps_the_expected_reflected_and_transmitted_weights() {
+        let glass = Material::Dielectric {
+            ior: RefractiveIndex::constant(1.5),
+            ext_ior: RefractiveIndex::constant(1.0),
+            anti_reflection: false,
+        };
+        let hit = flat_hit(Vec3::Z);
+        for (wo, f) in [(Vec3::Z, 0.04f32), (Vec3::new(0.8, 0.0, 0.6), fresnel_dielectric(0.6, 1.0, 1.5))] {
+            for (mode, refract) in [(Transport::Importance, 1.0), (Transport::Radiance, 1.0 / 2.25)] {
+                // Stratified u.x: the sums are the expectations up to 1/n.
+                let n = 4000;
+                let (mut reflected, mut transmitted, mut reflections) = (0.0f64, 0.0f64, 0);
+                for i in 0..n {
+                    let u = Vec2::new((i as f32 + 0.5) / n as f32, 0.5);
+                    let s = glass.sample_reflecting(&hit, wo, u, mode, 0.3).unwrap();
+                    if s.wi.z > 0.0 {
+                        reflected += s.weight.x as f64 / n as f64;
+                        reflections += 1;
+                    } else {
+                        transmitted += s.weight.x as f64 / n as f64;
+                    }
+                }
+                assert_eq!(reflections, (0.3 * n as f32).round() as usize, "reflects with the raised probability");
+                assert!((reflected - f as f64).abs() < 1e-3, "E[reflected weight] {reflected} ≠ F {f}");
+                let t = (1.0 - f as f64) * refract;
+                assert!((transmitted - t).abs() < 1e-3, "E[transmitted weight] {transmitted} ≠ {t}");
+            }
+        }
+        // Below the raised probability nothing changes; total internal reflection stays certain.
+        let s = glass.sample_reflecting(&hit, Vec3::Z, Vec2::new(0.5, 0.0), Transport::Importance, 0.0).unwrap();
+        assert_eq!(s.weight, glass.sample(&hit, Vec3::Z, Vec2::new(0.5, 0.0), Transport::Importance).unwrap().weight);
+        let wo = Vec3::new(0.9, 0.0, -(1.0f32 - 0.81).sqrt());
+        let s = glass.sample_reflecting(&hit, wo, Vec2::new(0.999, 0.0), Transport::Importance, 0.3).unwrap();
+        assert!(s.wi.z < 0.0 && s.weight == Rgb::ONE, "total internal reflection, weight 1");
     }
 
     #[test]

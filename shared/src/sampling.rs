@@ -52,6 +52,8 @@ pub enum Pass {
     Path = 3,
     /// The wavelength of a phase of a spectral scene.
     Wavelength = 4,
+    /// The ghost paths of a phase (`crate::pbpm::trace_ghost_paths`).
+    Ghost = 5,
 }
 
 fn splitmix64(mut z: u64) -> u64 {
@@ -101,6 +103,13 @@ impl Sampler {
     pub fn light(seed: u64, key: u64, index: u64) -> Self {
         let sequence = splitmix64(seed ^ splitmix64(key.wrapping_mul(0x1000_0000_01B3) ^ Pass::Light as u64));
         Self::new(seed, Pass::Light, key, index).with_sobol(sequence, index)
+    }
+
+    /// The stream of ghost path `index` of the phase with random key `key`, quasi-random over the phase as the
+    /// light paths are, in a sequence of its own.
+    pub fn ghost(seed: u64, key: u64, index: u64) -> Self {
+        let sequence = splitmix64(seed ^ splitmix64(key.wrapping_mul(0x1000_0000_01B3) ^ Pass::Ghost as u64));
+        Self::new(seed, Pass::Ghost, key, index).with_sobol(sequence, index)
     }
 
     /// Uniform in [0, 1).

@@ -329,3 +329,9 @@ fn a_diffuse_material_needs_an_albedo_or_a_texture() {
     let t = GOOD.replace("albedo = [0.5, 0.5, 0.5]", "");
     expect_error(&t, line_of(&t, "[materials.white]"), &["materials.white.albedo"]);
 }
+
+#[test]
+fn too_many_ghost_paths_are_refused_with_the_limit() {
+    let t = format!("[render]\nghost_paths = 1000\n{GOOD}");
+    expect_error(&t, line_of(&t, "ghost_paths"), &["render.ghost_paths", "at most 64", "1000"]);
+}

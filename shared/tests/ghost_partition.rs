@@ -9,7 +9,7 @@ mod common;
 use photonfarm::accumulation::Accumulator;
 use photonfarm::color::luminance_f64;
 use photonfarm::ghost::GHOST_LAYER;
-use photonfarm::pbpm::{trace_light_path, ForwardStats, LightEvent, LightSettings};
+use photonfarm::pbpm::{trace_ghost_paths, trace_light_path, ForwardStats, LightEvent, LightSettings};
 use photonfarm::render::{Engine, Method};
 use photonfarm::sampling::Sampler;
 use photonfarm::scene::Scene;
@@ -21,6 +21,11 @@ use photonfarm::spectrum::PhaseSpectrum;
 /// twice inside the window reaches the sensor through specular surfaces only: the light side's half of the
 /// ghost layer. The room seen in the window's reflections, behind the sensor, is the camera side's half.
 fn scene(ghost_light_paths: bool) -> Scene {
+    scene_with_glass(ghost_light_paths, 3.0)
+}
+
+/// `scene` with a window of refractive index `ior`.
+fn scene_with_glass(ghost_light_paths: bool, ior: f32) -> Scene {
     // The lamp's chains reach the sensor from about one light path in 500: enough paths per phase that most
     // pixels get some in every batch of phases, so that their standard errors can be estimated.
     let light_paths = if ghost_light_paths { 16 } else { 1 };
@@ -50,11 +55,11 @@ albedo = [0.0, 0.0, 0.0]
 
 [materials.air_to_glass]
 type = "dielectric"
-ior = 3.0
+ior = {ior:?}
 
 [materials.glass_to_air]
 type = "dielectric"
-ext_ior = 3.0
+ext_ior = {ior:?}
 ior = 1.0
 
 [[objects]]
@@ -146,21 +151,27 @@ fn image_sum(estimates: &[(f64, f64)]) -> (f64, f64) {
     (sum, estimates.iter().map(|e| e.1 * e.1).sum::<f64>().sqrt())
 }
 
-/// The light side's half of the ghost layer over the image: the luminance the light paths alone register on
-/// the sensor, per phase, summed over pixels.
-fn light_half(scene: &Scene, paths: u64) -> f64 {
-    let settings = LightSettings { max_depth: scene.render.max_depth, sensor: true, vertices: false };
-    let (mut stats, mut sum) = (ForwardStats::default(), 0.0);
+/// The light side's half of the ghost layer over the image: the luminance the light paths (and their ghost
+/// paths, `ghost_paths` per light path) register on the sensor per light path, summed over pixels, with its
+/// standard error over the light paths, and the rays they cost.
+fn light_half(scene: &Scene, paths: u64, ghost_paths: u32) -> ((f64, f64), u64) {
+    let settings = LightSettings { max_depth: scene.render.max_depth, sensor: true, vertices: false, ghost_paths };
+    let mut stats = ForwardStats::default();
+    let mut values = Vec::with_capacity(paths as usize);
     for index in 0..paths {
         let mut s = Sampler::light(5, 1, index);
-        trace_light_path(scene, settings, &PhaseSpectrum::RGB, index, &mut s, &mut stats, &mut |e| match e {
+        let mut sum = 0.0;
+        let mut visit = |e: &LightEvent| match e {
             LightEvent::Sensor(hit) if hit.ghost => {
                 sum += luminance_f64([hit.value.x as f64, hit.value.y as f64, hit.value.z as f64])
             }
             _ => {}
-        });
+        };
+        trace_light_path(scene, settings, &PhaseSpectrum::RGB, index, &mut s, &mut stats, &mut visit);
+        trace_ghost_paths(scene, settings, &PhaseSpectrum::RGB, index, 5, 1, &mut stats, &mut visit, None);
+        values.push(sum);
     }
-    sum / paths as f64
+    (common::mean_sem(&values), stats.rays)
 }
 
 /// Asserts that PBPM and the path tracer on `split` converge per pixel, in the total and in the ghost layer, to
@@ -197,7 +208,7 @@ fn ghosts_and_a_lights_lens_image_from_light_paths_converge_per_pixel_to_the_cam
     assert!((0..lights as u32).all(|l| !split.lights.lens_image_by_light_paths(l)));
     let reference = render(&camera_only, Method::Pbpm, 1, 40, 100);
     let ghost: f64 = reference.ghost.iter().map(|g| g.0).sum();
-    let light = light_half(&split, 200_000);
+    let light = light_half(&split, 200_000, split.render.ghost_paths).0 .0;
     println!("ghost layer over the image {ghost:.4e}, of which the lamp's chains from light paths {light:.4e}");
     assert!(light > 0.05 * ghost && light < 0.95 * ghost, "one half of the ghost layer is empty: {light} of {ghost}");
     assert_converges_to_camera_only(&split, &reference);
@@ -246,4 +257,21 @@ fn light_paths_aimed_at_the_front_element_carry_the_same_flux_overall_and_toward
     }
     // Aiming is the point: the estimate of the flux toward the window is much better.
     assert!(a[1].1 < 0.2 * p[1].1, "aiming did not help: {} against {}", a[1].1, p[1].1);
+}
+
+#[test]
+fn ghost_paths_bring_the_ghost_light_that_light_paths_bring_through_weakly_reflecting_glass() {
+    // At n = 1.5 a face reflects 4%, below the ghost paths' least reflection probability, so their chains carry
+    // the weights F / q and (1 − F) / (1 − q): the expectation must not move.
+    let scene = scene_with_glass(true, 1.5);
+    let (light_paths, light_rays) = light_half(&scene, 6_400_000, 0);
+    let (ghost_paths, ghost_rays) = light_half(&scene, 200_000, 2);
+    println!("light paths: {:.4e} ± {:.1e} ({light_rays} rays)", light_paths.0, light_paths.1);
+    println!("ghost paths: {:.4e} ± {:.1e} ({ghost_rays} rays)", ghost_paths.0, ghost_paths.1);
+    let bound = 4.0 * (light_paths.1.powi(2) + ghost_paths.1.powi(2)).sqrt();
+    assert!((light_paths.0 - ghost_paths.0).abs() < bound, "the ghost light differs by more than 4 standard errors");
+    // Ghost paths are the better estimator per ray, or they would not be worth tracing.
+    let (a, b) = (light_paths.1.powi(2) * light_rays as f64, ghost_paths.1.powi(2) * ghost_rays as f64);
+    println!("variance × rays: light paths {a:.3e}, ghost paths {b:.3e}");
+    assert!(b < a, "ghost paths gain nothing per ray");
 }

@@ -19,8 +19,8 @@ pub mod sorted_gather;
 pub use backward_pass::{trace_camera_path, BackwardSettings};
 pub use executor::Executor;
 pub use forward_pass::{
-    gather, gather_in_bucket, gather_point, trace_light_path, ForwardStats, Gather, GatherPoint, LightEvent,
-    LightSettings, LightVertex, SensorHit,
+    gather, gather_in_bucket, gather_point, trace_ghost_paths, trace_light_path, ForwardStats, Gather, GatherPoint,
+    LightEvent, LightSettings, LightVertex, SensorHit,
 };
 pub use gather_buffer::{AtomicGatherBuffer, AtomicSink, GatherBuffer};
 pub use phase::{LocalPixels, Phase, PhaseBuffers};

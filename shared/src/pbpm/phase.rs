@@ -13,7 +13,7 @@
 use super::backward_pass::{trace_camera_path_logged, BackwardSettings, BackwardStats};
 use super::executor::Executor;
 use super::forward_pass::{
-    gather, trace_light_path_logged, ForwardStats, Gather, LightEvent, LightSettings, SensorHit,
+    gather, trace_ghost_paths, trace_light_path_logged, ForwardStats, Gather, LightEvent, LightSettings, SensorHit,
 };
 use super::gather_buffer::GatherBuffer;
 use super::photon::BackwardPhoton;
@@ -50,6 +50,8 @@ pub struct Phase<'a> {
     /// Light paths register ghost chains on the sensor and camera paths leave those chains to them
     /// (`crate::ghost::sensor_ghosts`).
     pub sensor_ghosts: bool,
+    /// Ghost paths per light path (`crate::ghost::ghost_paths`).
+    pub ghost_paths: u32,
 }
 
 /// Which local pixel of a phase an image pixel is, for light that registers on the sensor: the identity when
@@ -99,21 +101,46 @@ impl Phase<'_> {
     /// and each ghost chain that reaches the sensor to `visit`.
     #[inline]
     pub fn trace_light_path(&self, index: u64, stats: &mut ForwardStats, visit: &mut impl FnMut(&LightEvent)) {
-        self.trace_light_path_logged(index, stats, visit, None);
+        self.trace_light_path_recorded(index, stats, visit, None);
     }
 
-    /// `trace_light_path` that also records the path into `log` (a ray map's path) when given one.
+    /// `trace_light_path` that records the light path (in `log`) and its ghost paths with `recorder` as paths
+    /// of phase `number`, when given them.
     #[inline]
-    pub fn trace_light_path_logged(
+    pub fn trace_light_path_recorded(
         &self,
         index: u64,
         stats: &mut ForwardStats,
         visit: &mut impl FnMut(&LightEvent),
-        log: Option<&mut RecordedPath>,
+        record: Option<(&Recorder, u64, &mut RecordedPath)>,
     ) {
         let mut s = Sampler::light(self.seed, self.key, index);
-        let settings = LightSettings { max_depth: self.max_depth, sensor: self.sensor_ghosts, vertices: true };
-        trace_light_path_logged(self.scene, settings, &self.spectrum, index, &mut s, stats, visit, log);
+        let settings = self.light_settings(true);
+        let (scene, spectrum) = (self.scene, &self.spectrum);
+        match record {
+            None => {
+                trace_light_path_logged(scene, settings, spectrum, index, &mut s, stats, visit, None);
+                trace_ghost_paths(scene, settings, spectrum, index, self.seed, self.key, stats, visit, None);
+            }
+            Some((recorder, number, log)) => {
+                (log.phase, log.item) = (number as u32, index as u32);
+                trace_light_path_logged(scene, settings, spectrum, index, &mut s, stats, visit, Some(log));
+                recorder.record(log);
+                let record = Some((recorder, number));
+                trace_ghost_paths(scene, settings, spectrum, index, self.seed, self.key, stats, visit, record);
+            }
+        }
+    }
+
+    /// What shapes the phase's light paths: `vertices` says whether they gather at diffuse vertices or only
+    /// bring light to the sensor.
+    pub fn light_settings(&self, vertices: bool) -> LightSettings {
+        LightSettings {
+            max_depth: self.max_depth,
+            sensor: self.sensor_ghosts,
+            vertices,
+            ghost_paths: if self.sensor_ghosts { self.ghost_paths } else { 0 },
+        }
     }
 
     /// Gathers what a light path hands over into one phase's target, adding to `sink`: a vertex into the photon
@@ -179,14 +206,9 @@ impl Phase<'_> {
                 LightEvent::Vertex(v) => sorted.push(map, v.point()),
                 LightEvent::Sensor(hit) => self.register(pixels, hit, gathered),
             };
-            match recorder.filter(|(r, n)| r.keeps(PathKind::Light, *n, index)) {
-                None => self.trace_light_path(index, &mut stats, &mut visit),
-                Some((rec, number)) => {
-                    (log.phase, log.item) = (number as u32, index as u32);
-                    self.trace_light_path_logged(index, &mut stats, &mut visit, Some(&mut log));
-                    rec.record(&log);
-                }
-            }
+            let kept = recorder.filter(|(r, n)| r.keeps(PathKind::Light, *n, index));
+            let record = kept.map(|(r, n)| (r, n, &mut log));
+            self.trace_light_path_recorded(index, &mut stats, &mut visit, record);
         }
         merges += gather(sorted, gathered);
         stats.merges = merges;

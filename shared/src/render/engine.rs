@@ -7,7 +7,7 @@ use super::settings::RenderSettings;
 use super::totals::{PhaseReport, RayTotals};
 use crate::accumulation::{Accumulator, AuxLayout, AuxSums, PixelSums};
 use crate::integrator::path_tracer;
-use crate::pbpm::forward_pass::{trace_light_path_logged, LightEvent, LightSettings};
+use crate::pbpm::forward_pass::{trace_ghost_paths, trace_light_path_logged, LightEvent};
 use crate::pbpm::phase::{start_aux, Closing, LocalPixels};
 use crate::pbpm::{Executor, ForwardStats, GatherBuffer, PhaseBuffers, PhotonMap, SortedGathers};
 use crate::ray_map::{PathKind, RecordedPath, Recorder};
@@ -236,7 +236,7 @@ impl<'s> Engine<'s> {
         // The camera paths' wavelength keys are phase << 32 | pixel; this one is no pixel's.
         let mut p = self.settings.phase(scene, phase);
         p.spectrum = self.settings.phase_spectrum(scene, phase << 32 | u32::MAX as u64);
-        let light = LightSettings { max_depth: self.settings.max_depth, sensor: true, vertices: false };
+        let light = p.light_settings(false);
         let mut stats = ForwardStats::default();
         let gathered = &mut self.gathered;
         let (pixels, rendered) = TilePixels::rendered(&self.tiles, scene);
@@ -255,6 +255,8 @@ impl<'s> Engine<'s> {
             if let Some(r) = kept {
                 r.record(&log);
             }
+            let record = kept.map(|r| (r, phase));
+            trace_ghost_paths(scene, light, &p.spectrum, index, p.seed, p.key, &mut stats, &mut visit, record);
         }
         stats
     }

@@ -80,6 +80,7 @@ impl RenderSettings {
             radius: self.radius_schedule(scene),
             spectrum: self.phase_spectrum(scene, key),
             sensor_ghosts: crate::ghost::sensor_ghosts(scene),
+            ghost_paths: crate::ghost::ghost_paths(scene),
         }
     }
 

@@ -28,6 +28,7 @@ pub struct RenderSection {
     pub radius_scale: Option<Spanned<f32>>,
     pub light_paths_per_pixel: Option<Spanned<f32>>,
     pub ghost_light_paths: Option<bool>,
+    pub ghost_paths: Option<Spanned<u32>>,
 }
 
 /// The camera.

@@ -42,6 +42,9 @@ pub struct SceneRenderSettings {
     /// For a lens that can make ghosts: whether light paths bring the all-specular ghost chains to the sensor
     /// (the default), or camera paths alone find them, as they find everything else.
     pub ghost_light_paths: bool,
+    /// Ghost paths traced per light path where light paths bring the ghost chains (`crate::ghost`); 0 leaves
+    /// the chains to the light paths themselves.
+    pub ghost_paths: u32,
 }
 
 impl Default for SceneRenderSettings {
@@ -52,6 +55,7 @@ impl Default for SceneRenderSettings {
             radius_scale: 3.0,
             light_paths_per_pixel: None,
             ghost_light_paths: true,
+            ghost_paths: crate::ghost::GHOST_PATHS_PER_LIGHT_PATH,
         }
     }
 }

@@ -174,6 +174,16 @@ impl Loader<'_> {
         if let Some(b) = r.ghost_light_paths {
             s.ghost_light_paths = b;
         }
+        if let Some(k) = &r.ghost_paths {
+            if *k.get_ref() > crate::ghost::MAX_GHOST_PATHS {
+                return Err(self.error(
+                    Some(k.span()),
+                    "render.ghost_paths",
+                    format!("must be at most {}, got {}", crate::ghost::MAX_GHOST_PATHS, k.get_ref()),
+                ));
+            }
+            s.ghost_paths = *k.get_ref();
+        }
         Ok(s)
     }
 }
