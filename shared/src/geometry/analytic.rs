@@ -70,7 +70,10 @@ impl Analytic {
                 if t <= t_min || t >= ray.t_max {
                     return None;
                 }
-                Some((t, (ray.at(t) - s.center) / s.radius))
+                // Normalised rather than divided by the radius: the root is off the sphere by rounding that grows
+                // with the origin's distance squared, and a normal off unit length reflects rays into
+                // directions off unit length, which every later intersection assumes.
+                Some((t, (ray.at(t) - s.center).normalize()))
             }
             Analytic::Lens(l) => l.intersect(ray, t_min),
             Analytic::Annulus(a) => a.intersect(ray, t_min),
@@ -149,7 +152,8 @@ impl LensSurface {
             if (p - center).dot(self.axis) * r >= 0.0 || !self.within_aperture(p) {
                 continue;
             }
-            let n = (p - center) / r.abs();
+            // Normalised, not divided by |r|, for the reason the sphere's normal is.
+            let n = (p - center).normalize();
             return Some((t, if n.dot(front) < 0.0 { -n } else { n }));
         }
         None
