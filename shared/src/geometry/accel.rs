@@ -1,7 +1,13 @@
 //! The scene's acceleration structure: a BVH over all triangles, built by obvhs (a compressed-wide BVH, the
 //! default) or, with the `embree` feature, by Embree; the analytic surfaces are few and tested directly.
 
-use super::{analytic::Analytic, hit::SurfaceHit, mesh::MeshTriangle, ray::Ray, surface_edges::SurfaceEdges};
+use super::{
+    analytic::{Analytic, Bounds},
+    hit::SurfaceHit,
+    mesh::MeshTriangle,
+    ray::Ray,
+    surface_edges::SurfaceEdges,
+};
 use glam::{Vec3, Vec3A};
 use obvhs::{
     cwbvh::{builder::build_cwbvh_from_tris, CwBvh},
@@ -172,7 +178,75 @@ pub struct SceneGeometry {
     /// Which triangle edges end their surface, for the photons' gather discs.
     edges: SurfaceEdges,
     analytic: Vec<(u32, Analytic)>,
+    culling: AnalyticCulling,
     t_min: f32,
+}
+
+/// The analytic surfaces' boxes, so that a ray is solved only against the surfaces whose box its segment
+/// crosses, and not at all when it misses the box around them all (most rays, in a room with a lens).
+struct AnalyticCulling {
+    /// Each surface's bounds (in `analytic`'s order) and the distance of its anchor from `all`'s.
+    boxes: Vec<(Bounds, f32)>,
+    all: Option<Bounds>,
+    enabled: bool,
+}
+
+impl AnalyticCulling {
+    fn new(analytic: &[(u32, Analytic)]) -> Self {
+        let bounds: Vec<Bounds> = analytic.iter().map(|(_, a)| a.bounds()).collect();
+        let all = bounds
+            .iter()
+            .skip(1)
+            .fold(bounds.first().copied(), |all, b| all.map(|all| all.union(b, (b.anchor - all.anchor).length())));
+        let boxes = match &all {
+            Some(all) => bounds.iter().map(|b| (*b, (b.anchor - all.anchor).length())).collect(),
+            None => Vec::new(),
+        };
+        AnalyticCulling { boxes, all, enabled: true }
+    }
+
+    /// The ray's culling state, or `None` when its segment [t0, t1] misses every surface's box.
+    #[inline]
+    fn probe(&self, origin: Vec3, direction: Vec3, t0: f32, t1: f32) -> Option<Probe> {
+        let all = self.all.as_ref()?;
+        // A zero (or subnormal) component makes the ray parallel to that slab: ±MAX instead of ±inf keeps
+        // 0 × inf = NaN out of the slab test, and a ray that never moves along that axis cannot enter the box
+        // through it anyway (each box holds its surface with a margin to spare).
+        let inv = direction.recip();
+        let inv = Vec3::select(inv.is_finite_mask(), inv, Vec3::splat(f32::MAX).copysign(direction));
+        let probe = Probe { origin, inv, distance: (origin - all.anchor).length(), enabled: self.enabled };
+        (!self.enabled || probe.crosses(all, 0.0, t0, t1)).then_some(probe)
+    }
+}
+
+/// One ray against the analytic surfaces' boxes.
+struct Probe {
+    origin: Vec3,
+    inv: Vec3,
+    /// The distance from the origin to the anchor of the box around all surfaces.
+    distance: f32,
+    enabled: bool,
+}
+
+impl Probe {
+    /// Whether the segment [t0, t1] of the ray crosses surface `i`'s box.
+    #[inline]
+    fn may_hit(&self, culling: &AnalyticCulling, i: usize, t0: f32, t1: f32) -> bool {
+        let (bounds, offset) = &culling.boxes[i];
+        !self.enabled || self.crosses(bounds, *offset, t0, t1)
+    }
+
+    /// The slab test against the box widened by twice its rounding margin, so that every point the surface's
+    /// `intersect` returns lies inside it by a margin that also covers the slab test's own rounding.
+    #[inline]
+    fn crosses(&self, b: &Bounds, anchor_offset: f32, t0: f32, t1: f32) -> bool {
+        let pad = Vec3::splat(2.0 * b.margin(self.distance + anchor_offset));
+        let a = (b.min - pad - self.origin) * self.inv;
+        let c = (b.max + pad - self.origin) * self.inv;
+        let enter = a.min(c).max_element().max(t0);
+        let exit = a.max(c).min_element().min(t1);
+        enter <= exit
+    }
 }
 
 /// Minimum hit distance relative to the scene size: rays start on surfaces, offset by `offset_origin`.
@@ -220,19 +294,34 @@ impl SceneGeometry {
             accel,
             by_index: triangles,
             edges,
+            culling: AnalyticCulling::new(&analytic),
             analytic,
             t_min: RELATIVE_T_MIN * (1.0 + extent),
         })
     }
 
+    /// The same geometry solving every analytic surface for every ray, as if it kept no boxes around them: the
+    /// reference the culling must agree with, for tests and measurements.
+    pub fn without_analytic_culling(mut self) -> Self {
+        self.culling.enabled = false;
+        self
+    }
+
     /// The same surfaces with their BVH built by another backend, to compare backends.
     pub fn rebuilt_with(&self, backend: Backend) -> Result<SceneGeometry, AccelError> {
-        Self::build_with(backend, self.by_index.clone(), self.analytic.clone())
+        let mut g = Self::build_with(backend, self.by_index.clone(), self.analytic.clone())?;
+        g.culling.enabled = self.culling.enabled;
+        Ok(g)
     }
 
     /// The backend that traces this geometry's triangles.
     pub fn backend(&self) -> Backend {
         self.backend
+    }
+
+    /// The analytic surfaces and their objects, in the order they were added.
+    pub fn analytic_surfaces(&self) -> &[(u32, Analytic)] {
+        &self.analytic
     }
 
     /// Number of triangles.
@@ -292,7 +381,13 @@ impl SceneGeometry {
                 }
             }
         }
-        for (object, a) in &self.analytic {
+        let Some(probe) = self.culling.probe(ray.origin, ray.direction, self.t_min, best_t) else {
+            return best;
+        };
+        for (i, (object, a)) in self.analytic.iter().enumerate() {
+            if !probe.may_hit(&self.culling, i, self.t_min, best_t) {
+                continue;
+            }
             let r = Ray { t_max: best_t, ..*ray };
             if let Some((t, n)) = a.intersect(&r, self.t_min) {
                 best_t = t;
@@ -323,8 +418,13 @@ impl SceneGeometry {
         if blocked {
             return false;
         }
+        let Some(probe) = self.culling.probe(from, dir, self.t_min, t_max) else {
+            return true;
+        };
         let r = Ray { origin: from, direction: dir, t_max };
-        !self.analytic.iter().any(|(_, a)| a.intersect(&r, self.t_min).is_some())
+        !self.analytic.iter().enumerate().any(|(i, (_, a))| {
+            probe.may_hit(&self.culling, i, self.t_min, t_max) && a.intersect(&r, self.t_min).is_some()
+        })
     }
 }
 
