@@ -232,22 +232,38 @@ impl Probe {
     /// Whether the segment [t0, t1] of the ray crosses surface `i`'s box.
     #[inline]
     fn may_hit(&self, culling: &AnalyticCulling, i: usize, t0: f32, t1: f32) -> bool {
+        !self.enabled || self.entry(culling, i, t0, t1).is_some()
+    }
+
+    /// Where the segment [t0, t1] of the ray enters surface `i`'s box, if it crosses it.
+    #[inline]
+    fn entry(&self, culling: &AnalyticCulling, i: usize, t0: f32, t1: f32) -> Option<f32> {
         let (bounds, offset) = &culling.boxes[i];
-        !self.enabled || self.crosses(bounds, *offset, t0, t1)
+        self.enter(bounds, *offset, t0, t1)
     }
 
     /// The slab test against the box widened by twice its rounding margin, so that every point the surface's
     /// `intersect` returns lies inside it by a margin that also covers the slab test's own rounding.
     #[inline]
     fn crosses(&self, b: &Bounds, anchor_offset: f32, t0: f32, t1: f32) -> bool {
+        self.enter(b, anchor_offset, t0, t1).is_some()
+    }
+
+    /// Where `crosses` enters the box.
+    #[inline]
+    fn enter(&self, b: &Bounds, anchor_offset: f32, t0: f32, t1: f32) -> Option<f32> {
         let pad = Vec3::splat(2.0 * b.margin(self.distance + anchor_offset));
         let a = (b.min - pad - self.origin) * self.inv;
         let c = (b.max + pad - self.origin) * self.inv;
         let enter = a.min(c).max_element().max(t0);
         let exit = a.max(c).min_element().min(t1);
-        enter <= exit
+        (enter <= exit).then_some(enter)
     }
 }
+
+/// Scenes with at most this many analytic surfaces solve them in the order rays enter their boxes (the
+/// entries sort on the stack); more are solved in index order, each still behind its box.
+const SORTED_SURFACES: usize = 32;
 
 /// Minimum hit distance relative to the scene size: rays start on surfaces, offset by `offset_origin`.
 const RELATIVE_T_MIN: f32 = 1e-7;
@@ -384,6 +400,9 @@ impl SceneGeometry {
         let Some(probe) = self.culling.probe(ray.origin, ray.direction, self.t_min, best_t) else {
             return best;
         };
+        if probe.enabled && self.analytic.len() <= SORTED_SURFACES {
+            return self.intersect_analytic_sorted(ray, &probe, best_t, best);
+        }
         for (i, (object, a)) in self.analytic.iter().enumerate() {
             if !probe.may_hit(&self.culling, i, self.t_min, best_t) {
                 continue;
@@ -392,6 +411,49 @@ impl SceneGeometry {
             if let Some((t, n)) = a.intersect(&r, self.t_min) {
                 best_t = t;
                 best = Some(SurfaceHit { t, p: ray.at(t), ng: n, ns: n, object: *object, triangle: u32::MAX });
+            }
+        }
+        best
+    }
+
+    /// The analytic part of `intersect`, solving the surfaces in the order the ray enters their boxes, so that
+    /// the nearest hit comes early and every box entered beyond it is skipped (in a lens, the surfaces are stacked
+    /// along the ray, and index order solves all of them for the rays that cross the stack back to front). The
+    /// answer is the one index order gives: the least t, ties to the lower index and to a triangle.
+    fn intersect_analytic_sorted(
+        &self,
+        ray: &Ray,
+        probe: &Probe,
+        mut best_t: f32,
+        mut best: Option<SurfaceHit>,
+    ) -> Option<SurfaceHit> {
+        let mut entries = [(0.0f32, 0u32); SORTED_SURFACES];
+        let mut count = 0;
+        for i in 0..self.analytic.len() {
+            if let Some(enter) = probe.entry(&self.culling, i, self.t_min, best_t) {
+                let mut j = count;
+                while j > 0 && entries[j - 1].0 > enter {
+                    entries[j] = entries[j - 1];
+                    j -= 1;
+                }
+                entries[j] = (enter, i as u32);
+                count += 1;
+            }
+        }
+        let mut best_index: Option<u32> = None;
+        for &(enter, i) in &entries[..count] {
+            if enter > best_t {
+                break;
+            }
+            // One ulp past the best, so that a tie comes back and goes to the lower index, as in index order.
+            let t_max = if best_t.is_finite() { f32::from_bits(best_t.to_bits() + 1) } else { best_t };
+            let (object, a) = &self.analytic[i as usize];
+            if let Some((t, n)) = a.intersect(&Ray { t_max, ..*ray }, self.t_min) {
+                if t < best_t || (t == best_t && best_index.is_some_and(|b| i < b)) {
+                    best_t = t;
+                    best_index = Some(i);
+                    best = Some(SurfaceHit { t, p: ray.at(t), ng: n, ns: n, object: *object, triangle: u32::MAX });
+                }
             }
         }
         best
