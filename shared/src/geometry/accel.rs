@@ -1,7 +1,13 @@
 //! The scene's acceleration structure: a BVH over all triangles, built by obvhs (a compressed-wide BVH, the
 //! default) or, with the `embree` feature, by Embree; the analytic surfaces are few and tested directly.
 
-use super::{analytic::Analytic, hit::SurfaceHit, mesh::MeshTriangle, ray::Ray, surface_edges::SurfaceEdges};
+use super::{
+    analytic::{Analytic, Bounds},
+    hit::SurfaceHit,
+    mesh::MeshTriangle,
+    ray::Ray,
+    surface_edges::SurfaceEdges,
+};
 use glam::{Vec3, Vec3A};
 use obvhs::{
     cwbvh::{builder::build_cwbvh_from_tris, CwBvh},
@@ -172,8 +178,92 @@ pub struct SceneGeometry {
     /// Which triangle edges end their surface, for the photons' gather discs.
     edges: SurfaceEdges,
     analytic: Vec<(u32, Analytic)>,
+    culling: AnalyticCulling,
     t_min: f32,
 }
+
+/// The analytic surfaces' boxes, so that a ray is solved only against the surfaces whose box its segment
+/// crosses, and not at all when it misses the box around them all (most rays, in a room with a lens).
+struct AnalyticCulling {
+    /// Each surface's bounds (in `analytic`'s order) and the distance of its anchor from `all`'s.
+    boxes: Vec<(Bounds, f32)>,
+    all: Option<Bounds>,
+    enabled: bool,
+}
+
+impl AnalyticCulling {
+    fn new(analytic: &[(u32, Analytic)]) -> Self {
+        let bounds: Vec<Bounds> = analytic.iter().map(|(_, a)| a.bounds()).collect();
+        let all = bounds
+            .iter()
+            .skip(1)
+            .fold(bounds.first().copied(), |all, b| all.map(|all| all.union(b, (b.anchor - all.anchor).length())));
+        let boxes = match &all {
+            Some(all) => bounds.iter().map(|b| (*b, (b.anchor - all.anchor).length())).collect(),
+            None => Vec::new(),
+        };
+        AnalyticCulling { boxes, all, enabled: true }
+    }
+
+    /// The ray's culling state, or `None` when its segment [t0, t1] misses every surface's box.
+    #[inline]
+    fn probe(&self, origin: Vec3, direction: Vec3, t0: f32, t1: f32) -> Option<Probe> {
+        let all = self.all.as_ref()?;
+        // A zero (or subnormal) component makes the ray parallel to that slab: ±MAX instead of ±inf keeps
+        // 0 × inf = NaN out of the slab test, and a ray that never moves along that axis cannot enter the box
+        // through it anyway (each box holds its surface with a margin to spare).
+        let inv = direction.recip();
+        let inv = Vec3::select(inv.is_finite_mask(), inv, Vec3::splat(f32::MAX).copysign(direction));
+        let probe = Probe { origin, inv, distance: (origin - all.anchor).length(), enabled: self.enabled };
+        (!self.enabled || probe.crosses(all, 0.0, t0, t1)).then_some(probe)
+    }
+}
+
+/// One ray against the analytic surfaces' boxes.
+struct Probe {
+    origin: Vec3,
+    inv: Vec3,
+    /// The distance from the origin to the anchor of the box around all surfaces.
+    distance: f32,
+    enabled: bool,
+}
+
+impl Probe {
+    /// Whether the segment [t0, t1] of the ray crosses surface `i`'s box.
+    #[inline]
+    fn may_hit(&self, culling: &AnalyticCulling, i: usize, t0: f32, t1: f32) -> bool {
+        !self.enabled || self.entry(culling, i, t0, t1).is_some()
+    }
+
+    /// Where the segment [t0, t1] of the ray enters surface `i`'s box, if it crosses it.
+    #[inline]
+    fn entry(&self, culling: &AnalyticCulling, i: usize, t0: f32, t1: f32) -> Option<f32> {
+        let (bounds, offset) = &culling.boxes[i];
+        self.enter(bounds, *offset, t0, t1)
+    }
+
+    /// The slab test against the box widened by twice its rounding margin, so that every point the surface's
+    /// `intersect` returns lies inside it by a margin that also covers the slab test's own rounding.
+    #[inline]
+    fn crosses(&self, b: &Bounds, anchor_offset: f32, t0: f32, t1: f32) -> bool {
+        self.enter(b, anchor_offset, t0, t1).is_some()
+    }
+
+    /// Where `crosses` enters the box.
+    #[inline]
+    fn enter(&self, b: &Bounds, anchor_offset: f32, t0: f32, t1: f32) -> Option<f32> {
+        let pad = Vec3::splat(2.0 * b.margin(self.distance + anchor_offset));
+        let a = (b.min - pad - self.origin) * self.inv;
+        let c = (b.max + pad - self.origin) * self.inv;
+        let enter = a.min(c).max_element().max(t0);
+        let exit = a.max(c).min_element().min(t1);
+        (enter <= exit).then_some(enter)
+    }
+}
+
+/// Scenes with at most this many analytic surfaces solve them in the order rays enter their boxes (the
+/// entries sort on the stack); more are solved in index order, each still behind its box.
+const SORTED_SURFACES: usize = 32;
 
 /// Minimum hit distance relative to the scene size: rays start on surfaces, offset by `offset_origin`.
 const RELATIVE_T_MIN: f32 = 1e-7;
@@ -220,19 +310,34 @@ impl SceneGeometry {
             accel,
             by_index: triangles,
             edges,
+            culling: AnalyticCulling::new(&analytic),
             analytic,
             t_min: RELATIVE_T_MIN * (1.0 + extent),
         })
     }
 
+    /// The same geometry solving every analytic surface for every ray, as if it kept no boxes around them: the
+    /// reference the culling must agree with, for tests and measurements.
+    pub fn without_analytic_culling(mut self) -> Self {
+        self.culling.enabled = false;
+        self
+    }
+
     /// The same surfaces with their BVH built by another backend, to compare backends.
     pub fn rebuilt_with(&self, backend: Backend) -> Result<SceneGeometry, AccelError> {
-        Self::build_with(backend, self.by_index.clone(), self.analytic.clone())
+        let mut g = Self::build_with(backend, self.by_index.clone(), self.analytic.clone())?;
+        g.culling.enabled = self.culling.enabled;
+        Ok(g)
     }
 
     /// The backend that traces this geometry's triangles.
     pub fn backend(&self) -> Backend {
         self.backend
+    }
+
+    /// The analytic surfaces and their objects, in the order they were added.
+    pub fn analytic_surfaces(&self) -> &[(u32, Analytic)] {
+        &self.analytic
     }
 
     /// Number of triangles.
@@ -292,11 +397,63 @@ impl SceneGeometry {
                 }
             }
         }
-        for (object, a) in &self.analytic {
+        let Some(probe) = self.culling.probe(ray.origin, ray.direction, self.t_min, best_t) else {
+            return best;
+        };
+        if probe.enabled && self.analytic.len() <= SORTED_SURFACES {
+            return self.intersect_analytic_sorted(ray, &probe, best_t, best);
+        }
+        for (i, (object, a)) in self.analytic.iter().enumerate() {
+            if !probe.may_hit(&self.culling, i, self.t_min, best_t) {
+                continue;
+            }
             let r = Ray { t_max: best_t, ..*ray };
             if let Some((t, n)) = a.intersect(&r, self.t_min) {
                 best_t = t;
                 best = Some(SurfaceHit { t, p: ray.at(t), ng: n, ns: n, object: *object, triangle: u32::MAX });
+            }
+        }
+        best
+    }
+
+    /// The analytic part of `intersect`, solving the surfaces in the order the ray enters their boxes, so that
+    /// the nearest hit comes early and every box entered beyond it is skipped (in a lens, the surfaces are stacked
+    /// along the ray, and index order solves all of them for the rays that cross the stack back to front). The
+    /// answer is the one index order gives: the least t, ties to the lower index and to a triangle.
+    fn intersect_analytic_sorted(
+        &self,
+        ray: &Ray,
+        probe: &Probe,
+        mut best_t: f32,
+        mut best: Option<SurfaceHit>,
+    ) -> Option<SurfaceHit> {
+        let mut entries = [(0.0f32, 0u32); SORTED_SURFACES];
+        let mut count = 0;
+        for i in 0..self.analytic.len() {
+            if let Some(enter) = probe.entry(&self.culling, i, self.t_min, best_t) {
+                let mut j = count;
+                while j > 0 && entries[j - 1].0 > enter {
+                    entries[j] = entries[j - 1];
+                    j -= 1;
+                }
+                entries[j] = (enter, i as u32);
+                count += 1;
+            }
+        }
+        let mut best_index: Option<u32> = None;
+        for &(enter, i) in &entries[..count] {
+            if enter > best_t {
+                break;
+            }
+            // One ulp past the best, so that a tie comes back and goes to the lower index, as in index order.
+            let t_max = if best_t.is_finite() { f32::from_bits(best_t.to_bits() + 1) } else { best_t };
+            let (object, a) = &self.analytic[i as usize];
+            if let Some((t, n)) = a.intersect(&Ray { t_max, ..*ray }, self.t_min) {
+                if t < best_t || (t == best_t && best_index.is_some_and(|b| i < b)) {
+                    best_t = t;
+                    best_index = Some(i);
+                    best = Some(SurfaceHit { t, p: ray.at(t), ng: n, ns: n, object: *object, triangle: u32::MAX });
+                }
             }
         }
         best
@@ -323,8 +480,13 @@ impl SceneGeometry {
         if blocked {
             return false;
         }
+        let Some(probe) = self.culling.probe(from, dir, self.t_min, t_max) else {
+            return true;
+        };
         let r = Ray { origin: from, direction: dir, t_max };
-        !self.analytic.iter().any(|(_, a)| a.intersect(&r, self.t_min).is_some())
+        !self.analytic.iter().enumerate().any(|(i, (_, a))| {
+            probe.may_hit(&self.culling, i, self.t_min, t_max) && a.intersect(&r, self.t_min).is_some()
+        })
     }
 }
 

@@ -70,7 +70,10 @@ impl Analytic {
                 if t <= t_min || t >= ray.t_max {
                     return None;
                 }
-                Some((t, (ray.at(t) - s.center) / s.radius))
+                // Normalised rather than divided by the radius: the root is off the sphere by rounding that grows
+                // with the origin's distance squared, and a normal off unit length reflects rays into
+                // directions off unit length, which every later intersection assumes.
+                Some((t, (ray.at(t) - s.center).normalize()))
             }
             Analytic::Lens(l) => l.intersect(ray, t_min),
             Analytic::Annulus(a) => a.intersect(ray, t_min),
@@ -84,6 +87,114 @@ impl Analytic {
             Analytic::Lens(l) => l.area(),
             Analytic::Annulus(a) => {
                 std::f32::consts::PI * (a.outer_radius * a.outer_radius - a.inner_radius * a.inner_radius)
+            }
+        }
+    }
+}
+
+/// An axis-aligned box around an analytic surface, with what it takes to widen it to cover f32 rounding: the
+/// points `Analytic::intersect` returns lie on the surface only up to an error that grows with the square of the
+/// ray origin's distance from the sphere it solves (its quadratic cancels), so a fixed margin cannot cover every
+/// ray, and a box that misses one of those points would change the image.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Bounds {
+    /// The corners of the box that holds the exact surface.
+    pub min: Vec3,
+    pub max: Vec3,
+    /// The point whose distance from a ray's origin sets the rounding error: the centre of the sphere solved, or
+    /// of the plane's disc.
+    pub anchor: Vec3,
+    /// The error per unit of (distance from `anchor`)², 0 for flat surfaces.
+    quadratic: f32,
+    /// The error per unit of distance, and the error for an origin at the anchor (rounding of coordinates).
+    linear: f32,
+    constant: f32,
+}
+
+impl Bounds {
+    /// How far outside the box a point `intersect` returns can lie, for a ray whose origin lies at most
+    /// `distance` from `anchor`.
+    #[inline]
+    pub fn margin(&self, distance: f32) -> f32 {
+        (self.quadratic * distance + self.linear) * distance + self.constant
+    }
+
+    /// The smallest box holding both, whose margin bounds both margins.
+    pub fn union(&self, other: &Bounds, distance_between_anchors: f32) -> Bounds {
+        // Seen from `self.anchor`, the other's origin distance is at most one more `distance_between_anchors`.
+        let d = distance_between_anchors;
+        let quadratic = self.quadratic.max(other.quadratic);
+        Bounds {
+            min: self.min.min(other.min),
+            max: self.max.max(other.max),
+            anchor: self.anchor,
+            quadratic,
+            linear: self.linear.max(other.linear + 2.0 * other.quadratic * d),
+            constant: self.constant.max(other.margin(d)),
+        }
+    }
+}
+
+/// The box around a disc of radius `r` centred at `c` perpendicular to the unit vector `axis`.
+fn disc_box(c: Vec3, axis: Vec3, r: f32) -> (Vec3, Vec3) {
+    let half = (Vec3::ONE - axis * axis).max(Vec3::ZERO).powf(0.5) * r;
+    (c - half, c + half)
+}
+
+/// Bounds on the rounding of `sphere_roots` and of the hit point (`Ray::at`), each a generous multiple of the
+/// unit roundoff: the discriminant b² − c is off by about 12 u L² for an origin at distance L from the centre,
+/// which moves a root off the sphere by about 6 u L² / R; coordinates round by u (|o| + |t|).
+const QUADRATIC_ERROR: f32 = 32.0 * f32::EPSILON;
+const LINEAR_ERROR: f32 = 32.0 * f32::EPSILON;
+
+impl Analytic {
+    /// The box that holds every point `intersect` can return, and its rounding margin.
+    pub fn bounds(&self) -> Bounds {
+        let flat = |c: Vec3, min: Vec3, max: Vec3, size: f32| Bounds {
+            min,
+            max,
+            anchor: c,
+            quadratic: 0.0,
+            linear: LINEAR_ERROR,
+            constant: LINEAR_ERROR * (c.abs().max_element() + size),
+        };
+        match self {
+            Analytic::Sphere(s) => Bounds {
+                min: s.center - Vec3::splat(s.radius),
+                max: s.center + Vec3::splat(s.radius),
+                anchor: s.center,
+                quadratic: QUADRATIC_ERROR / s.radius,
+                linear: LINEAR_ERROR,
+                constant: LINEAR_ERROR * (s.center.abs().max_element() + s.radius),
+            },
+            Analytic::Annulus(a) => {
+                let (min, max) = disc_box(a.center, a.axis, a.outer_radius);
+                flat(a.center, min, max, a.outer_radius)
+            }
+            Analytic::Lens(l) if l.curvature_radius == 0.0 => {
+                let (min, max) = disc_box(l.vertex, l.axis, l.aperture_radius);
+                flat(l.vertex, min, max, l.aperture_radius)
+            }
+            Analytic::Lens(l) => {
+                let (r, h) = (l.curvature_radius, l.aperture_radius);
+                let center = l.vertex + l.axis * r;
+                // The cap lies in the aperture's cylinder between the vertex plane and the rim plane. A point off
+                // the sphere by e near the rim is off the rim plane by up to e / cos θ (θ the rim's angle from the
+                // axis): that slope multiplies the margin, unless the rim is so steep that the centre's plane,
+                // which the cap never crosses, bounds it better.
+                let cos_rim = (r * r - h * h).max(0.0).sqrt() / r.abs();
+                let (far, slope) = if cos_rim >= 0.125 { (l.rim_sag(), 1.0 / cos_rim) } else { (r, 1.0) };
+                let (a0, a1) = disc_box(l.vertex, l.axis, h);
+                let (b0, b1) = disc_box(l.vertex + l.axis * far, l.axis, h);
+                let size = r.abs().max(h);
+                Bounds {
+                    min: a0.min(b0),
+                    max: a1.max(b1),
+                    anchor: center,
+                    quadratic: slope * QUADRATIC_ERROR / r.abs(),
+                    linear: slope * LINEAR_ERROR,
+                    constant: slope * LINEAR_ERROR * (center.abs().max_element() + size),
+                }
             }
         }
     }
@@ -149,7 +260,8 @@ impl LensSurface {
             if (p - center).dot(self.axis) * r >= 0.0 || !self.within_aperture(p) {
                 continue;
             }
-            let n = (p - center) / r.abs();
+            // Normalised, not divided by |r|, for the reason the sphere's normal is.
+            let n = (p - center).normalize();
             return Some((t, if n.dot(front) < 0.0 { -n } else { n }));
         }
         None
@@ -206,6 +318,24 @@ mod tests {
         assert!(l.intersect(&Ray::new(Vec3::new(0.3, 0.0, -1.0), Vec3::Z), 1e-4).is_none());
         // From inside the sphere toward the far side: only the far cap lies there, which is not the surface.
         assert!(l.intersect(&Ray::new(Vec3::new(0.0, 0.0, 0.5), Vec3::Z), 1e-4).is_none());
+    }
+
+    #[test]
+    fn normals_are_unit_length_for_rays_from_far_away() {
+        // The roots of a small sphere seen from 2 m are off it by about 0.1% of its radius.
+        let lens =
+            LensSurface { vertex: Vec3::ZERO, axis: -Vec3::Z, curvature_radius: 0.029475, aperture_radius: 0.0126 };
+        let sphere = Sphere { center: Vec3::new(0.0, 0.0, -0.03), radius: 0.0126 };
+        for i in 0..1000 {
+            let target = Vec3::new(0.012 * ((i % 40) as f32 / 20.0 - 1.0), 0.012 * ((i / 40) as f32 / 12.5 - 1.0), 0.0);
+            let origin = Vec3::new(0.46, 0.3, 1.85);
+            let ray = Ray::new(origin, (target - origin).normalize());
+            for a in [Analytic::Lens(lens), Analytic::Sphere(sphere)] {
+                if let Some((_, n)) = a.intersect(&ray, 1e-7) {
+                    assert!((n.length() - 1.0).abs() < 1e-6, "{a:?}: |n| = {} for {ray:?}", n.length());
+                }
+            }
+        }
     }
 
     #[test]
