@@ -14,7 +14,9 @@
 //! neighbourhood (itself and the up to eight tiles around it, pooled). Rare bright samples (the lens's ghosts)
 //! make most of the variance where they fall; a tile that has not caught one yet has replicates that agree,
 //! so its own S_t says it is done, and retiring it freezes a mean that is low exactly because it missed
-//! them. Nine tiles see nine times the pixel-phases, so they have far more often caught one.
+//! them. Nine tiles see nine times the pixel-phases, so they have far more often caught one. The floor is the
+//! whole neighbourhood's variance per pixel: with a fraction of it, a tile that caught a sample would still
+//! stay longer than one that missed, and its own data would still decide when it stops.
 //! Retiring a tile once its own δ (the same formula over its pixels) is below D instead keeps dark tiles, whose
 //! relative error is high but whose weight in δ is small, rendering long after they matter.
 
