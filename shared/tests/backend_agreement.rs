@@ -1,7 +1,10 @@
 //! The Embree backend (the `embree` feature) returns the hits obvhs returns, with each of its build presets: on
 //! random rays over every shipped scene's geometry, the same hit or miss, object, triangle, distance and
 //! normals, and the same occlusion answers, but for rare numerical ties (`Comparison`). `cargo test -p photonfarm --features embree --test backend_agreement`.
+
 #![cfg(feature = "embree")]
+
+mod common;
 
 use glam::Vec3;
 use photonfarm::geometry::{ray::offset_origin, Backend, ObvhsPreset, Ray, SceneGeometry, SurfaceHit};
@@ -12,17 +15,6 @@ use std::path::Path;
 
 /// Random rays per kind and scene.
 const RAYS: usize = 20_000;
-
-fn uniform(rng: &mut Pcg32) -> f32 {
-    (rng.next_u32() >> 8) as f32 / (1u32 << 24) as f32
-}
-
-fn direction(rng: &mut Pcg32) -> Vec3 {
-    let z = 1.0 - 2.0 * uniform(rng);
-    let r = (1.0 - z * z).max(0.0).sqrt();
-    let phi = std::f32::consts::TAU * uniform(rng);
-    Vec3::new(r * phi.cos(), r * phi.sin(), z)
-}
 
 /// The smallest barycentric coordinate of the hit point in its triangle: near 0 on an edge, where two
 /// triangles (or none, for obvhs's test, which is not watertight) may take the ray.
@@ -106,24 +98,26 @@ fn compare_scene(name: &str, scene: &Scene, preset: ObvhsPreset) {
     let mut occlusion_differs = 0;
     for _ in 0..RAYS {
         // From anywhere in (and around) the scene's box, in every direction.
-        let o = lo + (hi - lo) * Vec3::new(uniform(&mut rng), uniform(&mut rng), uniform(&mut rng));
-        cmp.closest(name, &obvhs, embree, &Ray::new(o, direction(&mut rng)), near);
+        let o =
+            lo + (hi - lo) * Vec3::new(common::uniform(&mut rng), common::uniform(&mut rng), common::uniform(&mut rng));
+        cmp.closest(name, &obvhs, embree, &Ray::new(o, common::direction(&mut rng)), near);
 
         // Leaving a random triangle from its offset surface point, as the renderer's rays do (the t_min rule).
         let i = (rng.next_u32() as usize % count) as u32;
         let [a, b, c] = embree.triangle(i).v;
-        let (mut u, mut v) = (uniform(&mut rng), uniform(&mut rng));
+        let (mut u, mut v) = (common::uniform(&mut rng), common::uniform(&mut rng));
         if u + v > 1.0 {
             (u, v) = (1.0 - u, 1.0 - v);
         }
         let p = a + (b - a) * u + (c - a) * v;
         let ng = (b - a).cross(c - a).normalize();
-        let d = direction(&mut rng);
+        let d = common::direction(&mut rng);
         let from = offset_origin(p, ng, d);
         cmp.closest(name, &obvhs, embree, &Ray::new(from, d), near);
 
         // Occlusion between that point and a random point of the box.
-        let to = lo + (hi - lo) * Vec3::new(uniform(&mut rng), uniform(&mut rng), uniform(&mut rng));
+        let to =
+            lo + (hi - lo) * Vec3::new(common::uniform(&mut rng), common::uniform(&mut rng), common::uniform(&mut rng));
         let from = offset_origin(p, ng, to - p);
         if obvhs.unoccluded(from, to) != embree.unoccluded(from, to) {
             occlusion_differs += 1;

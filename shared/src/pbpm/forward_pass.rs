@@ -192,23 +192,8 @@ fn light_path<const S: bool>(
         let registers = if ghost_chain { settings.ghost_paths == 0 } else { lens_image && m >= 1 };
         if registers && all_specular && m < max_depth {
             let t_max = hit.as_ref().map_or(f32::INFINITY, |h| h.t);
-            if let Some((pixel, importance)) = scene.camera.sensor_pixel(ray.origin, ray.direction, t_max) {
-                let value = beta * importance;
-                if value != Rgb::ZERO {
-                    visit(&LightEvent::Sensor(SensorHit {
-                        pixel,
-                        value,
-                        spectrum: path.tag(),
-                        phase: spectrum,
-                        ghost: ghost_chain,
-                    }));
-                    if let Some(l) = log.as_deref_mut() {
-                        l.sensor(scene.camera.sensor_point(ray.origin, ray.direction), pixel);
-                        // In image terms, as a pixel whose camera paths start in RGB reads it.
-                        registered += join(Rgb::ONE, 0, value, path.tag(), spectrum);
-                    }
-                }
-            }
+            let crossing = Crossing { ray: &ray, t_max, beta, tag: path.tag(), ghost: ghost_chain };
+            registered += register_crossing(scene, spectrum, crossing, visit, log.as_deref_mut());
         }
         let Some(hit) = hit else {
             if let Some(l) = log.as_deref_mut() {
@@ -277,6 +262,40 @@ fn light_path<const S: bool>(
         let weight = if registered == Rgb::ZERO { e.beta } else { registered };
         l.finish(weight, path.wavelength_nm());
     }
+}
+
+/// A light-path segment that may cross the sensor: the ray up to `t_max`, the flux it carries and its colour
+/// terms, and whether its chain is a ghost.
+struct Crossing<'a> {
+    ray: &'a Ray,
+    t_max: f32,
+    beta: Rgb,
+    tag: u8,
+    ghost: bool,
+}
+
+/// Registers a segment that crosses the sensor on its pixel: hands the hit to `visit` and records its sensor
+/// vertex into `log`. Returns what it registered in image terms (as a pixel whose camera paths start in RGB
+/// reads it) when it records, zero otherwise.
+#[inline(always)]
+fn register_crossing(
+    scene: &Scene,
+    spectrum: &PhaseSpectrum,
+    c: Crossing,
+    visit: &mut impl FnMut(&LightEvent),
+    log: Option<&mut RecordedPath>,
+) -> Rgb {
+    let Some((pixel, importance)) = scene.camera.sensor_pixel(c.ray.origin, c.ray.direction, c.t_max) else {
+        return Rgb::ZERO;
+    };
+    let value = c.beta * importance;
+    if value == Rgb::ZERO {
+        return Rgb::ZERO;
+    }
+    visit(&LightEvent::Sensor(SensorHit { pixel, value, spectrum: c.tag, phase: spectrum, ghost: c.ghost }));
+    let Some(l) = log else { return Rgb::ZERO };
+    l.sensor(scene.camera.sensor_point(c.ray.origin, c.ray.direction), pixel);
+    join(Rgb::ONE, 0, value, c.tag, spectrum)
 }
 
 /// The least probability with which a ghost path reflects at a dielectric until it has reflected twice: a
@@ -359,17 +378,8 @@ fn ghost_path<const S: bool>(
         let hit = scene.geometry.intersect(&ray);
         if reflections > 0 && m < settings.max_depth {
             let t_max = hit.as_ref().map_or(f32::INFINITY, |h| h.t);
-            if let Some((pixel, importance)) = scene.camera.sensor_pixel(ray.origin, ray.direction, t_max) {
-                let value = beta * importance;
-                if value != Rgb::ZERO {
-                    let hit = SensorHit { pixel, value, spectrum: path.tag(), phase: spectrum, ghost: true };
-                    visit(&LightEvent::Sensor(hit));
-                    if let Some(l) = log.as_deref_mut() {
-                        l.sensor(scene.camera.sensor_point(ray.origin, ray.direction), pixel);
-                        registered += join(Rgb::ONE, 0, value, path.tag(), spectrum);
-                    }
-                }
-            }
+            let crossing = Crossing { ray: &ray, t_max, beta, tag: path.tag(), ghost: true };
+            registered += register_crossing(scene, spectrum, crossing, visit, log.as_deref_mut());
         }
         let Some(hit) = hit else {
             if let Some(l) = log.as_deref_mut() {

@@ -1,9 +1,13 @@
-//! Helpers shared by the renderer's integration tests: scenes from TOML text and per-phase statistics.
+//! Helpers shared by the renderer's integration tests: scenes from TOML text, per-phase statistics and random
+//! rays.
 #![allow(dead_code, clippy::needless_range_loop)]
 
+use glam::Vec3;
 use photonfarm::integrator::Layer;
 use photonfarm::render::{Engine, Method, RenderSettings};
 use photonfarm::scene::Scene;
+use rand_core::RngCore;
+use rand_pcg::Pcg32;
 use std::path::Path;
 
 /// A scene from TOML text whose meshes resolve against the repository's scenes/ folder.
@@ -85,4 +89,17 @@ pub fn regions_phase_means(engine: &mut Engine, phases: usize, regions: &[(&[usi
         }
     }
     out
+}
+
+/// Uniform in [0, 1) from 24 random bits.
+pub fn uniform(rng: &mut Pcg32) -> f32 {
+    (rng.next_u32() >> 8) as f32 / (1u32 << 24) as f32
+}
+
+/// A uniform direction on the unit sphere.
+pub fn direction(rng: &mut Pcg32) -> Vec3 {
+    let z = 1.0 - 2.0 * uniform(rng);
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = std::f32::consts::TAU * uniform(rng);
+    Vec3::new(r * phi.cos(), r * phi.sin(), z)
 }
