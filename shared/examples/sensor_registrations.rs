@@ -32,6 +32,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (mut ghost_pixels, mut ghost_values, mut image_registrations) = (vec![0u32; pixels], Vec::new(), 0u64);
     // Per pixel, the sum and the sum of squares of its phases' ghost luminance, for the error of the mean.
     let (mut pixel_sum, mut pixel_sq) = (vec![0.0f64; pixels], vec![0.0f64; pixels]);
+    // The ghost light over the whole image per phase, for its mean and standard error.
+    let mut totals = Vec::new();
     for phase in 0..phases {
         let spectrum = settings.phase_spectrum(&scene, phase);
         let mut this_phase = vec![0.0f64; pixels];
@@ -62,6 +64,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 None,
             );
         }
+        totals.push(this_phase.iter().sum::<f64>());
         for (p, v) in this_phase.into_iter().enumerate() {
             pixel_sum[p] += v;
             pixel_sq[p] += v * v;
@@ -80,6 +83,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         mean2 += mean * mean;
     }
     by_pixel.sort_by(|a, b| b.total_cmp(a));
+    let total = totals.iter().sum::<f64>() / n;
+    let spread = totals.iter().map(|t| (t - total).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
+    println!("ghost light over the image: {total:.5e} ± {:.1e} (one standard error)", (spread / n).sqrt());
     let top: f64 = by_pixel.iter().take(100).sum();
     println!("share of the squared error in the 100 worst pixels: {:.1}%", 100.0 * top / sem2);
     println!("{phases} phases, {paths} light paths, {} rays", stats.rays);

@@ -33,6 +33,18 @@ pub enum Transport {
     Importance,
 }
 
+/// How a dielectric chooses between reflection and refraction (`Material::sample_reflecting`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Reflection {
+    /// With the Fresnel reflectance F, as light does.
+    Fresnel,
+    /// With probability max(F, q).
+    AtLeast(f32),
+    /// Never: the path refracts with weight 1 − F, and ends where total internal reflection leaves it no
+    /// refraction.
+    Never,
+}
+
 /// The sampled continuation of a path at a surface.
 #[derive(Clone, Copy, Debug)]
 pub struct ScatterSample {
@@ -73,19 +85,20 @@ impl Material {
     /// Samples an incident direction for outgoing direction `wo` (unit, pointing away from the surface).
     /// Returns None when the path is absorbed or would leave through the wrong side of the geometry.
     pub fn sample(&self, hit: &SurfaceHit, wo: Vec3, u: Vec2, mode: Transport) -> Option<ScatterSample> {
-        self.sample_reflecting(hit, wo, u, mode, 0.0)
+        self.sample_reflecting(hit, wo, u, mode, Reflection::Fresnel)
     }
 
-    /// `sample` that reflects at a dielectric with probability at least `min_reflection` (below total internal
-    /// reflection), weighting the choice by F / q or (1 − F) / (1 − q) so that the estimate stays unbiased: a
-    /// sampler that looks for reflections inside a lens finds them without changing what they are worth.
+    /// `sample` that chooses between reflection and refraction at a dielectric by `choice` rather than by the
+    /// Fresnel reflectance F, weighting the choice by F / q or (1 − F) / (1 − q) so that the estimate stays
+    /// unbiased: a sampler that looks for reflections inside a lens finds them without changing what they are
+    /// worth. Other materials sample as `sample` does.
     pub fn sample_reflecting(
         &self,
         hit: &SurfaceHit,
         wo: Vec3,
         u: Vec2,
         mode: Transport,
-        min_reflection: f32,
+        choice: Reflection,
     ) -> Option<ScatterSample> {
         let front = wo.dot(hit.ng) >= 0.0;
         // Normals turned to the side wo lies on: every material here is two-sided or handles sides itself.
@@ -117,7 +130,14 @@ impl Material {
             }
             Material::Dielectric { ior, ext_ior, anti_reflection } => {
                 let (eta_o, eta_t, cos_o, f) = dielectric_reflectance(ior, ext_ior, anti_reflection, front, wo, ns);
-                let q = if f < 1.0 { f.max(min_reflection) } else { f };
+                let q = match choice {
+                    // Total internal reflection leaves no refraction to take.
+                    Reflection::Never if f >= 1.0 => return None,
+                    Reflection::Never => 0.0,
+                    _ if f >= 1.0 => f,
+                    Reflection::Fresnel => f,
+                    Reflection::AtLeast(q) => f.max(q),
+                };
                 if u.x < q {
                     let weight = if q == f { Rgb::ONE } else { Rgb::splat(f / q) };
                     ScatterSample::specular(reflect(wo, ns), weight)
@@ -308,7 +328,7 @@ mod tests {
                 let (mut reflected, mut transmitted, mut reflections) = (0.0f64, 0.0f64, 0);
                 for i in 0..n {
                     let u = Vec2::new((i as f32 + 0.5) / n as f32, 0.5);
-                    let s = glass.sample_reflecting(&hit, wo, u, mode, 0.3).unwrap();
+                    let s = glass.sample_reflecting(&hit, wo, u, mode, Reflection::AtLeast(0.3)).unwrap();
                     if s.wi.z > 0.0 {
                         reflected += s.weight.x as f64 / n as f64;
                         reflections += 1;
@@ -323,11 +343,36 @@ mod tests {
             }
         }
         // Below the raised probability nothing changes; total internal reflection stays certain.
-        let s = glass.sample_reflecting(&hit, Vec3::Z, Vec2::new(0.5, 0.0), Transport::Importance, 0.0).unwrap();
+        let s = glass
+            .sample_reflecting(&hit, Vec3::Z, Vec2::new(0.5, 0.0), Transport::Importance, Reflection::Fresnel)
+            .unwrap();
         assert_eq!(s.weight, glass.sample(&hit, Vec3::Z, Vec2::new(0.5, 0.0), Transport::Importance).unwrap().weight);
         let wo = Vec3::new(0.9, 0.0, -(1.0f32 - 0.81).sqrt());
-        let s = glass.sample_reflecting(&hit, wo, Vec2::new(0.999, 0.0), Transport::Importance, 0.3).unwrap();
+        let s =
+            glass.sample_reflecting(&hit, wo, Vec2::new(0.999, 0.0), Transport::Importance, Reflection::AtLeast(0.3));
+        let s = s.unwrap();
         assert!(s.wi.z < 0.0 && s.weight == Rgb::ONE, "total internal reflection, weight 1");
+    }
+
+    #[test]
+    fn a_dielectric_told_never_to_reflect_refracts_with_weight_one_minus_f_and_ends_at_total_internal_reflection() {
+        let glass = Material::Dielectric {
+            ior: RefractiveIndex::constant(1.5),
+            ext_ior: RefractiveIndex::constant(1.0),
+            anti_reflection: false,
+        };
+        let hit = flat_hit(Vec3::Z);
+        let wo = Vec3::new(0.8, 0.0, 0.6);
+        let f = fresnel_dielectric(0.6, 1.0, 1.5);
+        for u in [0.0, 0.5, 0.999] {
+            let s = glass.sample_reflecting(&hit, wo, Vec2::new(u, 0.5), Transport::Importance, Reflection::Never);
+            let s = s.unwrap();
+            assert!(s.wi.z < 0.0, "refracts whatever u");
+            assert!((s.weight.x - (1.0 - f)).abs() < 1e-5, "weight {} ≠ 1 − F = {}", s.weight.x, 1.0 - f);
+        }
+        let inside = Vec3::new(0.9, 0.0, -(1.0f32 - 0.81).sqrt());
+        let s = glass.sample_reflecting(&hit, inside, Vec2::new(0.0, 0.5), Transport::Importance, Reflection::Never);
+        assert!(s.is_none(), "total internal reflection leaves nothing to refract");
     }
 
     #[test]

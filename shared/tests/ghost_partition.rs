@@ -9,7 +9,7 @@ mod common;
 use photonfarm::accumulation::Accumulator;
 use photonfarm::color::luminance_f64;
 use photonfarm::ghost::GHOST_LAYER;
-use photonfarm::pbpm::{trace_ghost_paths, trace_light_path, ForwardStats, LightEvent, LightSettings};
+use photonfarm::pbpm::{trace_ghost_paths, trace_light_path, ForwardStats, GhostPair, LightEvent, LightSettings};
 use photonfarm::render::{Engine, Method};
 use photonfarm::sampling::Sampler;
 use photonfarm::scene::Scene;
@@ -261,8 +261,9 @@ fn light_paths_aimed_at_the_front_element_carry_the_same_flux_overall_and_toward
 
 #[test]
 fn ghost_paths_bring_the_ghost_light_that_light_paths_bring_through_weakly_reflecting_glass() {
-    // At n = 1.5 a face reflects 4%, below the ghost paths' least reflection probability, so their chains carry
-    // the weights F / q and (1 − F) / (1 − q): the expectation must not move.
+    // At n = 1.5 a face reflects 4%: a ghost path reflects at its pair's surfaces with probability 0.95 and
+    // refracts at the others, so its chains carry the weights F / q, (1 − F) / (1 − q) and 1 / P(pair): the
+    // expectation must not move.
     let scene = scene_with_glass(true, 1.5);
     let (light_paths, light_rays) = light_half(&scene, 6_400_000, 0);
     let (ghost_paths, ghost_rays) = light_half(&scene, 200_000, 2);
@@ -274,4 +275,23 @@ fn ghost_paths_bring_the_ghost_light_that_light_paths_bring_through_weakly_refle
     let (a, b) = (light_paths.1.powi(2) * light_rays as f64, ghost_paths.1.powi(2) * ghost_rays as f64);
     println!("variance × rays: light paths {a:.3e}, ghost paths {b:.3e}");
     assert!(b < a, "ghost paths gain nothing per ray");
+}
+
+#[test]
+fn the_pair_table_gives_every_pair_a_probability_and_most_to_the_pair_that_makes_the_windows_ghost() {
+    let scene = scene_with_glass(true, 1.5);
+    let table: Vec<(GhostPair, f32)> = scene.ghost_pairs.as_ref().expect("a table for a sensor scene").iter().collect();
+    let name = |o: u32| scene.objects[o as usize].name.as_str();
+    // Two surfaces: each alone and each ordered pair, the surface twice included.
+    assert_eq!(table.len(), 6);
+    let total: f32 = table.iter().map(|(_, p)| p).sum();
+    assert!((total - 1.0).abs() < 1e-5, "probabilities sum to {total}");
+    let even = photonfarm::pbpm::ghost_paths::EVEN_SHARE / table.len() as f32;
+    assert!(table.iter().all(|&(_, p)| p >= 0.99 * even), "a pair lost its share: {table:?}");
+    // The lamp's light enters the front face, reflects at the back one, then at the front one, and leaves.
+    let (best, _) = table.iter().copied().max_by(|a, b| a.1.total_cmp(&b.1)).unwrap();
+    assert_eq!((name(best.first), best.second.map(name)), ("window back", Some("window front")));
+    // Decided by fixed seeds: every process that loads the scene draws from the same table.
+    let again: Vec<(GhostPair, f32)> = scene_with_glass(true, 1.5).ghost_pairs.unwrap().iter().collect();
+    assert_eq!(table, again);
 }

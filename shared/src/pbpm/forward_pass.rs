@@ -6,7 +6,7 @@ use crate::color::Rgb;
 use crate::geometry::{ray::offset_origin, Ray, SurfaceHit};
 use crate::integrator::Layer;
 use crate::material::Transport;
-use crate::ray_map::{events::scatter_event, Events, PathKind, RecordedPath, Recorder};
+use crate::ray_map::{events::scatter_event, Events, RecordedPath};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::spectrum::{join, PathSpectrum, PhaseSpectrum};
@@ -266,19 +266,19 @@ fn light_path<const S: bool>(
 
 /// A light-path segment that may cross the sensor: the ray up to `t_max`, the flux it carries and its colour
 /// terms, and whether its chain is a ghost.
-struct Crossing<'a> {
-    ray: &'a Ray,
-    t_max: f32,
-    beta: Rgb,
-    tag: u8,
-    ghost: bool,
+pub(super) struct Crossing<'a> {
+    pub ray: &'a Ray,
+    pub t_max: f32,
+    pub beta: Rgb,
+    pub tag: u8,
+    pub ghost: bool,
 }
 
 /// Registers a segment that crosses the sensor on its pixel: hands the hit to `visit` and records its sensor
 /// vertex into `log`. Returns what it registered in image terms (as a pixel whose camera paths start in RGB
 /// reads it) when it records, zero otherwise.
 #[inline(always)]
-fn register_crossing(
+pub(super) fn register_crossing(
     scene: &Scene,
     spectrum: &PhaseSpectrum,
     c: Crossing,
@@ -296,128 +296,6 @@ fn register_crossing(
     let Some(l) = log else { return Rgb::ZERO };
     l.sensor(scene.camera.sensor_point(c.ray.origin, c.ray.direction), pixel);
     join(Rgb::ONE, 0, value, c.tag, spectrum)
-}
-
-/// The least probability with which a ghost path reflects at a dielectric until it has reflected twice: a
-/// ghost needs two reflections, which a lens's surfaces give a light path only a few times in a thousand.
-pub const GHOST_REFLECTION: f32 = 0.25;
-
-/// The share of a ghost path's emission aimed at the lens's front element: ghosts reach the sensor through it.
-pub const GHOST_AIMED_FRACTION: f32 = 0.9;
-
-/// Traces the `settings.ghost_paths` ghost paths of light path `index` of the phase with random key `key`,
-/// handing each ghost chain that reaches the sensor to `visit` worth 1 / `ghost_paths` of itself, so that the
-/// ghost layer is normalised by the phase's light paths as every gather is.
-///
-/// A ghost path is a light path that looks only for ghost chains: its light leaves toward the front element
-/// with probability `GHOST_AIMED_FRACTION`, it reflects at dielectrics with probability at least
-/// `GHOST_REFLECTION` until it has reflected twice (weighted so that each chain keeps its value), and it ends
-/// at its first diffuse vertex. It has no roulette: all-specular chains are short and `max_depth` bounds them.
-///
-/// With `record` (a ray map's recorder and the phase's number), each ghost path is recorded as a light path
-/// numbered as the light path it belongs to, its weight being what it registered.
-#[allow(clippy::too_many_arguments)]
-pub fn trace_ghost_paths(
-    scene: &Scene,
-    settings: LightSettings,
-    spectrum: &PhaseSpectrum,
-    index: u64,
-    seed: u64,
-    key: u64,
-    stats: &mut ForwardStats,
-    visit: &mut impl FnMut(&LightEvent),
-    record: Option<(&Recorder, u64)>,
-) {
-    let k = settings.ghost_paths as u64;
-    let mut log = record.map(|(_, phase)| RecordedPath::new(PathKind::Light, phase as u32, index as u32, 0));
-    for j in 0..k {
-        let ghost = index * k + j;
-        let mut sampler = Sampler::ghost(seed, key, ghost);
-        if spectrum.wavelengths.is_some() {
-            ghost_path::<true>(scene, settings, spectrum, ghost, &mut sampler, stats, visit, log.as_mut())
-        } else {
-            ghost_path::<false>(scene, settings, spectrum, ghost, &mut sampler, stats, visit, log.as_mut())
-        }
-        if let (Some((recorder, _)), Some(log)) = (record, &log) {
-            recorder.record(log);
-        }
-    }
-}
-
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn ghost_path<const S: bool>(
-    scene: &Scene,
-    settings: LightSettings,
-    spectrum: &PhaseSpectrum,
-    index: u64,
-    sampler: &mut Sampler,
-    stats: &mut ForwardStats,
-    visit: &mut impl FnMut(&LightEvent),
-    mut log: Option<&mut RecordedPath>,
-) {
-    let u_select = sampler.next_f32();
-    let (u_pos, u_dir) = (sampler.next_2d(), sampler.next_2d());
-    let lights = &scene.lights;
-    let Some(e) = lights.sample_emission_aimed(&scene.geometry, u_select, u_pos, u_dir, GHOST_AIMED_FRACTION) else {
-        return;
-    };
-    let origin = if e.normal == Vec3::ZERO { e.origin } else { offset_origin(e.origin, e.normal, e.direction) };
-    let mut ray = Ray::new(origin, e.direction);
-    let mut beta = e.beta / settings.ghost_paths as f32;
-    let mut path = PathSpectrum::<S>::start(spectrum, PhaseSpectrum::class_of(index), &mut beta);
-    let mut reflections = 0u32;
-    let mut m = 0u32;
-    let mut registered = Rgb::ZERO;
-    if let Some(l) = log.as_deref_mut() {
-        l.source = crate::ray_map::emitter_of(scene, e.light);
-        l.begin(e.origin, e.normal);
-    }
-    loop {
-        stats.rays += 1;
-        let hit = scene.geometry.intersect(&ray);
-        if reflections > 0 && m < settings.max_depth {
-            let t_max = hit.as_ref().map_or(f32::INFINITY, |h| h.t);
-            let crossing = Crossing { ray: &ray, t_max, beta, tag: path.tag(), ghost: true };
-            registered += register_crossing(scene, spectrum, crossing, visit, log.as_deref_mut());
-        }
-        let Some(hit) = hit else {
-            if let Some(l) = log.as_deref_mut() {
-                l.escape(ray.direction);
-            }
-            break;
-        };
-        m += 1;
-        if let Some(l) = log.as_deref_mut() {
-            l.hit(&hit);
-        }
-        let material = path.material(scene.material(&hit), &mut beta);
-        if material.diffuse_albedo().is_some() || m >= settings.max_depth {
-            break;
-        }
-        let wi = -ray.direction;
-        let floor = if reflections < 2 { GHOST_REFLECTION } else { 0.0 };
-        let Some(s) = material.sample_reflecting(&hit, wi, sampler.next_2d(), Transport::Importance, floor) else {
-            if let Some(l) = log.as_deref_mut() {
-                l.event(Events::ABSORB);
-            }
-            break;
-        };
-        if let Some(l) = log.as_deref_mut() {
-            l.event(scatter_event(&material, &hit, wi, s.wi, s.delta));
-        }
-        if crate::ghost::is_dielectric_reflection(&material, &hit, wi, s.wi) {
-            reflections += 1;
-        }
-        beta *= s.weight;
-        if beta == Rgb::ZERO {
-            break;
-        }
-        ray = Ray::new(offset_origin(hit.p, hit.ng, s.wi), s.wi);
-    }
-    if let Some(l) = log {
-        l.finish(registered, path.wavelength_nm());
-    }
 }
 
 /// What a gather needs of a light vertex, owned, so that vertices can wait for a sorted gather

@@ -3,13 +3,14 @@
 //! into the running sums. `phase` puts the stages together once, for the single-threaded engine and the
 //! worker's groups alike; the other files are the stages' parts (camera and light paths, the photon and its
 //! map, the area a photon gathers over, the buffers gathered light waits in, the light vertices waiting for a
-//! gather in bucket order, the radius schedule) and where the stages run (`executor`).
+//! gather in bucket order, the ghost paths, the radius schedule) and where the stages run (`executor`).
 
 pub mod backward_pass;
 pub mod executor;
 pub mod forward_pass;
 pub mod gather_buffer;
 pub mod gather_disc;
+pub mod ghost_paths;
 pub mod phase;
 pub mod photon;
 pub mod photon_map;
@@ -19,10 +20,11 @@ pub mod sorted_gather;
 pub use backward_pass::{trace_camera_path, BackwardSettings};
 pub use executor::Executor;
 pub use forward_pass::{
-    gather, gather_in_bucket, gather_point, trace_ghost_paths, trace_light_path, ForwardStats, Gather, GatherPoint,
-    LightEvent, LightSettings, LightVertex, SensorHit,
+    gather, gather_in_bucket, gather_point, trace_light_path, ForwardStats, Gather, GatherPoint, LightEvent,
+    LightSettings, LightVertex, SensorHit,
 };
 pub use gather_buffer::{AtomicGatherBuffer, AtomicSink, GatherBuffer};
+pub use ghost_paths::{trace_ghost_paths, GhostPair, GhostPairs};
 pub use phase::{LocalPixels, Phase, PhaseBuffers};
 pub use photon::BackwardPhoton;
 pub use photon_map::PhotonMap;

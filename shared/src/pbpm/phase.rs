@@ -13,9 +13,10 @@
 use super::backward_pass::{trace_camera_path_logged, BackwardSettings, BackwardStats};
 use super::executor::Executor;
 use super::forward_pass::{
-    gather, trace_ghost_paths, trace_light_path_logged, ForwardStats, Gather, LightEvent, LightSettings, SensorHit,
+    gather, trace_light_path_logged, ForwardStats, Gather, LightEvent, LightSettings, SensorHit,
 };
 use super::gather_buffer::GatherBuffer;
+use super::ghost_paths::trace_ghost_paths;
 use super::photon::BackwardPhoton;
 use super::photon_map::PhotonMap;
 use super::radius::RadiusSchedule;

@@ -81,6 +81,8 @@ pub struct Scene {
     pub mesh_files: Vec<(String, String)>,
     /// True when any object has a specular material (then caustics exist).
     pub has_delta_surfaces: bool,
+    /// The pairs of reflecting surfaces ghost paths draw from, where the scene traces ghost paths.
+    pub ghost_pairs: Option<crate::pbpm::GhostPairs>,
 }
 
 impl Scene {

@@ -78,6 +78,9 @@ impl Loader<'_> {
             let lens_images = crate::ghost::lens_images_by_light_paths(&scene, &front);
             scene.lights.set_lens_images_by_light_paths(lens_images);
         }
+        if crate::ghost::ghost_paths(&scene) > 0 {
+            scene.ghost_pairs = crate::pbpm::GhostPairs::for_scene(&scene);
+        }
         Ok(scene)
     }
 
@@ -132,6 +135,7 @@ impl Loader<'_> {
             hash: format!("{:x}", self.hasher.finalize()),
             mesh_files: self.mesh_files,
             has_delta_surfaces,
+            ghost_pairs: None,
         })
     }
 

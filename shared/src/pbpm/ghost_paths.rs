@@ -1,0 +1,317 @@
+//! Ghost paths (docs/estimator.md, "The ghost layer"): light paths that look only for the ghost chains a sensor
+//! camera's lens makes. Each is sent to reflect at one pair of the scene's dielectric surfaces, drawn from a
+//! table the scene keeps (`GhostPairs`), as lens-design software traces a lens's ghosts pair by pair: every
+//! chain of a pair then carries nearly the same weight, where a path free to reflect anywhere carries weights
+//! that differ by the number of surfaces it crossed.
+
+use super::forward_pass::{register_crossing, Crossing, ForwardStats, LightEvent, LightSettings};
+use crate::color::{luminance, Rgb};
+use crate::geometry::{ray::offset_origin, Ray};
+use crate::material::{Material, Reflection, Transport};
+use crate::ray_map::{events::scatter_event, Events, PathKind, RecordedPath, Recorder};
+use crate::sampling::{Discrete, Pass, Sampler};
+use crate::scene::Scene;
+use crate::spectrum::{PathSpectrum, PhaseSpectrum};
+use glam::Vec3;
+use rayon::prelude::*;
+
+/// The share of a ghost path's emission aimed at the lens's front element: ghosts reach the sensor through it.
+pub const GHOST_AIMED_FRACTION: f32 = 0.9;
+
+/// The probability, unless F is higher, with which a ghost path reflects at the surface its pair names next.
+/// Below 1, so that a chain crossing that surface before it reflects there can still be sampled.
+pub const PAIR_REFLECTION: f32 = 0.95;
+
+/// The share of the pair table spread evenly over every pair: a pair the pilot saw bring nothing keeps a
+/// probability, so the ghost layer stays unbiased whatever the pilot missed.
+pub const EVEN_SHARE: f32 = 0.2;
+
+/// Ghost paths the table's pilot traces in all, spread over the pairs, and the fewest it traces per pair.
+const PILOT_PATHS: usize = 1 << 14;
+const PILOT_PATHS_PER_PAIR: usize = 8;
+
+/// The dielectric surfaces (scene objects) a ghost path reflects at: `first`, then `second`. A pair without a
+/// second surface stands for the chains that reflect once.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GhostPair {
+    pub first: u32,
+    pub second: Option<u32>,
+}
+
+impl GhostPair {
+    /// The reflections at dielectrics a chain of this pair has.
+    fn reflections(&self) -> u32 {
+        if self.second.is_some() {
+            2
+        } else {
+            1
+        }
+    }
+
+    /// How a ghost path of this pair that has reflected `reflections` times chooses at a dielectric `object`.
+    ///
+    /// Before its pair's last reflection it reflects only at the surface the pair names next (with probability
+    /// `PAIR_REFLECTION`) and refracts everywhere else, so each chain's first two reflections are sampled by
+    /// exactly one pair; after its second reflection it follows F, so longer chains belong to the pair of
+    /// their first two reflections. A one-reflection pair refracts everywhere after its reflection.
+    fn choice(&self, reflections: u32, object: u32) -> Reflection {
+        let next = match reflections {
+            0 => Some(self.first),
+            1 => match self.second {
+                Some(second) => Some(second),
+                None => return Reflection::Never,
+            },
+            _ => return Reflection::Fresnel,
+        };
+        if next == Some(object) {
+            Reflection::AtLeast(PAIR_REFLECTION)
+        } else {
+            Reflection::Never
+        }
+    }
+}
+
+/// The table ghost paths draw their pair from: every ordered pair of the scene's dielectric surfaces, and every
+/// surface alone, with probabilities from a pilot decided when the scene loads (the same in every process).
+///
+/// With every pair's probability above zero the estimate is unbiased whatever the probabilities; the pilot
+/// only puts them where ghosts are. It traces a few ghost paths of each pair and gives the pair a share
+/// proportional to the root of the mean square of what one path registers, the mixture weights that minimise
+/// the sum of the pixels' variances, and `EVEN_SHARE` of the table is spread over all pairs.
+#[derive(Clone, Debug)]
+pub struct GhostPairs {
+    pairs: Vec<GhostPair>,
+    choice: Discrete,
+}
+
+impl GhostPairs {
+    /// The table of `scene`, from its pilot; None when the scene has no dielectric surface.
+    pub fn for_scene(scene: &Scene) -> Option<GhostPairs> {
+        let dielectric = |o: &u32| {
+            matches!(scene.materials[scene.objects[*o as usize].material as usize], Material::Dielectric { .. })
+        };
+        let surfaces: Vec<u32> = (0..scene.objects.len() as u32).filter(dielectric).collect();
+        if surfaces.is_empty() {
+            return None;
+        }
+        let pairs: Vec<GhostPair> = surfaces
+            .iter()
+            .flat_map(|&first| {
+                std::iter::once(GhostPair { first, second: None })
+                    .chain(surfaces.iter().map(move |&s| GhostPair { first, second: Some(s) }))
+            })
+            .collect();
+        let weights = pilot_weights(scene, &pairs);
+        let total: f64 = weights.iter().sum();
+        let n = pairs.len() as f64;
+        let probabilities: Vec<f32> = weights
+            .iter()
+            .map(|w| if total > 0.0 { (1.0 - EVEN_SHARE as f64) * w / total + EVEN_SHARE as f64 / n } else { 1.0 / n })
+            .map(|p| p as f32)
+            .collect();
+        let choice = Discrete::new(&probabilities)?;
+        Some(GhostPairs { pairs, choice })
+    }
+
+    /// The pair for the random number `u` and its probability.
+    #[inline]
+    pub fn sample(&self, u: f32) -> (GhostPair, f32) {
+        let (i, p) = self.choice.sample(u);
+        (self.pairs[i], p)
+    }
+
+    /// Every pair with its probability, in the table's order.
+    pub fn iter(&self) -> impl Iterator<Item = (GhostPair, f32)> + '_ {
+        self.pairs.iter().enumerate().map(|(i, &pair)| (pair, self.choice.pmf(i)))
+    }
+}
+
+/// Per pair, the root of the mean square of the luminance one ghost path of that pair registers, from
+/// pseudo-random ghost paths of fixed seeds in RGB.
+fn pilot_weights(scene: &Scene, pairs: &[GhostPair]) -> Vec<f64> {
+    let per_pair = (PILOT_PATHS / pairs.len()).max(PILOT_PATHS_PER_PAIR);
+    let settings = LightSettings { max_depth: scene.render.max_depth, sensor: true, vertices: false, ghost_paths: 1 };
+    pairs
+        .par_iter()
+        .enumerate()
+        .map(|(p, &pair)| {
+            let mut stats = ForwardStats::default();
+            let mut square = 0.0f64;
+            for i in 0..per_pair {
+                let mut sampler = Sampler::new(0, Pass::Ghost, u64::MAX - p as u64, i as u64);
+                let mut registered = 0.0f64;
+                let mut visit = |e: &LightEvent| {
+                    if let LightEvent::Sensor(hit) = e {
+                        registered += luminance(hit.value) as f64;
+                    }
+                };
+                let spectrum = &PhaseSpectrum::RGB;
+                ghost_path::<false>(
+                    scene,
+                    settings,
+                    spectrum,
+                    0,
+                    pair,
+                    1.0,
+                    &mut sampler,
+                    &mut stats,
+                    &mut visit,
+                    None,
+                );
+                square += registered * registered;
+            }
+            (square / per_pair as f64).sqrt()
+        })
+        .collect()
+}
+
+/// Traces the `settings.ghost_paths` ghost paths of light path `index` of the phase with random key `key`,
+/// handing each ghost chain that reaches the sensor to `visit` worth 1 / `ghost_paths` of itself, so that the
+/// ghost layer is normalised by the phase's light paths as every gather is.
+///
+/// A ghost path draws its pair of reflecting surfaces from the scene's table and counts 1 / (the pair's
+/// probability); its light leaves toward the front element with probability `GHOST_AIMED_FRACTION`; it takes
+/// its pair's reflections (`GhostPair::choice`, each choice weighted so that the chain keeps its value) and
+/// registers where it crosses the sensor once it has them; it ends at its first diffuse vertex. It has no
+/// roulette: all-specular chains are short and `max_depth` bounds them.
+///
+/// With `record` (a ray map's recorder and the phase's number), each ghost path is recorded as a light path
+/// numbered as the light path it belongs to, its weight being what it registered.
+#[allow(clippy::too_many_arguments)]
+pub fn trace_ghost_paths(
+    scene: &Scene,
+    settings: LightSettings,
+    spectrum: &PhaseSpectrum,
+    index: u64,
+    seed: u64,
+    key: u64,
+    stats: &mut ForwardStats,
+    visit: &mut impl FnMut(&LightEvent),
+    record: Option<(&Recorder, u64)>,
+) {
+    let Some(pairs) = &scene.ghost_pairs else { return };
+    let k = settings.ghost_paths as u64;
+    let mut log = record.map(|(_, phase)| RecordedPath::new(PathKind::Light, phase as u32, index as u32, 0));
+    for j in 0..k {
+        let ghost = index * k + j;
+        let mut sampler = Sampler::ghost(seed, key, ghost);
+        let (pair, p) = pairs.sample(sampler.next_f32());
+        let weight = 1.0 / (p * k as f32);
+        if spectrum.wavelengths.is_some() {
+            ghost_path::<true>(scene, settings, spectrum, ghost, pair, weight, &mut sampler, stats, visit, log.as_mut())
+        } else {
+            ghost_path::<false>(
+                scene,
+                settings,
+                spectrum,
+                ghost,
+                pair,
+                weight,
+                &mut sampler,
+                stats,
+                visit,
+                log.as_mut(),
+            )
+        }
+        if let (Some((recorder, _)), Some(log)) = (record, &log) {
+            recorder.record(log);
+        }
+    }
+}
+
+/// One ghost path of `pair`, its emitted flux multiplied by `weight`.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn ghost_path<const S: bool>(
+    scene: &Scene,
+    settings: LightSettings,
+    spectrum: &PhaseSpectrum,
+    index: u64,
+    pair: GhostPair,
+    weight: f32,
+    sampler: &mut Sampler,
+    stats: &mut ForwardStats,
+    visit: &mut impl FnMut(&LightEvent),
+    mut log: Option<&mut RecordedPath>,
+) {
+    let u_select = sampler.next_f32();
+    let (u_pos, u_dir) = (sampler.next_2d(), sampler.next_2d());
+    let lights = &scene.lights;
+    let Some(e) = lights.sample_emission_aimed(&scene.geometry, u_select, u_pos, u_dir, GHOST_AIMED_FRACTION) else {
+        return;
+    };
+    let origin = if e.normal == Vec3::ZERO { e.origin } else { offset_origin(e.origin, e.normal, e.direction) };
+    let mut ray = Ray::new(origin, e.direction);
+    let mut beta = e.beta * weight;
+    let mut path = PathSpectrum::<S>::start(spectrum, PhaseSpectrum::class_of(index), &mut beta);
+    let mut reflections = 0u32;
+    let mut m = 0u32;
+    let mut registered = Rgb::ZERO;
+    if let Some(l) = log.as_deref_mut() {
+        l.source = crate::ray_map::emitter_of(scene, e.light);
+        l.begin(e.origin, e.normal);
+    }
+    loop {
+        stats.rays += 1;
+        let hit = scene.geometry.intersect(&ray);
+        if reflections >= pair.reflections() && m < settings.max_depth {
+            let t_max = hit.as_ref().map_or(f32::INFINITY, |h| h.t);
+            let crossing = Crossing { ray: &ray, t_max, beta, tag: path.tag(), ghost: true };
+            registered += register_crossing(scene, spectrum, crossing, visit, log.as_deref_mut());
+        }
+        let Some(hit) = hit else {
+            if let Some(l) = log.as_deref_mut() {
+                l.escape(ray.direction);
+            }
+            break;
+        };
+        m += 1;
+        if let Some(l) = log.as_deref_mut() {
+            l.hit(&hit);
+        }
+        let material = path.material(scene.material(&hit), &mut beta);
+        if material.diffuse_albedo().is_some() || m >= settings.max_depth {
+            break;
+        }
+        let wi = -ray.direction;
+        let choice = pair.choice(reflections, hit.object);
+        let Some(s) = material.sample_reflecting(&hit, wi, sampler.next_2d(), Transport::Importance, choice) else {
+            if let Some(l) = log.as_deref_mut() {
+                l.event(Events::ABSORB);
+            }
+            break;
+        };
+        if let Some(l) = log.as_deref_mut() {
+            l.event(scatter_event(&material, &hit, wi, s.wi, s.delta));
+        }
+        if crate::ghost::is_dielectric_reflection(&material, &hit, wi, s.wi) {
+            reflections += 1;
+        }
+        beta *= s.weight;
+        if beta == Rgb::ZERO {
+            break;
+        }
+        ray = Ray::new(offset_origin(hit.p, hit.ng, s.wi), s.wi);
+    }
+    if let Some(l) = log {
+        l.finish(registered, path.wavelength_nm());
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_pair_reflects_only_at_the_surface_it_names_next_and_follows_fresnel_after_two_reflections() {
+        let pair = GhostPair { first: 3, second: Some(5) };
+        assert_eq!(pair.choice(0, 3), Reflection::AtLeast(PAIR_REFLECTION));
+        assert_eq!(pair.choice(0, 5), Reflection::Never, "the second surface is crossed on the way in");
+        assert_eq!(pair.choice(1, 5), Reflection::AtLeast(PAIR_REFLECTION));
+        assert_eq!(pair.choice(1, 3), Reflection::Never);
+        assert_eq!(pair.choice(2, 3), Reflection::Fresnel);
+        let single = GhostPair { first: 3, second: None };
+        assert_eq!(single.choice(1, 3), Reflection::Never, "a one-reflection pair reflects once");
+        assert_eq!((pair.reflections(), single.reflections()), (2, 1));
+    }
+}
