@@ -29,9 +29,10 @@ pub fn sensor_ghosts(scene: &Scene) -> bool {
     scene.render.ghost_light_paths && scene_can_make_ghosts(scene)
 }
 
-/// Ghost paths per light path unless the scene sets `[render] ghost_paths`: a ghost path costs about as much
-/// as a light path, and the ghost layer's light comes from them alone.
-pub const GHOST_PATHS_PER_LIGHT_PATH: u32 = 2;
+/// Ghost paths per light path unless the scene sets `[render] ghost_paths`. One: a ghost path crosses the whole
+/// lens and costs more rays than the rest of its light path's work, so a second one takes more phases from the
+/// camera paths than it gives the ghost layer (docs/measurements.md, "Ghost pairs").
+pub const GHOST_PATHS_PER_LIGHT_PATH: u32 = 1;
 
 /// The most ghost paths per light path a scene may ask for.
 pub const MAX_GHOST_PATHS: u32 = 64;
