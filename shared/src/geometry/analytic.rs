@@ -51,7 +51,11 @@ fn sphere_roots(ray: &Ray, center: Vec3, radius: f32) -> Option<(f32, f32)> {
     let b = oc.dot(ray.direction);
     // c = |oc|² − r², written as a product to keep precision when the origin lies on the sphere.
     let c = (oc.length() - radius) * (oc.length() + radius);
-    let disc = b * b - c;
+    // The discriminant b² − c is r² − |f|², f being the centre's offset from the ray's line. Written as b² − c
+    // it loses the difference of two squares of the origin's distance: from 2 m, 25 µm of a lens surface's
+    // roots, so that a refracted light path met the same surface again and crossed the lens in the wrong media.
+    let f = oc - b * ray.direction;
+    let disc = (radius - f.length()) * (radius + f.length());
     if disc < 0.0 {
         return None;
     }
@@ -318,6 +322,32 @@ mod tests {
         assert!(l.intersect(&Ray::new(Vec3::new(0.3, 0.0, -1.0), Vec3::Z), 1e-4).is_none());
         // From inside the sphere toward the far side: only the far cap lies there, which is not the surface.
         assert!(l.intersect(&Ray::new(Vec3::new(0.0, 0.0, 0.5), Vec3::Z), 1e-4).is_none());
+    }
+
+    #[test]
+    fn a_lens_surface_hit_from_far_away_lies_on_it_and_the_refracted_ray_does_not_meet_it_again() {
+        // The scene lens's front surface seen from its lamp, 2 m away: the root must lie on the sphere to well
+        // below the origin offset, or the refracted ray starts outside the glass and meets the surface again.
+        let lens =
+            LensSurface { vertex: Vec3::ZERO, axis: -Vec3::Z, curvature_radius: 0.029475, aperture_radius: 0.0126 };
+        let center = lens.vertex + lens.axis * lens.curvature_radius;
+        let origin = Vec3::new(0.52, 0.33, 1.9);
+        let mut worst = 0.0f32;
+        for i in 0..2000 {
+            let target = Vec3::new(0.012 * ((i % 50) as f32 / 25.0 - 1.0), 0.012 * ((i / 50) as f32 / 20.0 - 1.0), 0.0);
+            let ray = Ray::new(origin, (target - origin).normalize());
+            let Some((t, n)) = Analytic::Lens(lens).intersect(&ray, 1e-7) else { continue };
+            let p = ray.at(t);
+            worst = worst.max(((p - center).length() - lens.curvature_radius).abs());
+            // Refracted into n = 1.67 glass, leaving the surface from the offset origin the integrators use.
+            let d = ray.direction;
+            let (eta, cos_i) = (1.0 / 1.67, -d.dot(n));
+            let cos_t = (1.0 - eta * eta * (1.0 - cos_i * cos_i)).sqrt();
+            let inside = (d * eta + n * (eta * cos_i - cos_t)).normalize();
+            let next = Ray::new(crate::geometry::ray::offset_origin(p, n, inside), inside);
+            assert!(Analytic::Lens(lens).intersect(&next, 1e-7).is_none(), "refracted ray meets the surface again");
+        }
+        assert!(worst < 1e-6, "a root lies {worst} m off the surface");
     }
 
     #[test]
