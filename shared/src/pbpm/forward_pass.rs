@@ -186,25 +186,15 @@ fn light_path<const S: bool>(
         l.begin(e.origin, e.normal);
     }
     loop {
-        stats.rays += 1;
-        let hit = scene.geometry.intersect(&ray);
         // Segment m + 1 reaches the sensor within max_depth segments, as a camera path's emitter hit does.
         let registers = if ghost_chain { settings.ghost_paths == 0 } else { lens_image && m >= 1 };
-        if registers && all_specular && m < max_depth {
-            let t_max = hit.as_ref().map_or(f32::INFINITY, |h| h.t);
-            let crossing = Crossing { ray: &ray, t_max, beta, tag: path.tag(), ghost: ghost_chain };
-            registered += register_crossing(scene, spectrum, crossing, visit, log.as_deref_mut());
-        }
-        let Some(hit) = hit else {
-            if let Some(l) = log.as_deref_mut() {
-                l.escape(ray.direction);
-            }
+        let sensor = (registers && all_specular && m < max_depth).then_some(ghost_chain);
+        let segment = Segment { ray: &ray, beta, tag: path.tag(), sensor };
+        let Some(hit) = trace_segment(scene, spectrum, segment, stats, visit, log.as_deref_mut(), &mut registered)
+        else {
             break;
         };
         m += 1;
-        if let Some(l) = log.as_deref_mut() {
-            l.hit(&hit);
-        }
         let material = path.material(scene.material(&hit), &mut beta);
         let wi = -ray.direction;
         if material.diffuse_albedo().is_some() {
@@ -264,21 +254,58 @@ fn light_path<const S: bool>(
     }
 }
 
-/// A light-path segment that may cross the sensor: the ray up to `t_max`, the flux it carries and its colour
-/// terms, and whether its chain is a ghost.
-pub(super) struct Crossing<'a> {
+/// A light-path segment about to be traced: its ray, the flux it carries and its colour terms, and, when it
+/// registers where it crosses the sensor, whether its chain is a ghost.
+pub(super) struct Segment<'a> {
     pub ray: &'a Ray,
-    pub t_max: f32,
     pub beta: Rgb,
     pub tag: u8,
-    pub ghost: bool,
+    pub sensor: Option<bool>,
+}
+
+/// Traces a light-path segment: counts its ray, registers it on the sensor where `s.sensor` asks (adding what it
+/// recorded to `registered`), and records where it ends into `log`. Returns its hit, None when it escaped.
+#[inline(always)]
+pub(super) fn trace_segment(
+    scene: &Scene,
+    spectrum: &PhaseSpectrum,
+    s: Segment,
+    stats: &mut ForwardStats,
+    visit: &mut impl FnMut(&LightEvent),
+    mut log: Option<&mut RecordedPath>,
+    registered: &mut Rgb,
+) -> Option<SurfaceHit> {
+    stats.rays += 1;
+    let hit = scene.geometry.intersect(s.ray);
+    if let Some(ghost) = s.sensor {
+        let t_max = hit.as_ref().map_or(f32::INFINITY, |h| h.t);
+        let crossing = Crossing { ray: s.ray, t_max, beta: s.beta, tag: s.tag, ghost };
+        *registered += register_crossing(scene, spectrum, crossing, visit, log.as_deref_mut());
+    }
+    if let Some(l) = log {
+        match &hit {
+            Some(h) => l.hit(h),
+            None => l.escape(s.ray.direction),
+        }
+    }
+    hit
+}
+
+/// A light-path segment that crosses the sensor: the ray up to `t_max`, the flux it carries and its colour
+/// terms, and whether its chain is a ghost.
+struct Crossing<'a> {
+    ray: &'a Ray,
+    t_max: f32,
+    beta: Rgb,
+    tag: u8,
+    ghost: bool,
 }
 
 /// Registers a segment that crosses the sensor on its pixel: hands the hit to `visit` and records its sensor
 /// vertex into `log`. Returns what it registered in image terms (as a pixel whose camera paths start in RGB
 /// reads it) when it records, zero otherwise.
 #[inline(always)]
-pub(super) fn register_crossing(
+fn register_crossing(
     scene: &Scene,
     spectrum: &PhaseSpectrum,
     c: Crossing,

@@ -4,7 +4,7 @@
 //! chain of a pair then carries nearly the same weight, where a path free to reflect anywhere carries weights
 //! that differ by the number of surfaces it crossed.
 
-use super::forward_pass::{register_crossing, Crossing, ForwardStats, LightEvent, LightSettings};
+use super::forward_pass::{trace_segment, ForwardStats, LightEvent, LightSettings, Segment};
 use crate::color::{luminance, Rgb};
 use crate::geometry::{ray::offset_origin, Ray};
 use crate::material::{Material, Reflection, Transport};
@@ -252,23 +252,13 @@ fn ghost_path<const S: bool>(
         l.begin(e.origin, e.normal);
     }
     loop {
-        stats.rays += 1;
-        let hit = scene.geometry.intersect(&ray);
-        if reflections >= pair.reflections() && m < settings.max_depth {
-            let t_max = hit.as_ref().map_or(f32::INFINITY, |h| h.t);
-            let crossing = Crossing { ray: &ray, t_max, beta, tag: path.tag(), ghost: true };
-            registered += register_crossing(scene, spectrum, crossing, visit, log.as_deref_mut());
-        }
-        let Some(hit) = hit else {
-            if let Some(l) = log.as_deref_mut() {
-                l.escape(ray.direction);
-            }
+        let sensor = (reflections >= pair.reflections() && m < settings.max_depth).then_some(true);
+        let segment = Segment { ray: &ray, beta, tag: path.tag(), sensor };
+        let Some(hit) = trace_segment(scene, spectrum, segment, stats, visit, log.as_deref_mut(), &mut registered)
+        else {
             break;
         };
         m += 1;
-        if let Some(l) = log.as_deref_mut() {
-            l.hit(&hit);
-        }
         let material = path.material(scene.material(&hit), &mut beta);
         if material.diffuse_albedo().is_some() || m >= settings.max_depth {
             break;
