@@ -24,6 +24,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if !photonfarm::ghost::sensor_ghosts(&scene) {
         return Err(format!("{}: no light registers on this scene's sensor", path.display()).into());
     }
+    if let Some(table) = &scene.ghost_pairs {
+        // The pairs the pilot found ghosts through: those above the share every pair gets.
+        let pairs: Vec<_> = table.iter().collect();
+        let even = photonfarm::pbpm::ghost_paths::EVEN_SHARE / pairs.len() as f32;
+        let found: Vec<_> = pairs.iter().filter(|(_, p)| *p > 1.5 * even).collect();
+        let share: f32 = found.iter().map(|(_, p)| p).sum();
+        println!(
+            "ghost pairs: {}, of which {} take {:.0}% of the ghost paths",
+            pairs.len(),
+            found.len(),
+            100.0 * share
+        );
+    }
     let settings = RenderSettings::for_scene(&scene, Method::Pbpm, 1);
     let ghost_paths = photonfarm::ghost::ghost_paths(&scene);
     let light = LightSettings { max_depth: scene.render.max_depth, sensor: true, vertices: false, ghost_paths };
