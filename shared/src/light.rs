@@ -51,12 +51,44 @@ pub struct EmissionSample {
     pub light: u32,
 }
 
-/// A direction leaving `origin` (on a light with `normal`) toward a uniform point of `disc` with probability
-/// `aimed` (below 1), by the cosine otherwise, chosen by `u.x` and rescaled so that `u` stays stratified. None
-/// when it points behind the light, which emits nothing there.
-fn aimed_direction(disc: &RearElement, origin: Vec3, normal: Vec3, u: Vec2, aimed: f32) -> Option<Vec3> {
+/// How an aimed light path picks its point on the aim disc: a density over the unit disc, in the disc's own
+/// frame (`Frame::from_normal(disc.axis)`), that integrates to π like the uniform one.
+pub trait AimDensity {
+    /// A point of the unit disc for the uniform random numbers `u`.
+    fn sample(&self, u: Vec2) -> Vec2;
+    /// The density at the unit-disc point `p` relative to the uniform density (1 everywhere for uniform).
+    fn relative(&self, p: Vec2) -> f32;
+}
+
+/// Every point of the aim disc alike.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct UniformAim;
+
+impl AimDensity for UniformAim {
+    #[inline]
+    fn sample(&self, u: Vec2) -> Vec2 {
+        concentric_disk(u)
+    }
+
+    #[inline]
+    fn relative(&self, _: Vec2) -> f32 {
+        1.0
+    }
+}
+
+/// A direction leaving `origin` (on a light with `normal`) toward a point of `disc` drawn from `density` with
+/// probability `aimed` (below 1), by the cosine otherwise, chosen by `u.x` and rescaled so that `u` stays
+/// stratified. None when it points behind the light, which emits nothing there.
+fn aimed_direction(
+    disc: &RearElement,
+    density: &impl AimDensity,
+    origin: Vec3,
+    normal: Vec3,
+    u: Vec2,
+    aimed: f32,
+) -> Option<Vec3> {
     let direction = if u.x < aimed {
-        let d = concentric_disk(Vec2::new(u.x / aimed, u.y)) * disc.radius;
+        let d = density.sample(Vec2::new(u.x / aimed, u.y)) * disc.radius;
         let frame = Frame::from_normal(disc.axis);
         let to = disc.center + frame.s * d.x + frame.t * d.y - origin;
         to.try_normalize()?
@@ -67,18 +99,27 @@ fn aimed_direction(disc: &RearElement, origin: Vec3, normal: Vec3, u: Vec2, aime
     (direction.dot(normal) > 0.0).then_some(direction)
 }
 
-/// Solid-angle pdf of aiming at a uniform point of `disc` from `origin` and leaving along `direction`: d² / (A
-/// cos θ_d) where the ray crosses the disc, zero where it misses it.
-fn disc_pdf(disc: &RearElement, origin: Vec3, direction: Vec3) -> f32 {
+/// Where a ray from `origin` along `direction` crosses `disc`, as a point of the unit disc in the disc's frame,
+/// and the distance along the ray; None where it misses the disc.
+pub fn disc_crossing(disc: &RearElement, origin: Vec3, direction: Vec3) -> Option<(Vec2, f32)> {
     let along = direction.dot(disc.axis);
     if along == 0.0 {
-        return 0.0;
+        return None;
     }
     let t = (disc.center - origin).dot(disc.axis) / along;
-    if t <= 0.0 || (origin + direction * t - disc.center).length_squared() > disc.radius * disc.radius {
-        return 0.0;
+    let offset = origin + direction * t - disc.center;
+    if t <= 0.0 || offset.length_squared() > disc.radius * disc.radius {
+        return None;
     }
-    t * t / (PI * disc.radius * disc.radius * along.abs())
+    let frame = Frame::from_normal(disc.axis);
+    Some((Vec2::new(offset.dot(frame.s), offset.dot(frame.t)) / disc.radius, t))
+}
+
+/// Solid-angle pdf of aiming at a point of `disc` drawn from `density` from `origin` and leaving along
+/// `direction`: d² ρ / (A cos θ_d) where the ray crosses the disc at relative density ρ, zero where it misses.
+fn disc_pdf(disc: &RearElement, density: &impl AimDensity, origin: Vec3, direction: Vec3) -> f32 {
+    let Some((p, t)) = disc_crossing(disc, origin, direction) else { return 0.0 };
+    t * t * density.relative(p) / (PI * disc.radius * disc.radius * direction.dot(disc.axis).abs())
 }
 
 /// An emission texture on one emitting triangle: its radiance is `emission` times the texture at the point.
@@ -338,11 +379,11 @@ impl Lights {
         u_pos: Vec2,
         u_dir: Vec2,
     ) -> Option<EmissionSample> {
-        self.sample_emission_aimed(geometry, u_select, u_pos, u_dir, AIMED_FRACTION)
+        self.sample_emission_aimed(geometry, u_select, u_pos, u_dir, AIMED_FRACTION, &UniformAim)
     }
 
     /// `sample_emission` with `aimed` (in (0, 1)) of an area light's paths aimed at the disc of `aim_at`
-    /// instead of `AIMED_FRACTION`.
+    /// instead of `AIMED_FRACTION`, at points of it drawn from `density`.
     pub fn sample_emission_aimed(
         &self,
         geometry: &SceneGeometry,
@@ -350,6 +391,7 @@ impl Lights {
         u_pos: Vec2,
         u_dir: Vec2,
         aimed: f32,
+        density: &impl AimDensity,
     ) -> Option<EmissionSample> {
         let (index, pmf) = self.by_power.as_ref()?.sample(u_select);
         let sample = match self.lights[index] {
@@ -358,10 +400,10 @@ impl Lights {
                 let b = uniform_triangle(u_pos);
                 let origin = tri.v[0] * (1.0 - b.x - b.y) + tri.v[1] * b.x + tri.v[2] * b.y;
                 if let Some(disc) = self.aim.filter(|d| (d.center - tri.v[0]).dot(normal) > 0.0) {
-                    let direction = aimed_direction(&disc, origin, normal, u_dir, aimed)?;
+                    let direction = aimed_direction(&disc, density, origin, normal, u_dir, aimed)?;
                     let cos = direction.dot(normal);
-                    let pdf =
-                        (1.0 - aimed) * cos * std::f32::consts::FRAC_1_PI + aimed * disc_pdf(&disc, origin, direction);
+                    let pdf = (1.0 - aimed) * cos * std::f32::consts::FRAC_1_PI
+                        + aimed * disc_pdf(&disc, density, origin, direction);
                     return Some(EmissionSample {
                         origin,
                         normal,

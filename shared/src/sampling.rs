@@ -1,5 +1,9 @@
 //! Random streams and the warps from uniform numbers to the directions and points the estimators need.
 
+mod square_grid;
+
+pub use square_grid::{GridShape, SquareGrid};
+
 use glam::{Vec2, Vec3};
 use rand_core::RngCore;
 use rand_pcg::Pcg32;
@@ -252,6 +256,13 @@ impl Discrete {
         (i, self.pmf[i])
     }
 
+    /// `sample`, and `u` rescaled to [0, 1) within the chosen entry's share, so that it can draw once more.
+    pub fn sample_remapped(&self, u: f32) -> (usize, f32, f32) {
+        let (i, p) = self.sample(u);
+        let below = if i == 0 { 0.0 } else { self.cdf[i - 1] };
+        (i, p, ((u - below) / p).clamp(0.0, 1.0 - f32::EPSILON / 2.0))
+    }
+
     /// Probability of choosing `i`.
     pub fn pmf(&self, i: usize) -> f32 {
         self.pmf[i]
@@ -304,5 +315,15 @@ mod tests {
         }
         assert!((d.pmf(3) - 0.75).abs() < 1e-6);
         assert!(Discrete::new(&[0.0, 0.0]).is_none());
+    }
+
+    #[test]
+    fn a_remapped_draw_is_uniform_within_the_chosen_share() {
+        let d = Discrete::new(&[1.0, 0.0, 3.0]).unwrap();
+        assert_eq!(d.sample_remapped(0.125), (0, 0.25, 0.5));
+        let (i, p, u) = d.sample_remapped(0.625);
+        assert_eq!((i, p), (2, 0.75));
+        assert!((u - 0.5).abs() < 1e-6, "{u}");
+        assert!(d.sample_remapped(0.999_999_9).2 < 1.0);
     }
 }

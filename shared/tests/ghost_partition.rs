@@ -9,9 +9,10 @@ mod common;
 use photonfarm::accumulation::Accumulator;
 use photonfarm::color::luminance_f64;
 use photonfarm::ghost::GHOST_LAYER;
+use photonfarm::pbpm::ghost_aim::{RINGS, SECTORS};
 use photonfarm::pbpm::{trace_ghost_paths, trace_light_path, ForwardStats, GhostPair, LightEvent, LightSettings};
 use photonfarm::render::{Engine, Method};
-use photonfarm::sampling::Sampler;
+use photonfarm::sampling::{Frame, Sampler};
 use photonfarm::scene::Scene;
 use photonfarm::spectrum::PhaseSpectrum;
 
@@ -26,6 +27,11 @@ fn scene(ghost_light_paths: bool) -> Scene {
 
 /// `scene` with a window of refractive index `ior`.
 fn scene_with_glass(ghost_light_paths: bool, ior: f32) -> Scene {
+    scene_with_glass_and(ghost_light_paths, ior, "")
+}
+
+/// `scene_with_glass` with more of the scene file's text after it.
+fn scene_with_glass_and(ghost_light_paths: bool, ior: f32, more: &str) -> Scene {
     // The lamp's chains reach the sensor from about one light path in 500: enough paths per phase that most
     // pixels get some in every batch of phases, so that their standard errors can be estimated.
     let light_paths = if ghost_light_paths { 16 } else { 1 };
@@ -88,6 +94,7 @@ name = "lamp"
 material = "black"
 emission = [200.0, 175.0, 125.0]
 quad = {{ corner = [-0.02, -0.02, 0.3], edge1 = [0.0, 0.04, 0.0], edge2 = [0.04, 0.0, 0.0] }}
+{more}
 "#
     ))
 }
@@ -294,4 +301,42 @@ fn the_pair_table_gives_every_pair_a_probability_and_most_to_the_pair_that_makes
     // Decided by fixed seeds: every process that loads the scene draws from the same table.
     let again: Vec<(GhostPair, f32)> = scene_with_glass(true, 1.5).ghost_pairs.unwrap().iter().collect();
     assert_eq!(table, again);
+}
+
+#[test]
+fn ghost_paths_aim_where_the_pilot_saw_their_pair_reach_the_sensor_and_keep_the_expectation() {
+    // A black screen just in front of the window hides its half at x < 0 from the lamp: no ghost chain starts
+    // there, and the grid of the window's ghost pair must send few paths there. Light paths, which aim
+    // evenly, still decide what the ghost paths must bring.
+    let screen = r#"
+[[objects]]
+name = "screen"
+material = "black"
+quad = { corner = [-0.5, -0.5, 0.002], edge1 = [0.0, 1.0, 0.0], edge2 = [0.5, 0.0, 0.0] }
+"#;
+    let scene = scene_with_glass_and(true, 1.5, screen);
+    let pairs = scene.ghost_pairs.as_ref().expect("a table for a sensor scene");
+    let (best, _) = pairs.iter().enumerate().max_by(|a, b| a.1 .1.total_cmp(&b.1 .1)).expect("pairs");
+    let grid = pairs.aim(best);
+    let front = scene.lights.aim().expect("the window's front face");
+    let frame = Frame::from_normal(front.axis);
+    // A cell of the polar grid lies on the side of its centre.
+    let hidden_cells: Vec<usize> = (0..RINGS * SECTORS)
+        .filter(|&c| {
+            let (ring, sector) = (c / SECTORS, c % SECTORS);
+            let radius = ((ring as f32 + 0.5) / RINGS as f32).sqrt() * front.radius;
+            let angle = (sector as f32 + 0.5) / SECTORS as f32 * std::f32::consts::TAU;
+            (front.center + (frame.s * angle.cos() + frame.t * angle.sin()) * radius).x < 0.0
+        })
+        .collect();
+    assert_eq!(hidden_cells.len(), RINGS * SECTORS / 2, "the screen's edge runs between sectors");
+    let hidden: f32 = hidden_cells.iter().map(|&c| grid.cell_probability(c)).sum();
+    println!("{hidden:.3} of the best pair's aimed paths go to the hidden half of the window");
+    assert!(hidden < 0.3, "the hidden half keeps {hidden} of the aimed paths");
+    let (light_paths, _) = light_half(&scene, 6_400_000, 0);
+    let (ghost_paths, _) = light_half(&scene, 200_000, 2);
+    println!("light paths: {:.4e} ± {:.1e}", light_paths.0, light_paths.1);
+    println!("ghost paths: {:.4e} ± {:.1e}", ghost_paths.0, ghost_paths.1);
+    let bound = 4.0 * (light_paths.1.powi(2) + ghost_paths.1.powi(2)).sqrt();
+    assert!((light_paths.0 - ghost_paths.0).abs() < bound, "the ghost light differs by more than 4 standard errors");
 }

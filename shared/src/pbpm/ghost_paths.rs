@@ -5,8 +5,10 @@
 //! that differ by the number of surfaces it crossed.
 
 use super::forward_pass::{trace_segment, ForwardStats, LightEvent, LightSettings, Segment};
+use super::ghost_aim::{AimGrid, RINGS, SECTORS};
 use crate::color::{luminance, Rgb};
 use crate::geometry::{ray::offset_origin, Ray};
+use crate::light::{disc_crossing, AimDensity, EmissionSample, UniformAim};
 use crate::material::{Material, Reflection, Transport};
 use crate::ray_map::{events::scatter_event, Events, PathKind, RecordedPath, Recorder};
 use crate::sampling::{Discrete, Pass, Sampler};
@@ -26,9 +28,10 @@ pub const PAIR_REFLECTION: f32 = 0.95;
 /// probability, so the ghost layer stays unbiased whatever the pilot missed.
 pub const EVEN_SHARE: f32 = 0.2;
 
-/// Ghost paths the table's pilot traces in all, spread over the pairs, and the fewest it traces per pair.
-const PILOT_PATHS: usize = 1 << 14;
-const PILOT_PATHS_PER_PAIR: usize = 8;
+/// Ghost paths the table's pilot traces in all, spread over the pairs, and the fewest it traces per pair: enough
+/// that each pair's aim grid sees a few paths per cell.
+const PILOT_PATHS: usize = 1 << 17;
+const PILOT_PATHS_PER_PAIR: usize = 256;
 
 /// The dielectric surfaces (scene objects) a ghost path reflects at: `first`, then `second`. A pair without a
 /// second surface stands for the chains that reflect once.
@@ -72,15 +75,19 @@ impl GhostPair {
 }
 
 /// The table ghost paths draw their pair from: every ordered pair of the scene's dielectric surfaces, and every
-/// surface alone, with probabilities from a pilot decided when the scene loads (the same in every process).
+/// surface alone, with probabilities and, per pair, where on the front element to aim (`AimGrid`), from a pilot
+/// decided when the scene loads (the same in every process).
 ///
-/// With every pair's probability above zero the estimate is unbiased whatever the probabilities; the pilot
-/// only puts them where ghosts are. It traces a few ghost paths of each pair and gives the pair a share
-/// proportional to the root of the mean square of what one path registers, the mixture weights that minimise
-/// the sum of the pixels' variances, and `EVEN_SHARE` of the table is spread over all pairs.
+/// With every pair's probability and every cell's density above zero the estimate is unbiased whatever they
+/// are; the pilot only puts them where ghosts are. It traces ghost paths of each pair aimed evenly and gives
+/// each cell of the pair's grid a weight proportional to the root of the mean square of what a path through it
+/// registers, the density that minimises the sum of the pixels' variances; the pair gets a share proportional
+/// to the root of the mean square one path registers with that density. `EVEN_SHARE` of the table is spread
+/// over all pairs.
 #[derive(Clone, Debug)]
 pub struct GhostPairs {
     pairs: Vec<GhostPair>,
+    aims: Vec<AimGrid>,
     choice: Discrete,
 }
 
@@ -101,7 +108,9 @@ impl GhostPairs {
                     .chain(surfaces.iter().map(move |&s| GhostPair { first, second: Some(s) }))
             })
             .collect();
-        let weights = pilot_weights(scene, &pairs);
+        let pilots = pilot(scene, &pairs);
+        let weights: Vec<f64> = pilots.iter().map(PairPilot::root_mean_square).collect();
+        let aims = pilots.iter().map(PairPilot::aim).collect();
         let total: f64 = weights.iter().sum();
         let n = pairs.len() as f64;
         let probabilities: Vec<f32> = weights
@@ -110,35 +119,75 @@ impl GhostPairs {
             .map(|p| p as f32)
             .collect();
         let choice = Discrete::new(&probabilities)?;
-        Some(GhostPairs { pairs, choice })
+        Some(GhostPairs { pairs, aims, choice })
     }
 
-    /// The pair for the random number `u` and its probability.
+    /// The pair for the random number `u`, its probability, and where its paths aim.
     #[inline]
-    pub fn sample(&self, u: f32) -> (GhostPair, f32) {
+    pub fn sample(&self, u: f32) -> (GhostPair, f32, &AimGrid) {
         let (i, p) = self.choice.sample(u);
-        (self.pairs[i], p)
+        (self.pairs[i], p, &self.aims[i])
     }
 
     /// Every pair with its probability, in the table's order.
     pub fn iter(&self) -> impl Iterator<Item = (GhostPair, f32)> + '_ {
         self.pairs.iter().enumerate().map(|(i, &pair)| (pair, self.choice.pmf(i)))
     }
+
+    /// Where the paths of the table's `i`-th pair aim.
+    pub fn aim(&self, i: usize) -> &AimGrid {
+        &self.aims[i]
+    }
 }
 
-/// Per pair, the root of the mean square of the luminance one ghost path of that pair registers, from
-/// pseudo-random ghost paths of fixed seeds in RGB.
-fn pilot_weights(scene: &Scene, pairs: &[GhostPair]) -> Vec<f64> {
+/// Cells of a pair's grid over the front element.
+const AIM_CELLS: usize = RINGS * SECTORS;
+
+/// What one pair's pilot paths registered: the sum of the squares of their luminance and the paths per cell of
+/// the front element they aimed at, and the sum for the paths that left by the cosine and missed it.
+struct PairPilot {
+    paths: usize,
+    squares: [f64; AIM_CELLS],
+    through: [u32; AIM_CELLS],
+    elsewhere: f64,
+}
+
+impl PairPilot {
+    /// The cells' weights: the root of the mean square a path through each registered.
+    fn roots(&self) -> [f64; AIM_CELLS] {
+        std::array::from_fn(
+            |c| if self.through[c] > 0 { (self.squares[c] / self.through[c] as f64).sqrt() } else { 0.0 },
+        )
+    }
+
+    /// Where the pair's paths aim: the cells in proportion to their roots (`AimGrid::from_weights`).
+    fn aim(&self) -> AimGrid {
+        AimGrid::from_weights(&self.roots())
+    }
+
+    /// The root of the mean square one path of the pair registers when it aims by its grid, as the pilot
+    /// estimates it: the mean of the cells' roots (each cell is the same share of the disc), and the paths
+    /// that missed the disc as they were.
+    fn root_mean_square(&self) -> f64 {
+        self.roots().iter().sum::<f64>() / AIM_CELLS as f64 + (self.elsewhere / self.paths as f64).sqrt()
+    }
+}
+
+/// Each pair's pilot: pseudo-random ghost paths of fixed seeds in RGB, aimed evenly at the front element.
+fn pilot(scene: &Scene, pairs: &[GhostPair]) -> Vec<PairPilot> {
     let per_pair = (PILOT_PATHS / pairs.len()).max(PILOT_PATHS_PER_PAIR);
     let settings = LightSettings { max_depth: scene.render.max_depth, sensor: true, vertices: false, ghost_paths: 1 };
+    let front = scene.lights.aim();
     pairs
         .par_iter()
         .enumerate()
         .map(|(p, &pair)| {
             let mut stats = ForwardStats::default();
-            let mut square = 0.0f64;
+            let mut pilot =
+                PairPilot { paths: per_pair, squares: [0.0; AIM_CELLS], through: [0; AIM_CELLS], elsewhere: 0.0 };
             for i in 0..per_pair {
                 let mut sampler = Sampler::new(0, Pass::Ghost, u64::MAX - p as u64, i as u64);
+                let Some(e) = emit(scene, &UniformAim, &mut sampler) else { continue };
                 let mut registered = 0.0f64;
                 let mut visit = |e: &LightEvent| {
                     if let LightEvent::Sensor(hit) = e {
@@ -150,6 +199,7 @@ fn pilot_weights(scene: &Scene, pairs: &[GhostPair]) -> Vec<f64> {
                     scene,
                     settings,
                     spectrum,
+                    e,
                     0,
                     pair,
                     1.0,
@@ -158,11 +208,28 @@ fn pilot_weights(scene: &Scene, pairs: &[GhostPair]) -> Vec<f64> {
                     &mut visit,
                     None,
                 );
-                square += registered * registered;
+                let square = registered * registered;
+                match front.and_then(|d| disc_crossing(&d, e.origin, e.direction)) {
+                    Some((point, _)) => {
+                        let c = AimGrid::cell_of(point);
+                        pilot.squares[c] += square;
+                        pilot.through[c] += 1;
+                    }
+                    None => pilot.elsewhere += square,
+                }
             }
-            (square / per_pair as f64).sqrt()
+            pilot
         })
         .collect()
+}
+
+/// A ghost path's start: a light chosen by power, a point on it, and `GHOST_AIMED_FRACTION` of an area light's
+/// paths aimed at the front element at points drawn from `density`.
+#[inline]
+fn emit(scene: &Scene, density: &impl AimDensity, sampler: &mut Sampler) -> Option<EmissionSample> {
+    let u_select = sampler.next_f32();
+    let (u_pos, u_dir) = (sampler.next_2d(), sampler.next_2d());
+    scene.lights.sample_emission_aimed(&scene.geometry, u_select, u_pos, u_dir, GHOST_AIMED_FRACTION, density)
 }
 
 /// Traces the `settings.ghost_paths` ghost paths of light path `index` of the phase with random key `key`,
@@ -195,15 +262,29 @@ pub fn trace_ghost_paths(
     for j in 0..k {
         let ghost = index * k + j;
         let mut sampler = Sampler::ghost(seed, key, ghost);
-        let (pair, p) = pairs.sample(sampler.next_f32());
+        let (pair, p, aim) = pairs.sample(sampler.next_f32());
         let weight = 1.0 / (p * k as f32);
+        let Some(e) = emit(scene, aim, &mut sampler) else { continue };
         if spectrum.wavelengths.is_some() {
-            ghost_path::<true>(scene, settings, spectrum, ghost, pair, weight, &mut sampler, stats, visit, log.as_mut())
+            ghost_path::<true>(
+                scene,
+                settings,
+                spectrum,
+                e,
+                ghost,
+                pair,
+                weight,
+                &mut sampler,
+                stats,
+                visit,
+                log.as_mut(),
+            )
         } else {
             ghost_path::<false>(
                 scene,
                 settings,
                 spectrum,
+                e,
                 ghost,
                 pair,
                 weight,
@@ -219,13 +300,14 @@ pub fn trace_ghost_paths(
     }
 }
 
-/// One ghost path of `pair`, its emitted flux multiplied by `weight`.
+/// One ghost path of `pair` from the start `e`, its emitted flux multiplied by `weight`.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn ghost_path<const S: bool>(
     scene: &Scene,
     settings: LightSettings,
     spectrum: &PhaseSpectrum,
+    e: EmissionSample,
     index: u64,
     pair: GhostPair,
     weight: f32,
@@ -234,12 +316,6 @@ fn ghost_path<const S: bool>(
     visit: &mut impl FnMut(&LightEvent),
     mut log: Option<&mut RecordedPath>,
 ) {
-    let u_select = sampler.next_f32();
-    let (u_pos, u_dir) = (sampler.next_2d(), sampler.next_2d());
-    let lights = &scene.lights;
-    let Some(e) = lights.sample_emission_aimed(&scene.geometry, u_select, u_pos, u_dir, GHOST_AIMED_FRACTION) else {
-        return;
-    };
     let origin = if e.normal == Vec3::ZERO { e.origin } else { offset_origin(e.origin, e.normal, e.direction) };
     let mut ray = Ray::new(origin, e.direction);
     let mut beta = e.beta * weight;

@@ -3,13 +3,14 @@
 //! into the running sums. `phase` puts the stages together once, for the single-threaded engine and the
 //! worker's groups alike; the other files are the stages' parts (camera and light paths, the photon and its
 //! map, the area a photon gathers over, the buffers gathered light waits in, the light vertices waiting for a
-//! gather in bucket order, the ghost paths, the radius schedule) and where the stages run (`executor`).
+//! gather in bucket order, the ghost paths and where they aim, the radius schedule) and where the stages run (`executor`).
 
 pub mod backward_pass;
 pub mod executor;
 pub mod forward_pass;
 pub mod gather_buffer;
 pub mod gather_disc;
+pub mod ghost_aim;
 pub mod ghost_paths;
 pub mod phase;
 pub mod photon;
