@@ -7,8 +7,8 @@
 //! The modules form layers, listed here from the bottom up. A module imports modules of its own layer or of
 //! lower ones, never of a higher one.
 //!
-//! **Colour, sampling and geometry.** `color` (linear RGB), `sampling` (random streams and the warps from
-//! uniform numbers to directions and points) and `geometry` (rays, triangle meshes, analytic lens surfaces and
+//! **Colour, sampling and geometry.** `color` (linear RGB), `sampling` (random streams, the warps from
+//! uniform numbers to directions and points, and densities learnt per cell of a grid) and `geometry` (rays, triangle meshes, analytic lens surfaces and
 //! the BVH over them) import nothing of the crate. `camera` (pinhole, thin lens, sensor behind a lens) builds
 //! its rays from `geometry` and `sampling`.
 //!
@@ -23,8 +23,8 @@
 //!
 //! **Integrators and the PBPM estimator.** `integrator` holds the image layers, next-event estimation and the
 //! reference path tracer; `pbpm` the backward pass that stores photons on camera paths, the photon map, the
-//! forward pass that gathers light paths into it, and the radius schedule; `ghost` tells which light is ghost
-//! light (reflected inside a lens). They read the scene.
+//! forward pass that gathers light paths into it, the ghost paths and where on the lens they aim, and the radius
+//! schedule; `ghost` tells which light is ghost light (reflected inside a lens). They read the scene.
 //!
 //! **Accumulation and error.** `accumulation` keeps the running sums of every pixel and layer, the auxiliary
 //! layers (ghost light, wavelength bands), the error estimate δ over the SEM, and `accumulation::delta`, the

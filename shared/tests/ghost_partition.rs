@@ -181,6 +181,18 @@ fn light_half(scene: &Scene, paths: u64, ghost_paths: u32) -> ((f64, f64), u64) 
     (common::mean_sem(&values), stats.rays)
 }
 
+/// Asserts that ghost paths (two per light path) bring the ghost light that light paths alone bring, within 4
+/// standard errors, and returns the variance × rays of each: light paths, then ghost paths.
+fn assert_ghost_paths_bring_what_light_paths_bring(scene: &Scene) -> (f64, f64) {
+    let (light_paths, light_rays) = light_half(scene, 6_400_000, 0);
+    let (ghost_paths, ghost_rays) = light_half(scene, 200_000, 2);
+    println!("light paths: {:.4e} ± {:.1e} ({light_rays} rays)", light_paths.0, light_paths.1);
+    println!("ghost paths: {:.4e} ± {:.1e} ({ghost_rays} rays)", ghost_paths.0, ghost_paths.1);
+    let bound = 4.0 * (light_paths.1.powi(2) + ghost_paths.1.powi(2)).sqrt();
+    assert!((light_paths.0 - ghost_paths.0).abs() < bound, "the ghost light differs by more than 4 standard errors");
+    (light_paths.1.powi(2) * light_rays as f64, ghost_paths.1.powi(2) * ghost_rays as f64)
+}
+
 /// Asserts that PBPM and the path tracer on `split` converge per pixel, in the total and in the ghost layer, to
 /// the camera-only `reference` (mean z² within 4 standard deviations of 1), and that the image sums agree.
 fn assert_converges_to_camera_only(split: &Scene, reference: &PixelEstimates) {
@@ -271,15 +283,8 @@ fn ghost_paths_bring_the_ghost_light_that_light_paths_bring_through_weakly_refle
     // At n = 1.5 a face reflects 4%: a ghost path reflects at its pair's surfaces with probability 0.95 and
     // refracts at the others, so its chains carry the weights F / q, (1 − F) / (1 − q) and 1 / P(pair): the
     // expectation must not move.
-    let scene = scene_with_glass(true, 1.5);
-    let (light_paths, light_rays) = light_half(&scene, 6_400_000, 0);
-    let (ghost_paths, ghost_rays) = light_half(&scene, 200_000, 2);
-    println!("light paths: {:.4e} ± {:.1e} ({light_rays} rays)", light_paths.0, light_paths.1);
-    println!("ghost paths: {:.4e} ± {:.1e} ({ghost_rays} rays)", ghost_paths.0, ghost_paths.1);
-    let bound = 4.0 * (light_paths.1.powi(2) + ghost_paths.1.powi(2)).sqrt();
-    assert!((light_paths.0 - ghost_paths.0).abs() < bound, "the ghost light differs by more than 4 standard errors");
+    let (a, b) = assert_ghost_paths_bring_what_light_paths_bring(&scene_with_glass(true, 1.5));
     // Ghost paths are the better estimator per ray, or they would not be worth tracing.
-    let (a, b) = (light_paths.1.powi(2) * light_rays as f64, ghost_paths.1.powi(2) * ghost_rays as f64);
     println!("variance × rays: light paths {a:.3e}, ghost paths {b:.3e}");
     assert!(b < a, "ghost paths gain nothing per ray");
 }
@@ -333,10 +338,5 @@ quad = { corner = [-0.5, -0.5, 0.002], edge1 = [0.0, 1.0, 0.0], edge2 = [0.5, 0.
     let hidden: f32 = hidden_cells.iter().map(|&c| grid.cell_probability(c)).sum();
     println!("{hidden:.3} of the best pair's aimed paths go to the hidden half of the window");
     assert!(hidden < 0.3, "the hidden half keeps {hidden} of the aimed paths");
-    let (light_paths, _) = light_half(&scene, 6_400_000, 0);
-    let (ghost_paths, _) = light_half(&scene, 200_000, 2);
-    println!("light paths: {:.4e} ± {:.1e}", light_paths.0, light_paths.1);
-    println!("ghost paths: {:.4e} ± {:.1e}", ghost_paths.0, ghost_paths.1);
-    let bound = 4.0 * (light_paths.1.powi(2) + ghost_paths.1.powi(2)).sqrt();
-    assert!((light_paths.0 - ghost_paths.0).abs() < bound, "the ghost light differs by more than 4 standard errors");
+    assert_ghost_paths_bring_what_light_paths_bring(&scene);
 }

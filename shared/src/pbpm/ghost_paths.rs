@@ -194,20 +194,9 @@ fn pilot(scene: &Scene, pairs: &[GhostPair]) -> Vec<PairPilot> {
                         registered += luminance(hit.value) as f64;
                     }
                 };
+                let start = GhostStart { emission: e, index: 0, pair, weight: 1.0 };
                 let spectrum = &PhaseSpectrum::RGB;
-                ghost_path::<false>(
-                    scene,
-                    settings,
-                    spectrum,
-                    e,
-                    0,
-                    pair,
-                    1.0,
-                    &mut sampler,
-                    &mut stats,
-                    &mut visit,
-                    None,
-                );
+                ghost_path::<false>(scene, settings, spectrum, start, &mut sampler, &mut stats, &mut visit, None);
                 let square = registered * registered;
                 match front.and_then(|d| disc_crossing(&d, e.origin, e.direction)) {
                     Some((point, _)) => {
@@ -264,35 +253,12 @@ pub fn trace_ghost_paths(
         let mut sampler = Sampler::ghost(seed, key, ghost);
         let (pair, p, aim) = pairs.sample(sampler.next_f32());
         let weight = 1.0 / (p * k as f32);
-        let Some(e) = emit(scene, aim, &mut sampler) else { continue };
+        let Some(emission) = emit(scene, aim, &mut sampler) else { continue };
+        let start = GhostStart { emission, index: ghost, pair, weight };
         if spectrum.wavelengths.is_some() {
-            ghost_path::<true>(
-                scene,
-                settings,
-                spectrum,
-                e,
-                ghost,
-                pair,
-                weight,
-                &mut sampler,
-                stats,
-                visit,
-                log.as_mut(),
-            )
+            ghost_path::<true>(scene, settings, spectrum, start, &mut sampler, stats, visit, log.as_mut())
         } else {
-            ghost_path::<false>(
-                scene,
-                settings,
-                spectrum,
-                e,
-                ghost,
-                pair,
-                weight,
-                &mut sampler,
-                stats,
-                visit,
-                log.as_mut(),
-            )
+            ghost_path::<false>(scene, settings, spectrum, start, &mut sampler, stats, visit, log.as_mut())
         }
         if let (Some((recorder, _)), Some(log)) = (record, &log) {
             recorder.record(log);
@@ -300,22 +266,30 @@ pub fn trace_ghost_paths(
     }
 }
 
-/// One ghost path of `pair` from the start `e`, its emitted flux multiplied by `weight`.
+/// What a ghost path starts from: its emission, its number among the phase's ghost paths (its wavelength class),
+/// its pair, and the factor its emitted flux is multiplied by.
+#[derive(Clone, Copy, Debug)]
+struct GhostStart {
+    emission: EmissionSample,
+    index: u64,
+    pair: GhostPair,
+    weight: f32,
+}
+
+/// One ghost path from `start`.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn ghost_path<const S: bool>(
     scene: &Scene,
     settings: LightSettings,
     spectrum: &PhaseSpectrum,
-    e: EmissionSample,
-    index: u64,
-    pair: GhostPair,
-    weight: f32,
+    start: GhostStart,
     sampler: &mut Sampler,
     stats: &mut ForwardStats,
     visit: &mut impl FnMut(&LightEvent),
     mut log: Option<&mut RecordedPath>,
 ) {
+    let GhostStart { emission: e, index, pair, weight } = start;
     let origin = if e.normal == Vec3::ZERO { e.origin } else { offset_origin(e.origin, e.normal, e.direction) };
     let mut ray = Ray::new(origin, e.direction);
     let mut beta = e.beta * weight;
