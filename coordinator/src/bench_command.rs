@@ -101,10 +101,10 @@ fn targets(spec: &str, scenes: &[String]) -> Result<std::collections::BTreeMap<S
     Ok(out)
 }
 
-/// The scene's reference image, if one is shipped: the path tracer's, or PBPM's where the path tracer cannot
-/// converge.
+/// The scene's reference image, if one is shipped: PBPM's where one was made because the path tracer cannot
+/// converge (the lens's ghosts), the path tracer's otherwise.
 pub fn reference_of(scene: &str) -> Option<PathBuf> {
-    [Estimator::Path, Estimator::Pbpm]
+    [Estimator::Pbpm, Estimator::Path]
         .iter()
         .map(|e| PathBuf::from("scenes/references").join(format!("{scene}-{}.exr", e.name())))
         .find(|p| p.exists())
