@@ -8,9 +8,9 @@
 //! lower ones, never of a higher one.
 //!
 //! **Colour, sampling and geometry.** `color` (linear RGB), `sampling` (random streams, the warps from
-//! uniform numbers to directions and points, and densities learnt per cell of a grid) and `geometry` (rays, triangle meshes, analytic lens surfaces and
-//! the BVH over them) import nothing of the crate. `camera` (pinhole, thin lens, sensor behind a lens) builds
-//! its rays from `geometry` and `sampling`.
+//! uniform numbers to directions and points, and densities learnt per cell of a grid) and `geometry` (rays,
+//! triangle meshes, analytic lens surfaces and the BVH over them) import nothing of the crate. `camera`
+//! (pinhole, thin lens, sensor behind a lens) builds its rays from `geometry` and `sampling`.
 //!
 //! **Spectra, materials and lights.** `spectrum` holds wavelengths, dispersive refractive indices and the
 //! colour state of a path; it knows of materials only through its `Dispersive` trait. `material` (scattering

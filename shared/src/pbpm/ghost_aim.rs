@@ -51,7 +51,7 @@ impl AimGrid {
 
     /// The cell of a point of the unit disc.
     pub fn cell_of(p: Vec2) -> usize {
-        SquareGrid::uniform(RINGS, SECTORS).cell_of(Self::polar(p))
+        SquareGrid::cell_in(RINGS, SECTORS, Self::polar(p))
     }
 
     /// The probability of a cell.

@@ -79,9 +79,15 @@ impl SquareGrid {
     /// The cell holding the point `u` of the unit square.
     #[inline]
     pub fn cell_of(&self, u: Vec2) -> usize {
-        let r = ((u.x * self.rows as f32) as usize).min(self.rows - 1);
-        let c = ((u.y * self.columns as f32) as usize).min(self.columns - 1);
-        r * self.columns + c
+        Self::cell_in(self.rows, self.columns, u)
+    }
+
+    /// The cell holding the point `u` of the unit square on a grid of `rows × columns`.
+    #[inline]
+    pub fn cell_in(rows: usize, columns: usize, u: Vec2) -> usize {
+        let r = ((u.x * rows as f32) as usize).min(rows - 1);
+        let c = ((u.y * columns as f32) as usize).min(columns - 1);
+        r * columns + c
     }
 
     /// The probability of a cell.
