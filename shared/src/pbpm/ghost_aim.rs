@@ -31,13 +31,8 @@ pub struct AimGrid {
 }
 
 impl AimGrid {
-    /// The uniform density.
-    pub fn uniform() -> Self {
-        AimGrid { grid: SquareGrid::uniform(RINGS, SECTORS) }
-    }
-
     /// The density from a pilot's weights, one per cell as `cell_of` numbers them (`SquareGrid::from_weights`
-    /// with `AIM_SHAPE`).
+    /// with `AIM_SHAPE`; uniform when none is positive).
     pub fn from_weights(weights: &[f64]) -> Self {
         AimGrid { grid: SquareGrid::from_weights(AIM_SHAPE, weights) }
     }
@@ -102,6 +97,6 @@ mod tests {
     fn cells_number_the_disc_by_ring_then_sector() {
         assert_eq!(AimGrid::cell_of(Vec2::ZERO), 0);
         assert_eq!(AimGrid::cell_of(Vec2::new(0.0, -0.999)), RINGS * SECTORS - SECTORS / 4);
-        assert!((AimGrid::uniform().relative(Vec2::new(0.3, -0.4)) - 1.0).abs() < 1e-5);
+        assert!((AimGrid::from_weights(&[0.0; RINGS * SECTORS]).relative(Vec2::new(0.3, -0.4)) - 1.0).abs() < 1e-5);
     }
 }
