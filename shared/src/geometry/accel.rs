@@ -2,7 +2,8 @@
 //! default) or, with the `embree` feature, by Embree; the analytic surfaces are few and tested directly.
 
 use super::{
-    analytic::{Analytic, Bounds},
+    analytic::Analytic,
+    analytic_culling::{AnalyticCulling, Probe},
     hit::SurfaceHit,
     mesh::MeshTriangle,
     ray::Ray,
@@ -15,7 +16,7 @@ use obvhs::{
     triangle::Triangle,
     BvhBuildParams,
 };
-use std::time::Duration;
+use std::{ops::ControlFlow, time::Duration};
 
 /// obvhs's build presets, from the fastest build to the most thorough (a better BVH should trace faster).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -179,91 +180,18 @@ pub struct SceneGeometry {
     edges: SurfaceEdges,
     analytic: Vec<(u32, Analytic)>,
     culling: AnalyticCulling,
+    /// The box around all triangles, widened for rounding: a ray segment that misses it skips the BVH, as rays
+    /// between the surfaces of a lens away from the triangles do.
+    triangle_box: (Vec3, Vec3),
     t_min: f32,
-}
-
-/// The analytic surfaces' boxes, so that a ray is solved only against the surfaces whose box its segment
-/// crosses, and not at all when it misses the box around them all (most rays, in a room with a lens).
-struct AnalyticCulling {
-    /// Each surface's bounds (in `analytic`'s order) and the distance of its anchor from `all`'s.
-    boxes: Vec<(Bounds, f32)>,
-    all: Option<Bounds>,
-    enabled: bool,
-}
-
-impl AnalyticCulling {
-    fn new(analytic: &[(u32, Analytic)]) -> Self {
-        let bounds: Vec<Bounds> = analytic.iter().map(|(_, a)| a.bounds()).collect();
-        let all = bounds
-            .iter()
-            .skip(1)
-            .fold(bounds.first().copied(), |all, b| all.map(|all| all.union(b, (b.anchor - all.anchor).length())));
-        let boxes = match &all {
-            Some(all) => bounds.iter().map(|b| (*b, (b.anchor - all.anchor).length())).collect(),
-            None => Vec::new(),
-        };
-        AnalyticCulling { boxes, all, enabled: true }
-    }
-
-    /// The ray's culling state, or `None` when its segment [t0, t1] misses every surface's box.
-    #[inline]
-    fn probe(&self, origin: Vec3, direction: Vec3, t0: f32, t1: f32) -> Option<Probe> {
-        let all = self.all.as_ref()?;
-        // A zero (or subnormal) component makes the ray parallel to that slab: ±MAX instead of ±inf keeps
-        // 0 × inf = NaN out of the slab test, and a ray that never moves along that axis cannot enter the box
-        // through it anyway (each box holds its surface with a margin to spare).
-        let inv = direction.recip();
-        let inv = Vec3::select(inv.is_finite_mask(), inv, Vec3::splat(f32::MAX).copysign(direction));
-        let probe = Probe { origin, inv, distance: (origin - all.anchor).length(), enabled: self.enabled };
-        (!self.enabled || probe.crosses(all, 0.0, t0, t1)).then_some(probe)
-    }
-}
-
-/// One ray against the analytic surfaces' boxes.
-struct Probe {
-    origin: Vec3,
-    inv: Vec3,
-    /// The distance from the origin to the anchor of the box around all surfaces.
-    distance: f32,
-    enabled: bool,
-}
-
-impl Probe {
-    /// Whether the segment [t0, t1] of the ray crosses surface `i`'s box.
-    #[inline]
-    fn may_hit(&self, culling: &AnalyticCulling, i: usize, t0: f32, t1: f32) -> bool {
-        !self.enabled || self.entry(culling, i, t0, t1).is_some()
-    }
-
-    /// Where the segment [t0, t1] of the ray enters surface `i`'s box, if it crosses it.
-    #[inline]
-    fn entry(&self, culling: &AnalyticCulling, i: usize, t0: f32, t1: f32) -> Option<f32> {
-        let (bounds, offset) = &culling.boxes[i];
-        self.enter(bounds, *offset, t0, t1)
-    }
-
-    /// The slab test against the box widened by twice its rounding margin, so that every point the surface's
-    /// `intersect` returns lies inside it by a margin that also covers the slab test's own rounding.
-    #[inline]
-    fn crosses(&self, b: &Bounds, anchor_offset: f32, t0: f32, t1: f32) -> bool {
-        self.enter(b, anchor_offset, t0, t1).is_some()
-    }
-
-    /// Where `crosses` enters the box.
-    #[inline]
-    fn enter(&self, b: &Bounds, anchor_offset: f32, t0: f32, t1: f32) -> Option<f32> {
-        let pad = Vec3::splat(2.0 * b.margin(self.distance + anchor_offset));
-        let a = (b.min - pad - self.origin) * self.inv;
-        let c = (b.max + pad - self.origin) * self.inv;
-        let enter = a.min(c).max_element().max(t0);
-        let exit = a.max(c).min_element().min(t1);
-        (enter <= exit).then_some(enter)
-    }
 }
 
 /// Scenes with at most this many analytic surfaces solve them in the order rays enter their boxes (the
 /// entries sort on the stack); more are solved in index order, each still behind its box.
 const SORTED_SURFACES: usize = 32;
+
+/// How far the triangles' box is widened, relative to the scene's size: far more than a hit's rounding.
+const TRIANGLE_BOX_MARGIN: f32 = 1e-5;
 
 /// Minimum hit distance relative to the scene size: rays start on surfaces, offset by `offset_origin`.
 const RELATIVE_T_MIN: f32 = 1e-7;
@@ -305,7 +233,13 @@ impl SceneGeometry {
             }
         };
         let edges = SurfaceEdges::find(&triangles);
+        let (lo, hi) = triangles
+            .iter()
+            .flat_map(|(_, t)| t.v)
+            .fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(lo, hi), v| (lo.min(v), hi.max(v)));
+        let pad = Vec3::splat(TRIANGLE_BOX_MARGIN * (1.0 + extent));
         Ok(SceneGeometry {
+            triangle_box: (lo - pad, hi + pad),
             backend,
             accel,
             by_index: triangles,
@@ -316,8 +250,9 @@ impl SceneGeometry {
         })
     }
 
-    /// The same geometry solving every analytic surface for every ray, as if it kept no boxes around them: the
-    /// reference the culling must agree with, for tests and measurements.
+    /// The same geometry solving every analytic surface for every ray, as if it kept no boxes around them, and
+    /// searching the triangles' BVH for every ray: the reference the culling must agree with, for tests and
+    /// measurements.
     pub fn without_analytic_culling(mut self) -> Self {
         self.culling.enabled = false;
         self
@@ -364,84 +299,122 @@ impl SceneGeometry {
 
     /// The closest surface along the ray, if any.
     pub fn intersect(&self, ray: &Ray) -> Option<SurfaceHit> {
-        let mut best_t = ray.t_max;
-        let mut best: Option<SurfaceHit> = None;
-        match &self.accel {
-            TriangleAccel::None => {}
-            TriangleAccel::Obvhs(o) => {
-                let bray = BvhRay::new(Vec3A::from(ray.origin), Vec3A::from(ray.direction), self.t_min, ray.t_max);
-                let mut hit = RayHit::none();
-                if o.bvh.ray_traverse(bray, &mut hit, |r, id| o.triangles[id].intersect(r)) && hit.t < best_t {
-                    let id = hit.primitive_id as usize;
-                    let (tri, data) = (&o.triangles[id], &o.data[id]);
-                    best_t = hit.t;
-                    let uv = || barycentrics(tri, ray);
-                    best = Some(triangle_hit(
-                        ray,
-                        hit.t,
-                        [tri.v0, tri.v1, tri.v2],
-                        data.normals,
-                        uv,
-                        data.object,
-                        data.index,
-                    ));
-                }
-            }
-            #[cfg(feature = "embree")]
-            TriangleAccel::Embree(e) => {
-                if let Some(h) = e.intersect(ray, self.t_min) {
-                    let (object, tri) = &self.by_index[h.index as usize];
-                    let v = tri.v.map(Vec3A::from);
-                    best_t = h.t;
-                    best = Some(triangle_hit(ray, h.t, v, tri.n, || (h.u, h.v), *object, h.index));
-                }
-            }
-        }
-        let Some(probe) = self.culling.probe(ray.origin, ray.direction, self.t_min, best_t) else {
-            return best;
+        let Some(probe) = self.culling.probe(ray.origin, ray.direction, self.t_min, ray.t_max) else {
+            return self.intersect_triangles(ray, ray.t_max);
         };
         if probe.enabled && self.analytic.len() <= SORTED_SURFACES {
-            return self.intersect_analytic_sorted(ray, &probe, best_t, best);
+            return self.intersect_sorted(ray, &probe);
         }
-        for (i, (object, a)) in self.analytic.iter().enumerate() {
-            if !probe.may_hit(&self.culling, i, self.t_min, best_t) {
-                continue;
+        let mut best = self.intersect_triangles(ray, ray.t_max);
+        let mut best_t = best.as_ref().map_or(ray.t_max, |h| h.t);
+        probe.each_crossing(&self.culling, self.t_min, best_t, |i, enter| {
+            let (object, a) = &self.analytic[i];
+            if enter <= best_t {
+                if let Some((t, n)) = a.intersect(&Ray { t_max: best_t, ..*ray }, self.t_min) {
+                    best_t = t;
+                    best = Some(SurfaceHit { t, p: ray.at(t), ng: n, ns: n, object: *object, triangle: u32::MAX });
+                }
             }
-            let r = Ray { t_max: best_t, ..*ray };
-            if let Some((t, n)) = a.intersect(&r, self.t_min) {
-                best_t = t;
-                best = Some(SurfaceHit { t, p: ray.at(t), ng: n, ns: n, object: *object, triangle: u32::MAX });
-            }
-        }
+            ControlFlow::Continue(())
+        });
         best
     }
 
-    /// The analytic part of `intersect`, solving the surfaces in the order the ray enters their boxes, so that
-    /// the nearest hit comes early and every box entered beyond it is skipped (in a lens, the surfaces are stacked
-    /// along the ray, and index order solves all of them for the rays that cross the stack back to front). The
-    /// answer is the one index order gives: the least t, ties to the lower index and to a triangle.
-    fn intersect_analytic_sorted(
+    /// The `t_max` for `intersect_triangles` that still returns a triangle at distance `t`, so that a triangle
+    /// wins a tie with an analytic surface: obvhs keeps hits before `t_max`, Embree up to it.
+    #[inline]
+    fn through(&self, t: f32) -> f32 {
+        match self.accel {
+            #[cfg(feature = "embree")]
+            TriangleAccel::Embree(_) => t,
+            _ if t.is_finite() => f32::from_bits(t.to_bits() + 1),
+            _ => t,
+        }
+    }
+
+    /// The closest triangle along the ray before `t_max` (up to it, with Embree).
+    #[inline]
+    fn intersect_triangles(&self, ray: &Ray, t_max: f32) -> Option<SurfaceHit> {
+        if self.culling.enabled && !self.crosses_triangle_box(ray, t_max) {
+            return None;
+        }
+        match &self.accel {
+            TriangleAccel::None => None,
+            TriangleAccel::Obvhs(o) => {
+                let bray = BvhRay::new(Vec3A::from(ray.origin), Vec3A::from(ray.direction), self.t_min, t_max);
+                let mut hit = RayHit::none();
+                if !o.bvh.ray_traverse(bray, &mut hit, |r, id| o.triangles[id].intersect(r)) || hit.t >= t_max {
+                    return None;
+                }
+                let id = hit.primitive_id as usize;
+                let (tri, data) = (&o.triangles[id], &o.data[id]);
+                let uv = || barycentrics(tri, ray);
+                Some(triangle_hit(ray, hit.t, [tri.v0, tri.v1, tri.v2], data.normals, uv, data.object, data.index))
+            }
+            #[cfg(feature = "embree")]
+            TriangleAccel::Embree(e) => {
+                let h = e.intersect(&Ray { t_max, ..*ray }, self.t_min)?;
+                let (object, tri) = &self.by_index[h.index as usize];
+                let v = tri.v.map(Vec3A::from);
+                Some(triangle_hit(ray, h.t, v, tri.n, || (h.u, h.v), *object, h.index))
+            }
+        }
+    }
+
+    /// Whether the segment [t_min, t_max] of the ray crosses the box around all triangles.
+    #[inline]
+    fn crosses_triangle_box(&self, ray: &Ray, t_max: f32) -> bool {
+        let (lo, hi) = self.triangle_box;
+        // As in `AnalyticCulling::probe`: ±MAX keeps 0 × inf = NaN out of the slab test.
+        let inv = ray.direction.recip();
+        let inv = Vec3::select(inv.is_finite_mask(), inv, Vec3::splat(f32::MAX).copysign(ray.direction));
+        let a = (lo - ray.origin) * inv;
+        let b = (hi - ray.origin) * inv;
+        a.min(b).max_element().max(self.t_min) <= a.max(b).min_element().min(t_max)
+    }
+
+    /// `intersect` for scenes with few analytic surfaces, solving them in the order the ray enters their boxes, so
+    /// that the nearest hit comes early and every box entered beyond it is skipped (in a lens, the surfaces are
+    /// stacked along the ray, and index order solves all of them for the rays that cross the stack back to front).
+    /// A ray that starts inside a surface's box (between the surfaces of a lens) most often ends a few
+    /// millimetres on, on one of them: those are solved before the triangles, whose BVH then needs to be searched
+    /// only up to that hit. The answer is the one index order gives: the least t, ties to the lower index and to
+    /// a triangle.
+    fn intersect_sorted(&self, ray: &Ray, probe: &Probe) -> Option<SurfaceHit> {
+        let mut entries = [(0.0f32, 0u32); SORTED_SURFACES];
+        let mut count = 0;
+        probe.each_crossing(&self.culling, self.t_min, ray.t_max, |i, enter| {
+            let mut j = count;
+            while j > 0 && entries[j - 1].0 > enter {
+                entries[j] = entries[j - 1];
+                j -= 1;
+            }
+            entries[j] = (enter, i as u32);
+            count += 1;
+            ControlFlow::Continue(())
+        });
+        let entries = &entries[..count];
+        if entries.first().is_some_and(|&(enter, _)| enter <= self.t_min) {
+            let analytic = self.solve_in_order(ray, entries, ray.t_max, None);
+            let Some(a) = analytic else { return self.intersect_triangles(ray, ray.t_max) };
+            return self.intersect_triangles(ray, self.through(a.t)).or(analytic);
+        }
+        let best = self.intersect_triangles(ray, ray.t_max);
+        self.solve_in_order(ray, entries, best.as_ref().map_or(ray.t_max, |h| h.t), best)
+    }
+
+    /// Solves the analytic surfaces of `entries` (sorted by where the ray enters their boxes) until the next box
+    /// starts beyond the best hit so far, which is `best` at `best_t` (a triangle, or nothing).
+    #[inline]
+    fn solve_in_order(
         &self,
         ray: &Ray,
-        probe: &Probe,
+        entries: &[(f32, u32)],
         mut best_t: f32,
         mut best: Option<SurfaceHit>,
     ) -> Option<SurfaceHit> {
-        let mut entries = [(0.0f32, 0u32); SORTED_SURFACES];
-        let mut count = 0;
-        for i in 0..self.analytic.len() {
-            if let Some(enter) = probe.entry(&self.culling, i, self.t_min, best_t) {
-                let mut j = count;
-                while j > 0 && entries[j - 1].0 > enter {
-                    entries[j] = entries[j - 1];
-                    j -= 1;
-                }
-                entries[j] = (enter, i as u32);
-                count += 1;
-            }
-        }
         let mut best_index: Option<u32> = None;
-        for &(enter, i) in &entries[..count] {
+        for &(enter, i) in entries {
             if enter > best_t {
                 break;
             }
@@ -484,9 +457,16 @@ impl SceneGeometry {
             return true;
         };
         let r = Ray { origin: from, direction: dir, t_max };
-        !self.analytic.iter().enumerate().any(|(i, (_, a))| {
-            probe.may_hit(&self.culling, i, self.t_min, t_max) && a.intersect(&r, self.t_min).is_some()
-        })
+        let mut blocked = false;
+        probe.each_crossing(&self.culling, self.t_min, t_max, |i, _| {
+            blocked = self.analytic[i].1.intersect(&r, self.t_min).is_some();
+            if blocked {
+                ControlFlow::Break(())
+            } else {
+                ControlFlow::Continue(())
+            }
+        });
+        !blocked
     }
 }
 

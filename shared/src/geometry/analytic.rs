@@ -123,6 +123,11 @@ impl Bounds {
         (self.quadratic * distance + self.linear) * distance + self.constant
     }
 
+    /// The margin's coefficients of distance² and distance, and its constant.
+    pub(super) fn margin_coefficients(&self) -> (f32, f32, f32) {
+        (self.quadratic, self.linear, self.constant)
+    }
+
     /// The smallest box holding both, whose margin bounds both margins.
     pub fn union(&self, other: &Bounds, distance_between_anchors: f32) -> Bounds {
         // Seen from `self.anchor`, the other's origin distance is at most one more `distance_between_anchors`.

@@ -2,6 +2,7 @@
 
 pub mod accel;
 pub mod analytic;
+mod analytic_culling;
 #[cfg(feature = "embree")]
 mod embree;
 pub mod hit;
