@@ -1,5 +1,6 @@
 //! The scene's acceleration structure: a BVH over all triangles, built by obvhs (a compressed-wide BVH, the
-//! default) or, with the `embree` feature, by Embree; the analytic surfaces are few and tested directly.
+//! default) or, with the `embree` feature, by Embree; the analytic surfaces are few and solved directly, behind
+//! their boxes (`analytic_culling`).
 
 use super::{
     analytic::Analytic,
