@@ -7,7 +7,7 @@ use super::{
     analytic_culling::{AnalyticCulling, Probe},
     hit::SurfaceHit,
     mesh::MeshTriangle,
-    ray::Ray,
+    ray::{slab_entry, slab_inverse, Ray},
     surface_edges::SurfaceEdges,
 };
 use glam::{Vec3, Vec3A};
@@ -300,13 +300,14 @@ impl SceneGeometry {
 
     /// The closest surface along the ray, if any.
     pub fn intersect(&self, ray: &Ray) -> Option<SurfaceHit> {
-        let Some(probe) = self.culling.probe(ray.origin, ray.direction, self.t_min, ray.t_max) else {
-            return self.intersect_triangles(ray, ray.t_max);
+        let inv = slab_inverse(ray.direction);
+        let Some(probe) = self.culling.probe(ray.origin, inv, self.t_min, ray.t_max) else {
+            return self.intersect_triangles(ray, inv, ray.t_max);
         };
         if probe.enabled && self.analytic.len() <= SORTED_SURFACES {
-            return self.intersect_sorted(ray, &probe);
+            return self.intersect_sorted(ray, inv, &probe);
         }
-        let mut best = self.intersect_triangles(ray, ray.t_max);
+        let mut best = self.intersect_triangles(ray, inv, ray.t_max);
         let mut best_t = best.as_ref().map_or(ray.t_max, |h| h.t);
         probe.each_crossing(&self.culling, self.t_min, best_t, |i, enter| {
             let (object, a) = &self.analytic[i];
@@ -333,10 +334,12 @@ impl SceneGeometry {
         }
     }
 
-    /// The closest triangle along the ray before `t_max` (up to it, with Embree).
+    /// The closest triangle along the ray before `t_max` (up to it, with Embree); `inv` is
+    /// `slab_inverse(ray.direction)`, for the box around all triangles.
     #[inline]
-    fn intersect_triangles(&self, ray: &Ray, t_max: f32) -> Option<SurfaceHit> {
-        if self.culling.enabled && !self.crosses_triangle_box(ray, t_max) {
+    fn intersect_triangles(&self, ray: &Ray, inv: Vec3, t_max: f32) -> Option<SurfaceHit> {
+        let (lo, hi) = self.triangle_box;
+        if self.culling.enabled && slab_entry(lo, hi, ray.origin, inv, self.t_min, t_max).is_none() {
             return None;
         }
         match &self.accel {
@@ -362,18 +365,6 @@ impl SceneGeometry {
         }
     }
 
-    /// Whether the segment [t_min, t_max] of the ray crosses the box around all triangles.
-    #[inline]
-    fn crosses_triangle_box(&self, ray: &Ray, t_max: f32) -> bool {
-        let (lo, hi) = self.triangle_box;
-        // As in `AnalyticCulling::probe`: ±MAX keeps 0 × inf = NaN out of the slab test.
-        let inv = ray.direction.recip();
-        let inv = Vec3::select(inv.is_finite_mask(), inv, Vec3::splat(f32::MAX).copysign(ray.direction));
-        let a = (lo - ray.origin) * inv;
-        let b = (hi - ray.origin) * inv;
-        a.min(b).max_element().max(self.t_min) <= a.max(b).min_element().min(t_max)
-    }
-
     /// `intersect` for scenes with few analytic surfaces, solving them in the order the ray enters their boxes, so
     /// that the nearest hit comes early and every box entered beyond it is skipped (in a lens, the surfaces are
     /// stacked along the ray, and index order solves all of them for the rays that cross the stack back to front).
@@ -381,7 +372,7 @@ impl SceneGeometry {
     /// millimetres on, on one of them: those are solved before the triangles, whose BVH then needs to be searched
     /// only up to that hit. The answer is the one index order gives: the least t, ties to the lower index and to
     /// a triangle.
-    fn intersect_sorted(&self, ray: &Ray, probe: &Probe) -> Option<SurfaceHit> {
+    fn intersect_sorted(&self, ray: &Ray, inv: Vec3, probe: &Probe) -> Option<SurfaceHit> {
         let mut entries = [(0.0f32, 0u32); SORTED_SURFACES];
         let mut count = 0;
         probe.each_crossing(&self.culling, self.t_min, ray.t_max, |i, enter| {
@@ -397,10 +388,10 @@ impl SceneGeometry {
         let entries = &entries[..count];
         if entries.first().is_some_and(|&(enter, _)| enter <= self.t_min) {
             let analytic = self.solve_in_order(ray, entries, ray.t_max, None);
-            let Some(a) = analytic else { return self.intersect_triangles(ray, ray.t_max) };
-            return self.intersect_triangles(ray, self.through(a.t)).or(analytic);
+            let Some(a) = analytic else { return self.intersect_triangles(ray, inv, ray.t_max) };
+            return self.intersect_triangles(ray, inv, self.through(a.t)).or(analytic);
         }
-        let best = self.intersect_triangles(ray, ray.t_max);
+        let best = self.intersect_triangles(ray, inv, ray.t_max);
         self.solve_in_order(ray, entries, best.as_ref().map_or(ray.t_max, |h| h.t), best)
     }
 
@@ -454,7 +445,7 @@ impl SceneGeometry {
         if blocked {
             return false;
         }
-        let Some(probe) = self.culling.probe(from, dir, self.t_min, t_max) else {
+        let Some(probe) = self.culling.probe(from, slab_inverse(dir), self.t_min, t_max) else {
             return true;
         };
         let r = Ray { origin: from, direction: dir, t_max };

@@ -5,6 +5,7 @@
 //! a time: their corners and margins are stored by lane, and one slab test in `Vec4`s answers for four boxes.
 
 use super::analytic::{Analytic, Bounds};
+use super::ray::slab_entry;
 use glam::{Vec3, Vec4};
 use std::ops::ControlFlow;
 
@@ -64,15 +65,11 @@ impl AnalyticCulling {
         AnalyticCulling { boxes, count: analytic.len(), all, enabled: true }
     }
 
-    /// The ray's culling state, or `None` when its segment [t0, t1] misses every surface's box.
+    /// The culling state of the ray from `origin` with `inv` = `slab_inverse(direction)`, or `None` when its
+    /// segment [t0, t1] misses every surface's box.
     #[inline]
-    pub(super) fn probe(&self, origin: Vec3, direction: Vec3, t0: f32, t1: f32) -> Option<Probe> {
+    pub(super) fn probe(&self, origin: Vec3, inv: Vec3, t0: f32, t1: f32) -> Option<Probe> {
         let all = self.all.as_ref()?;
-        // A zero (or subnormal) component makes the ray parallel to that slab: ±MAX instead of ±inf keeps
-        // 0 × inf = NaN out of the slab test, and a ray that never moves along that axis cannot enter the box
-        // through it anyway (each box holds its surface with a margin to spare).
-        let inv = direction.recip();
-        let inv = Vec3::select(inv.is_finite_mask(), inv, Vec3::splat(f32::MAX).copysign(direction));
         let probe = Probe { origin, inv, distance: (origin - all.anchor).length(), enabled: self.enabled };
         (!self.enabled || probe.crosses(all, t0, t1)).then_some(probe)
     }
@@ -143,9 +140,7 @@ impl Probe {
     #[inline]
     fn crosses(&self, b: &Bounds, t0: f32, t1: f32) -> bool {
         let pad = Vec3::splat(2.0 * b.margin(self.distance));
-        let a = (b.min - pad - self.origin) * self.inv;
-        let c = (b.max + pad - self.origin) * self.inv;
-        a.min(c).max_element().max(t0) <= a.max(c).min_element().min(t1)
+        slab_entry(b.min - pad, b.max + pad, self.origin, self.inv, t0, t1).is_some()
     }
 }
 
@@ -153,6 +148,7 @@ impl Probe {
 mod tests {
     use super::*;
     use crate::geometry::analytic::{Annulus, LensSurface, Sphere};
+    use crate::geometry::ray::slab_inverse;
 
     fn surfaces() -> Vec<(u32, Analytic)> {
         // Nine surfaces (two full lanes and one of a third), stacked along z like a lens, and a sphere off axis.
@@ -202,7 +198,7 @@ mod tests {
                 direction = Vec3::Z * direction.z.signum(); // parallel to two slabs
             }
             let t1 = if next() < 0.5 { f32::INFINITY } else { 0.05 * next() };
-            let Some(probe) = culling.probe(origin, direction, 1e-7, t1) else { continue };
+            let Some(probe) = culling.probe(origin, slab_inverse(direction), 1e-7, t1) else { continue };
             let mut four = Vec::new();
             probe.each_crossing(&culling, 1e-7, t1, |i, enter| {
                 four.push((i, enter));
@@ -231,7 +227,7 @@ mod tests {
     fn a_break_stops_the_crossings_and_disabled_culling_reports_every_surface() {
         let analytic = surfaces();
         let mut culling = AnalyticCulling::new(&analytic);
-        let probe = culling.probe(Vec3::new(0.0, 0.0, 0.05), -Vec3::Z, 1e-7, f32::INFINITY).unwrap();
+        let probe = culling.probe(Vec3::new(0.0, 0.0, 0.05), slab_inverse(-Vec3::Z), 1e-7, f32::INFINITY).unwrap();
         let mut seen = Vec::new();
         probe.each_crossing(&culling, 1e-7, f32::INFINITY, |i, _| {
             seen.push(i);
@@ -243,7 +239,7 @@ mod tests {
         });
         assert_eq!(seen, [0, 1, 2]);
         culling.enabled = false;
-        let probe = culling.probe(Vec3::new(5.0, 5.0, 5.0), Vec3::X, 1e-7, f32::INFINITY).unwrap();
+        let probe = culling.probe(Vec3::new(5.0, 5.0, 5.0), slab_inverse(Vec3::X), 1e-7, f32::INFINITY).unwrap();
         let mut seen = Vec::new();
         probe.each_crossing(&culling, 1e-7, f32::INFINITY, |i, enter| {
             assert_eq!(enter, 1e-7);

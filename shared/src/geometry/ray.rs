@@ -34,3 +34,22 @@ pub fn offset_origin(p: Vec3, ng: Vec3, direction: Vec3) -> Vec3 {
         p - ng * eps
     }
 }
+
+/// 1 / direction for slab tests against boxes: a zero (or subnormal) component gives ±MAX instead of ±inf,
+/// which keeps 0 × inf = NaN out of the test; a ray that never moves along that axis cannot enter a box through
+/// it anyway (every box here holds its surfaces with a margin to spare).
+#[inline]
+pub fn slab_inverse(direction: Vec3) -> Vec3 {
+    let inv = direction.recip();
+    Vec3::select(inv.is_finite_mask(), inv, Vec3::splat(f32::MAX).copysign(direction))
+}
+
+/// Where the segment [t0, t1] of the ray from `origin` with `inv` = `slab_inverse(direction)` enters the box
+/// [`min`, `max`], if it crosses it.
+#[inline]
+pub fn slab_entry(min: Vec3, max: Vec3, origin: Vec3, inv: Vec3, t0: f32, t1: f32) -> Option<f32> {
+    let a = (min - origin) * inv;
+    let c = (max - origin) * inv;
+    let enter = a.min(c).max_element().max(t0);
+    (enter <= a.max(c).min_element().min(t1)).then_some(enter)
+}
