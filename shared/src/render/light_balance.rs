@@ -36,9 +36,9 @@ const SETTLED_PHASES: u32 = 4;
 /// What the steps of one trial L added up to.
 #[derive(Clone, Copy, Debug, Default)]
 struct Trial {
-    /// Σ over settled pixels and new phases of (phase value − the pixel's mean before the step)², luminance.
+    /// Σ over pixels and new phases of the squared deviations (`observe`), luminance.
     squared_deviation: f64,
-    /// Pixel-phases in that sum.
+    /// Their degrees of freedom.
     pixel_phases: f64,
     /// Every pixel-phase of the steps (the cost's denominator) and their rays.
     all_pixel_phases: f64,
@@ -95,9 +95,9 @@ impl LightBalance {
         (if self.turn == 0 { self.centre * SPREAD } else { self.centre / SPREAD }) as f32
     }
 
-    /// Takes in the step just rendered at `next()`: its new phases' spread around each pixel's earlier mean, and
-    /// its rays. Pixels that have seen a light directly are left out: their camera-side noise is no part of δ
-    /// over unlit pixels and does not depend on L.
+    /// Takes in the step just rendered at `next()`: its new phases' spread (around their own mean where a pixel
+    /// got two or more, else around the pixel's earlier mean), and its rays. Pixels that have seen a light
+    /// directly are left out: their camera-side noise is no part of δ over unlit pixels and does not depend on L.
     pub fn observe(&mut self, sums: &Accumulator, totals: RayTotals) {
         let moments = |i: usize| {
             let p = &sums.pixels[i];
@@ -115,14 +115,22 @@ impl LightBalance {
             let before = std::mem::replace(&mut self.previous[i], now);
             let new = now.phases.saturating_sub(before.phases) as f64;
             trial.all_pixel_phases += new;
-            if new == 0.0 || before.phases < SETTLED_PHASES || luminance_f64(sums.mean(i, Layer::VisibleLights)) > 0.0 {
+            if new == 0.0 || luminance_f64(sums.mean(i, Layer::VisibleLights)) > 0.0 {
                 continue;
             }
-            let m = before.sum / before.phases as f64;
-            // Σ_new (y − m)² = Σ_new y² − 2 m Σ_new y + n_new m².
-            let d = (now.sum_sq - before.sum_sq) - 2.0 * m * (now.sum - before.sum) + new * m * m;
-            trial.squared_deviation += d.max(0.0);
-            trial.pixel_phases += new;
+            let (sum, sum_sq) = (now.sum - before.sum, now.sum_sq - before.sum_sq);
+            if new >= 2.0 {
+                // The new phases' spread around their own mean: no earlier phases needed, and neither the noise
+                // of an earlier mean nor the image's drift as the radius shrinks adds to it.
+                // Σ_new (y − ȳ)² = Σ_new y² − (Σ_new y)² / n_new, with n_new − 1 degrees of freedom.
+                trial.squared_deviation += (sum_sq - sum * sum / new).max(0.0);
+                trial.pixel_phases += new - 1.0;
+            } else if before.phases >= SETTLED_PHASES {
+                let m = before.sum / before.phases as f64;
+                // Σ_new (y − m)² = Σ_new y² − 2 m Σ_new y + n_new m².
+                trial.squared_deviation += (sum_sq - 2.0 * m * sum + new * m * m).max(0.0);
+                trial.pixel_phases += new;
+            }
         }
         trial.backward_rays += totals.backward_rays.saturating_sub(self.previous_totals.backward_rays) as f64;
         let (t, p) = (totals, self.previous_totals);
@@ -158,8 +166,8 @@ impl LightBalance {
         } else {
             (a * c / (v0 * d)).sqrt() // L* = √(a C / (V₀ D))
         };
-        // Half-way in log L, and a factor 2 at most: a noisy fit moves L a little.
-        let moved = (self.centre * target).sqrt().clamp(self.centre / 2.0, self.centre * 2.0);
+        // A factor 2 at most: a noisy fit moves L a little.
+        let moved = target.clamp(self.centre / 2.0, self.centre * 2.0);
         moved.clamp(MIN_LIGHT_PATHS_PER_PIXEL, MAX_LIGHT_PATHS_PER_PIXEL)
     }
 }
@@ -170,35 +178,42 @@ mod tests {
     use crate::color::Rgb;
     use rand_core::{RngCore, SeedableRng};
 
-    /// Feeds the controller steps of a synthetic renderer whose phase values have variance V₀ + a/L and whose
-    /// phases cost `c` camera rays and `d` L light rays per pixel; returns the geometric mean of the centre over
-    /// the second half of `steps` steps.
-    fn run(v0: f64, a: f64, c: f64, d: f64, start: f32, steps: usize) -> f32 {
+    /// Feeds the controller steps of `per_step` phases of a synthetic renderer whose phase values have variance
+    /// V₀ + a/L and whose phases cost `c` camera rays and `d` L light rays per pixel; returns the centre after
+    /// each step.
+    fn centres(v0: f64, a: f64, c: f64, d: f64, start: f32, steps: usize, per_step: usize) -> Vec<f32> {
         let pixels = 1024;
         let mut sums = Accumulator::new(32, 32);
-        let mut log_centres = 0.0;
+        let mut centres = Vec::with_capacity(steps);
         let mut totals = RayTotals::default();
         let mut balance = LightBalance::new(start);
         let mut rng = rand_pcg::Pcg32::seed_from_u64(3);
         balance.observe(&sums, totals);
-        for step in 0..steps {
+        for _ in 0..steps {
             let l = balance.next() as f64;
             let sd = (v0 + a / l).sqrt();
-            for i in 0..pixels {
-                // Uniform with that standard deviation around 1 (a diffuse layer, no visible light).
-                let y = 1.0 + sd * 3f64.sqrt() * (2.0 * (rng.next_u32() as f64 / 4294967296.0) - 1.0);
-                let v = [Rgb::ZERO, Rgb::splat(y as f32), Rgb::ZERO, Rgb::ZERO];
-                sums.add_phase(i, &v, 1, 0);
+            for _ in 0..per_step {
+                for i in 0..pixels {
+                    // Uniform with that standard deviation around 1 (a diffuse layer, no visible light).
+                    let y = 1.0 + sd * 3f64.sqrt() * (2.0 * (rng.next_u32() as f64 / 4294967296.0) - 1.0);
+                    let v = [Rgb::ZERO, Rgb::splat(y as f32), Rgb::ZERO, Rgb::ZERO];
+                    sums.add_phase(i, &v, 1, 0);
+                }
+                totals.phases += 1;
+                totals.backward_rays += (c * pixels as f64) as u64;
+                totals.forward_rays += (d * l * pixels as f64 / LIGHT_RAY_COST) as u64;
             }
-            totals.phases += 1;
-            totals.backward_rays += (c * pixels as f64) as u64;
-            totals.forward_rays += (d * l * pixels as f64 / LIGHT_RAY_COST) as u64;
             balance.observe(&sums, totals);
-            if step >= steps / 2 {
-                log_centres += (balance.centre() as f64).ln();
-            }
+            centres.push(balance.centre());
         }
-        (log_centres / (steps - steps / 2) as f64).exp() as f32
+        centres
+    }
+
+    /// The geometric mean of the centre over the second half of `steps` one-phase steps.
+    fn run(v0: f64, a: f64, c: f64, d: f64, start: f32, steps: usize) -> f32 {
+        let c = centres(v0, a, c, d, start, steps, 1);
+        let half = &c[steps / 2..];
+        (half.iter().map(|&l| (l as f64).ln()).sum::<f64>() / half.len() as f64).exp() as f32
     }
 
     #[test]
@@ -211,6 +226,17 @@ mod tests {
         // Costly light paths (D = 16 C) call for a quarter of the light: √16.
         let costly = run(0.01, 0.16, 10.0, 160.0, 1.0, 400);
         assert!((0.75..=1.35).contains(&costly), "wanted about 1, got {costly}");
+    }
+
+    #[test]
+    fn steps_of_several_phases_reach_l_star_within_a_few_steps_and_stay() {
+        // A parallel round gives each pixel several phases: their own spread measures the trial from the first
+        // step on, so a fit follows every pair of steps. From L = 1 to L* = 0.25 (or 4) is two fits of a factor
+        // 2 each.
+        let c = centres(0.16, 0.01, 10.0, 10.0, 1.0, 40, 6);
+        assert!(c[3..].iter().all(|l| (0.2..=0.31).contains(l)), "not settled near 0.25 after 4 steps: {c:?}");
+        let c = centres(0.01, 0.16, 10.0, 10.0, 1.0, 40, 6);
+        assert!(c[3..].iter().all(|l| (2.8..=5.7).contains(l)), "not settled near 4 after 4 steps: {c:?}");
     }
 
     #[test]
