@@ -33,12 +33,45 @@ pub fn binary(name: &str) -> PathBuf {
     dir.join(name)
 }
 
-/// A fresh, empty folder for one test's outputs.
-pub fn scratch_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("photonfarm-e2e-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("cannot create a scratch folder");
-    dir
+/// A fresh, empty folder for one test's outputs, removed when it goes out of scope unless the test is failing:
+/// then it stays, and its path is printed, so that the failure's images and records can be looked at.
+pub struct Scratch(tempfile::TempDir);
+
+/// A new scratch folder named after `name` in the system's temporary folder.
+pub fn scratch_dir(name: &str) -> Scratch {
+    let dir = tempfile::Builder::new()
+        .prefix(&format!("photonfarm-e2e-{name}-"))
+        .tempdir()
+        .expect("cannot create a scratch folder");
+    Scratch(dir)
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            self.0.disable_cleanup(true);
+            eprintln!("the failing test's scratch folder is kept: {}", self.0.path().display());
+        }
+    }
+}
+
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        self.0.path()
+    }
+}
+
+impl AsRef<Path> for Scratch {
+    fn as_ref(&self) -> &Path {
+        self.0.path()
+    }
+}
+
+impl AsRef<std::ffi::OsStr> for Scratch {
+    fn as_ref(&self) -> &std::ffi::OsStr {
+        self.0.path().as_os_str()
+    }
 }
 
 /// The shipped Cornell box at `size` × `size` pixels, copied with its meshes into `dir`: a scene the tests can
@@ -208,5 +241,30 @@ pub mod link {
         }
         drop(tx);
         let _ = writer.await;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::scratch_dir;
+
+    #[test]
+    fn a_scratch_folder_is_removed_after_a_passing_test_and_kept_after_a_failing_one() {
+        let passed = scratch_dir("scratch-passes");
+        std::fs::write(passed.join("image.exr"), b"x").unwrap();
+        let path = passed.to_path_buf();
+        drop(passed);
+        assert!(!path.exists(), "{} outlived its test", path.display());
+
+        let kept = std::thread::spawn(|| {
+            let failing = scratch_dir("scratch-fails");
+            std::fs::write(failing.join("image.exr"), b"x").unwrap();
+            std::panic::panic_any(failing.to_path_buf());
+        })
+        .join()
+        .unwrap_err();
+        let kept = kept.downcast_ref::<std::path::PathBuf>().expect("the failing test's folder");
+        assert!(kept.join("image.exr").is_file(), "{} was removed with the failing test", kept.display());
+        std::fs::remove_dir_all(kept).unwrap();
     }
 }

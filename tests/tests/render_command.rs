@@ -165,7 +165,8 @@ fn render_with_a_reference_reports_the_true_error() {
 fn a_memory_limit_makes_async_give_up_threads_and_other_methods_refuse_up_front() {
     // 512 × 512: async's per-thread buffers (about 160 MB per extra thread) dwarf the variation of the memory a
     // process has in use after loading a scene.
-    let scene = cornell_at(&scratch_dir("memory-limit"), 512);
+    let scene_dir = scratch_dir("memory-limit");
+    let scene = cornell_at(&scene_dir, 512);
     let scene = scene.to_str().unwrap();
     // Async's estimate is about 1.1 kB per pixel at one thread and 2 kB at two: about 270 and 490 MiB over what is
     // in use.
@@ -180,10 +181,11 @@ fn a_memory_limit_makes_async_give_up_threads_and_other_methods_refuse_up_front(
     assert!(flags.iter().any(|f| f.as_str().unwrap().starts_with("--memory-limit 300 MiB: async needs")), "{flags:?}");
     assert!(r["peak_memory_bytes"].as_u64().unwrap() < 300 << 20);
 
+    let sync_out = scratch_dir("memory-limit-sync");
     let refused = Command::new(binary("coordinator"))
         .args(["render", scene, "--method", "sync", "--threads", "2", "--phases", "2", "--memory-limit", "20M"])
         .arg("--out")
-        .arg(scratch_dir("memory-limit-sync"))
+        .arg(&sync_out)
         .current_dir(repo_root())
         .output()
         .unwrap();

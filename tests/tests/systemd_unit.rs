@@ -29,7 +29,8 @@ fn systemd_analyze(args: &[&str], unit: &Path) -> (bool, String) {
 
 #[test]
 fn the_worker_unit_verifies_without_a_warning() {
-    let unit = unit_with_built_worker(&scratch_dir("systemd-verify"));
+    let dir = scratch_dir("systemd-verify");
+    let unit = unit_with_built_worker(&dir);
     // verify exits 0 on unknown keys and unparsable values, which it only warns about: any output is a fault.
     let (ok, text) = systemd_analyze(&["verify"], &unit);
     assert!(ok && text.trim().is_empty(), "{text}");
@@ -37,7 +38,8 @@ fn the_worker_unit_verifies_without_a_warning() {
 
 #[test]
 fn the_worker_unit_takes_its_secret_from_a_credential_and_is_hardened() {
-    let unit = unit_with_built_worker(&scratch_dir("systemd-security"));
+    let dir = scratch_dir("systemd-security");
+    let unit = unit_with_built_worker(&dir);
     let text = std::fs::read_to_string(&unit).unwrap();
     for line in ["LoadCredential=secret:", "--secret-file %d/secret", "DynamicUser=yes", "ProtectSystem=strict"] {
         assert!(text.contains(line), "the unit lacks {line}");

@@ -5,7 +5,7 @@
 //! without keys unless `--insecure` is given.
 
 use end_to_end::link::{Proxy, Shape};
-use end_to_end::{binary, cornell_at, repo_root, scratch_dir};
+use end_to_end::{binary, cornell_at, repo_root, scratch_dir, Scratch};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -77,7 +77,7 @@ fn deltas_in(bytes: &[u8]) -> usize {
 }
 
 struct Setup {
-    dir: PathBuf,
+    dir: Scratch,
     scene: PathBuf,
     /// A line of the scene file that a plaintext link carries verbatim.
     scene_line: &'static str,

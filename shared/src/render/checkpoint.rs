@@ -221,9 +221,8 @@ mod tests {
             },
         ];
         let c = Checkpoint::new(&a, "abc", Method::ThreeLevel, settings, 1, 2.5, RayTotals::default(), &history);
-        let dir = std::env::temp_dir().join(format!("pf-checkpoint-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("checkpoint.bin");
+        let dir = tempfile::Builder::new().prefix("pf-checkpoint-").tempdir().unwrap();
+        let path = dir.path().join("checkpoint.bin");
         c.save(&path).unwrap();
         let back = Checkpoint::decode(&std::fs::read(&path).unwrap()).unwrap();
         assert_eq!(back, c);
@@ -263,9 +262,8 @@ quad = {{ corner = [-1.0, -1.0, 0.0], edge1 = [2.0, 0.0, 0.0], edge2 = [0.0, 2.0
 
     #[test]
     fn a_checkpoint_of_another_scene_or_size_is_refused_before_its_sums_are_decoded() {
-        let dir = std::env::temp_dir().join(format!("pf-checkpoint-scene-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("checkpoint.bin");
+        let dir = tempfile::Builder::new().prefix("pf-checkpoint-scene-").tempdir().unwrap();
+        let path = dir.path().join("checkpoint.bin");
         let (scene, c) = empty_scene_and_checkpoint(8, 4);
         c.save(&path).unwrap();
         assert_eq!(Checkpoint::load(&path, &scene).unwrap(), c);
@@ -288,9 +286,8 @@ quad = {{ corner = [-1.0, -1.0, 0.0], edge1 = [2.0, 0.0, 0.0], edge2 = [0.0, 2.0
 
     #[test]
     fn a_file_larger_than_any_checkpoint_of_the_scene_is_refused_unread() {
-        let dir = std::env::temp_dir().join(format!("pf-checkpoint-large-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("checkpoint.bin");
+        let dir = tempfile::Builder::new().prefix("pf-checkpoint-large-").tempdir().unwrap();
+        let path = dir.path().join("checkpoint.bin");
         let (scene, _) = empty_scene_and_checkpoint(2, 2);
         let max = Checkpoint::max_file_bytes(&scene);
         // A sparse file: its size, not its content, is what is refused.
