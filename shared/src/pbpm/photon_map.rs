@@ -26,6 +26,9 @@ pub struct PhotonMap {
     order: Vec<u32>,
 }
 
+/// Cells a photon's sphere may overlap for its buckets to be told apart by a scan rather than a sort.
+const SCANNED_CELLS: usize = 8;
+
 /// The grid's cell size and hash table size.
 #[derive(Clone, Copy, Default)]
 struct Grid {
@@ -55,20 +58,77 @@ impl Grid {
     }
 
     /// Buckets of the cells a photon's sphere overlaps, each once: a photon whose cells collide in one bucket
-    /// must be entered there once, or it would be gathered twice.
+    /// must be entered there once, or it would be gathered twice. A sphere of about the mean radius overlaps at
+    /// most eight cells of three mean radii, where a scan of the buckets found so far is cheaper than a sort;
+    /// the rare large sphere is sorted.
     fn buckets_of(&self, p: &BackwardPhoton, out: &mut Vec<usize>) {
         let r = Vec3::splat(p.radius2.sqrt());
         let (lo, hi) = (self.cell(p.position - r), self.cell(p.position + r));
+        let cells = (0..3).map(|a| (hi[a] - lo[a] + 1) as usize).product::<usize>();
         out.clear();
         for z in lo[2]..=hi[2] {
             for y in lo[1]..=hi[1] {
                 for x in lo[0]..=hi[0] {
-                    out.push(self.bucket([x, y, z]));
+                    let b = self.bucket([x, y, z]);
+                    if cells > SCANNED_CELLS || !out.contains(&b) {
+                        out.push(b);
+                    }
                 }
             }
         }
-        out.sort_unstable();
-        out.dedup();
+        if cells > SCANNED_CELLS {
+            out.sort_unstable();
+            out.dedup();
+        }
+    }
+}
+
+/// The photons a build reads, by index: the map's own buffer, or a camera pass's lists one after another.
+#[derive(Clone, Copy)]
+enum Photons<'a> {
+    Flat(&'a [BackwardPhoton]),
+    /// The lists and the index of each list's first photon.
+    Lists(&'a [Vec<BackwardPhoton>], &'a [usize]),
+}
+
+impl Photons<'_> {
+    fn len(&self) -> usize {
+        match *self {
+            Photons::Flat(p) => p.len(),
+            Photons::Lists(lists, firsts) => firsts.last().map_or(0, |f| f + lists[lists.len() - 1].len()),
+        }
+    }
+
+    /// Calls `f` with the index and the photon of every photon in `range`, in index order.
+    fn each_in(&self, range: std::ops::Range<usize>, mut f: impl FnMut(usize, &BackwardPhoton)) {
+        match *self {
+            Photons::Flat(p) => p[range.clone()].iter().enumerate().for_each(|(i, p)| f(range.start + i, p)),
+            Photons::Lists(lists, firsts) => {
+                // The last list that starts at or before the index holds it (empty lists start where the next
+                // one does).
+                let mut l = firsts.partition_point(|&s| s <= range.start).saturating_sub(1);
+                let mut i = range.start;
+                while i < range.end {
+                    let end = (range.end - firsts[l]).min(lists[l].len());
+                    for (k, p) in lists[l][i - firsts[l]..end].iter().enumerate() {
+                        f(i + k, p);
+                    }
+                    i = firsts[l] + end;
+                    l += 1;
+                }
+            }
+        }
+    }
+
+    /// Σ of the photons' radii, with the current rayon pool's threads when `parallel`.
+    fn radius_sum(&self, parallel: bool) -> f64 {
+        let radius = |p: &BackwardPhoton| p.radius2.sqrt() as f64;
+        match (*self, parallel) {
+            (Photons::Flat(p), true) => p.par_iter().map(radius).sum(),
+            (Photons::Flat(p), false) => p.iter().map(radius).sum(),
+            (Photons::Lists(lists, _), true) => lists.par_iter().flatten().map(radius).sum(),
+            (Photons::Lists(lists, _), false) => lists.iter().flatten().map(radius).sum(),
+        }
     }
 }
 
@@ -110,15 +170,34 @@ impl PhotonMap {
 
     /// Replaces the photons by the lists' photons, in list order, and builds the grid over them, both with
     /// `exec`'s threads: the same grid, entry for entry, whatever the executor.
+    /// The grid is built over the lists where they lie, and each photon is then copied once, straight to its
+    /// place in grid order.
     pub fn build_from_lists(&mut self, lists: &[Vec<BackwardPhoton>], exec: Executor) {
-        self.copy_lists(lists, exec);
-        self.build_with(exec.threads());
+        let mut firsts = Vec::with_capacity(lists.len());
+        let mut total = 0;
+        for list in lists {
+            firsts.push(total);
+            total += list.len();
+        }
+        let room = lists.iter().map(Vec::capacity).sum::<usize>().max(total);
+        if self.photons.capacity() < room {
+            self.photons.reserve_exact(room - self.photons.len());
+        }
+        let source = Photons::Lists(lists, &firsts);
+        self.build_grid(source, exec.threads());
+        self.photons.clear();
+        if let Some(&any) = lists.iter().find_map(|l| l.first()) {
+            // Every slot is overwritten: `order` is a permutation.
+            self.photons.resize(total, any);
+            let (photons, order) = (&mut self.photons, &self.order);
+            source.each_in(0..total, |i, p| photons[order[i] as usize] = *p);
+        }
     }
 
     /// Takes `photons` as the map's own and builds the grid over them with `exec`'s threads.
     pub fn build_from(&mut self, photons: Vec<BackwardPhoton>, exec: Executor) {
         self.photons = photons;
-        self.build_with(exec.threads());
+        self.build_in_place(exec.threads());
     }
 
     /// Hands the photon buffer over, emptied but with its room, for the next phase's camera pass to fill.
@@ -164,36 +243,43 @@ impl PhotonMap {
     /// cells per photon to enter; three radii measured fastest on `cornell` (build and forward pass together).
     /// Sizes the hash table to a power of two near half the photon count: nearby photons share cells, so this
     /// keeps the load low while the table stays in cache during the build; collisions only add candidates.
-    fn set_grid(&mut self, mean_radius: f64) -> usize {
-        let size = (self.photons.len() / 2).next_power_of_two().max(16);
+    fn set_grid(&mut self, mean_radius: f64, photons: usize) -> usize {
+        let size = (photons / 2).next_power_of_two().max(16);
         self.grid = Grid { inv_cell: 1.0 / (3.0 * mean_radius as f32).max(1e-12), mask: (size - 1) as u32 };
         size
     }
 
     /// Builds the grid over the current photons on the calling thread.
     pub fn build(&mut self) {
-        self.build_with(1);
+        self.build_in_place(1);
     }
 
     /// Builds the same grid as `build`, entry for entry, with the threads of the current rayon pool (a
     /// synchronous group).
     pub fn build_parallel(&mut self) {
-        self.build_with(rayon::current_num_threads().max(1));
+        self.build_in_place(rayon::current_num_threads().max(1));
+    }
+
+    /// Builds the grid over the map's own photons in `parts` parts and moves them into grid order.
+    fn build_in_place(&mut self, parts: usize) {
+        let photons = std::mem::take(&mut self.photons);
+        self.build_grid(Photons::Flat(&photons), parts);
+        self.photons = photons;
+        self.put_photons_in_grid_order();
     }
 
     /// Counting sort of the (bucket, photon) pairs in `parts` parts: part p finds the pairs of the p-th slice of
     /// the photons, sorted into the bucket ranges; range r then counts and places its buckets' pairs, reading
-    /// the parts in order. Each bucket therefore lists its photons in photon order, whatever `parts` is.
-    fn build_with(&mut self, parts: usize) {
-        self.built = !self.photons.is_empty();
+    /// the parts in order. Each bucket therefore lists its photons in photon order, whatever `parts` is. Then
+    /// `order` is each photon's place in grid order and the entries name those places.
+    fn build_grid(&mut self, photons: Photons, parts: usize) {
+        let len = photons.len();
+        self.built = len > 0;
         if !self.built {
             return;
         }
-        let radius = |p: &BackwardPhoton| p.radius2.sqrt() as f64;
-        let sum_r: f64 =
-            if parts > 1 { self.photons.par_iter().map(radius).sum() } else { self.photons.iter().map(radius).sum() };
-        let size = self.set_grid(sum_r / self.photons.len() as f64);
-        let Self { photons, grid, starts, entries, pairs, .. } = self;
+        let size = self.set_grid(photons.radius_sum(parts > 1) / len as f64, len);
+        let Self { grid, starts, entries, pairs, .. } = self;
         let grid = *grid;
         // Buckets range_start(r)..range_start(r + 1) form range r.
         let range_start = |r: usize| r * size / parts;
@@ -202,15 +288,15 @@ impl PhotonMap {
 
         // 1. The pairs, found once per photon: the expensive part.
         pairs.resize_with(parts * parts, Vec::new);
-        let per_part = photons.len().div_ceil(parts);
+        let per_part = len.div_ceil(parts);
         let find_pairs = |(p, lists): (usize, &mut [Vec<u64>])| {
             lists.iter_mut().for_each(Vec::clear);
-            let first = (p * per_part).min(photons.len());
-            let last = (first + per_part).min(photons.len());
+            let first = (p * per_part).min(len);
+            let last = (first + per_part).min(len);
             let mut buckets = Vec::with_capacity(27);
-            for (i, photon) in photons[first..last].iter().enumerate() {
+            photons.each_in(first..last, |i, photon| {
                 grid.buckets_of(photon, &mut buckets);
-                let pair = |b: usize| ((b as u64) << 32) | (first + i) as u64;
+                let pair = |b: usize| ((b as u64) << 32) | i as u64;
                 if let [list] = lists {
                     list.extend(buckets.iter().map(|&b| pair(b)));
                 } else {
@@ -218,7 +304,7 @@ impl PhotonMap {
                         lists[range_of(b)].push(pair(b));
                     }
                 }
-            }
+            });
         };
         if parts > 1 {
             pairs.par_chunks_mut(parts).enumerate().for_each(find_pairs);
@@ -271,17 +357,17 @@ impl PhotonMap {
             ranges.into_iter().for_each(sort_range);
         }
         starts[size] = total as u32;
-        self.put_photons_in_grid_order();
+        self.grid_order(len);
     }
 
-    /// Moves the photons into the order in which the entries first name them, and renames the entries to match,
-    /// so that a bucket's candidates lie side by side in memory: a gather then reads a few runs of photons
-    /// instead of one cache line per candidate. Entries keep their order, so the grid is the same whatever the
-    /// threads that built it.
-    fn put_photons_in_grid_order(&mut self) {
-        let Self { photons, entries, order, .. } = self;
+    /// Gives each photon its place in the order in which the entries first name them, in `order`, and renames
+    /// the entries to match, so that a bucket's candidates lie side by side in memory: a gather then reads a few
+    /// runs of photons instead of one cache line per candidate. Entries keep their order, so the grid is the same
+    /// whatever the threads that built it.
+    fn grid_order(&mut self, photons: usize) {
+        let Self { entries, order, .. } = self;
         order.clear();
-        order.resize(photons.len(), u32::MAX);
+        order.resize(photons, u32::MAX);
         let mut next = 0;
         for e in entries.iter_mut() {
             let place = &mut order[*e as usize];
@@ -291,9 +377,13 @@ impl PhotonMap {
             }
             *e = *place;
         }
-        // Every photon is entered in its own cell's bucket, so `order` is a permutation: apply it in place, one
-        // cycle at a time.
-        debug_assert_eq!(next as usize, photons.len());
+        // Every photon is entered in its own cell's bucket, so `order` is a permutation.
+        debug_assert_eq!(next as usize, photons);
+    }
+
+    /// Moves the map's own photons to their places in `order`, one cycle of the permutation at a time.
+    fn put_photons_in_grid_order(&mut self) {
+        let Self { photons, order, .. } = self;
         for start in 0..photons.len() {
             let mut to = order[start] as usize;
             while to != start {
@@ -379,7 +469,7 @@ mod tests {
     }
 
     #[test]
-    fn parallel_build_makes_the_sequential_grid_entry_for_entry() {
+    fn every_build_makes_the_sequential_grid_entry_for_entry() {
         let mut s = Sampler::new(2, Pass::Camera, 1, 1);
         let photons: Vec<BackwardPhoton> = (0..3000)
             .map(|i| photon(Vec3::new(s.next_f32(), s.next_f32(), s.next_f32()), 0.01 + 0.05 * s.next_f32(), i))
@@ -400,6 +490,14 @@ mod tests {
             assert_eq!(parallel.photons, sequential.photons, "{threads} threads");
             assert_eq!(parallel.starts, sequential.starts, "{threads} threads");
             assert_eq!(parallel.entries, sequential.entries, "{threads} threads");
+            // Built over the lists where they lie, each photon then copied straight to its place.
+            for exec in [Executor::CurrentPool, Executor::CallingThread] {
+                let mut from_lists = PhotonMap::new();
+                pool.install(|| from_lists.build_from_lists(&lists, exec));
+                assert_eq!(from_lists.photons, sequential.photons, "{threads} threads, {exec:?}");
+                assert_eq!(from_lists.starts, sequential.starts, "{threads} threads, {exec:?}");
+                assert_eq!(from_lists.entries, sequential.entries, "{threads} threads, {exec:?}");
+            }
         }
         // Fewer photons than last phase: the buffer shrinks to the new lists.
         parallel.copy_from_lists(&lists[..1]);
