@@ -10,6 +10,7 @@ use crate::output_folder::{self, Reference};
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use photonfarm::accumulation::{Accumulator, LitMask};
+use photonfarm::ghost::sensor_ghosts;
 use photonfarm::protocol::Secret;
 use photonfarm::ray_map::{self, Recorder};
 use photonfarm::render::active_tiles::DEFAULT_TILE;
@@ -60,6 +61,9 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let bar = progress_bar(args.quiet);
 
     let mut notes = Vec::new();
+    if stop.target_error.is_some() && !args.uniform && sensor_ghosts_keep_tiles(&args, &scene) {
+        notes.push(TILES_OFF_FOR_SENSOR_GHOSTS.to_string());
+    }
     let recorder = start_ray_map(&args, &scene, &settings, &dir)?;
     let (mut engine, layout) =
         start_engine(&args, &scene, settings, &dir, checkpoint.as_ref(), recorder.clone(), &mut notes)?;
@@ -435,15 +439,29 @@ fn start_engine<'s>(
 }
 
 /// The tile edge of an adaptive run: with a target error, unless `--uniform`, `--adaptive-tile`'s, else
-/// `--tile-size`'s, by default the masks' 32 pixels.
-fn adaptive_tile_edge(args: &RenderArgs, stop: &StopRule) -> Option<u32> {
-    (stop.target_error.is_some() && !args.uniform)
-        .then(|| args.adaptive_tile.or(args.tile_size).unwrap_or(DEFAULT_TILE))
+/// `--tile-size`'s, by default the masks' 32 pixels. A scene whose light paths register ghosts on its sensor
+/// renders every tile unless `--adaptive-tile` is given (`sensor_ghosts_keep_tiles`).
+fn adaptive_tile_edge(args: &RenderArgs, scene: &Scene, stop: &StopRule) -> Option<u32> {
+    if stop.target_error.is_none() || args.uniform || sensor_ghosts_keep_tiles(args, scene) {
+        return None;
+    }
+    Some(args.adaptive_tile.or(args.tile_size).unwrap_or(DEFAULT_TILE))
 }
+
+/// True when `scene`'s light paths register ghosts on its sensor and `--adaptive-tile` does not ask for tiles
+/// anyway: every tile then renders every round.
+fn sensor_ghosts_keep_tiles(args: &RenderArgs, scene: &Scene) -> bool {
+    args.adaptive_tile.is_none() && sensor_ghosts(scene)
+}
+
+/// Why a run with a target error renders every tile of a scene whose light paths register ghosts on its sensor.
+const TILES_OFF_FOR_SENSOR_GHOSTS: &str = "adaptive tiles are off: this scene's light paths register its \
+    ghosts on the sensor, a round's light paths shrink with the tiles it renders, and once tiles retire the \
+    others get fewer ghost registrations per phase, which slows the run (--adaptive-tile PX turns tiles on)";
 
 /// The tiles of an adaptive run (`adaptive_tile_edge`), every one active.
 fn adaptive_tiles(args: &RenderArgs, scene: &Scene, stop: &StopRule) -> Result<Option<ActiveTiles>> {
-    let Some(tile) = adaptive_tile_edge(args, stop) else { return Ok(None) };
+    let Some(tile) = adaptive_tile_edge(args, scene, stop) else { return Ok(None) };
     Ok(Some(
         ActiveTiles::all(scene.camera.width, scene.camera.height, tile)
             .map_err(|e| anyhow::anyhow!("--adaptive-tile / --tile-size: {e}"))?,
@@ -530,7 +548,7 @@ impl Outputs<'_> {
             bytes_per_pixel: engine.bytes_per_pixel(),
             error: engine.sums().error(self.lit),
             lit_mask: Some(self.lit.record(self.lit_seconds)),
-            adaptive_tile: adaptive_tile_edge(self.args, self.stop),
+            adaptive_tile: adaptive_tile_edge(self.args, self.scene, self.stop),
             forecast: forecast.record(),
             pixel_phases: engine.sums().pixels.iter().map(|p| p.phases as u64).sum(),
             session: self.session,
@@ -810,7 +828,7 @@ mod tests {
         ] {
             let args = render_args(&[&target[..], extra].concat());
             let stop = stop_rule(&args).unwrap();
-            assert_eq!(adaptive_tile_edge(&args, &stop), Some(edge), "{extra:?}");
+            assert_eq!(adaptive_tile_edge(&args, &scene, &stop), Some(edge), "{extra:?}");
             let t = adaptive_tiles(&args, &scene, &stop).unwrap().expect("adaptive tiles");
             assert_eq!(t.tile, edge, "{extra:?}");
         }
@@ -818,5 +836,18 @@ mod tests {
         assert!(tiles(&[&target[..], &["--uniform", "--adaptive-tile", "8"]].concat()).unwrap().is_none());
         let e = tiles(&[&target[..], &["--adaptive-tile", "0"]].concat()).unwrap_err().to_string();
         assert!(e.contains("--adaptive-tile"), "{e}");
+    }
+
+    #[test]
+    fn a_lens_whose_light_paths_register_ghosts_renders_every_tile_unless_adaptive_tile_asks() {
+        let lens = Scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/lens.toml")).unwrap();
+        assert!(sensor_ghosts(&lens));
+        let edge = |extra: &[&str]| {
+            let args = render_args(&[&["--target-error", "0.5"][..], extra].concat());
+            adaptive_tile_edge(&args, &lens, &stop_rule(&args).unwrap())
+        };
+        assert_eq!(edge(&[]), None);
+        assert_eq!(edge(&["--tile-size", "16"]), None);
+        assert_eq!(edge(&["--adaptive-tile", "16"]), Some(16));
     }
 }
