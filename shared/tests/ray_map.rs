@@ -16,9 +16,12 @@ use proptest::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-/// A folder for one test's ray maps, removed when it goes out of scope.
-fn scratch(name: &str) -> tempfile::TempDir {
-    tempfile::Builder::new().prefix(&format!("photonfarm-raymap-{name}-")).tempdir().unwrap()
+/// A folder for one test's ray maps and its path: the folder is removed when the first goes out of scope, so
+/// bind it to a name (`_scratch`), not to `_`.
+fn scratch(name: &str) -> (tempfile::TempDir, PathBuf) {
+    let dir = tempfile::Builder::new().prefix(&format!("photonfarm-raymap-{name}-")).tempdir().unwrap();
+    let path = dir.path().to_path_buf();
+    (dir, path)
 }
 
 /// A point light at (0, 1, 0) under a small ceiling mirror at y = 2, with a black shade just below the light
@@ -58,8 +61,7 @@ fn sum_bits(e: &Engine) -> Vec<u64> {
 fn recording_every_path_leaves_a_one_thread_runs_sums_bit_identical() {
     let sc = scene(MIRROR_SCENE);
     for method in [Method::Pbpm, Method::Path] {
-        let scratch_dir = scratch(&format!("identical-{}", method.name()));
-        let dir = scratch_dir.path().to_path_buf();
+        let (_scratch, dir) = scratch(&format!("identical-{}", method.name()));
         let (plain, recorded) = std::thread::scope(|s| {
             let a = s.spawn(|| sum_bits(&render(&sc, method, 3, None)));
             let b = s.spawn(|| sum_bits(&render(&sc, method, 3, Some((&dir, 1.0)))));
@@ -83,8 +85,7 @@ fn small_lens() -> Scene {
 fn light_paths_reaching_the_lens_sensor_are_recorded_with_their_pixel_and_leave_the_sums_bit_identical() {
     let sc = small_lens();
     for method in [Method::Pbpm, Method::Path] {
-        let scratch_dir = scratch(&format!("lens-{}", method.name()));
-        let dir = scratch_dir.path().to_path_buf();
+        let (_scratch, dir) = scratch(&format!("lens-{}", method.name()));
         let (plain, recorded) = std::thread::scope(|s| {
             let a = s.spawn(|| sum_bits(&render(&sc, method, 2, None)));
             let b = s.spawn(|| sum_bits(&render(&sc, method, 2, Some((&dir, 1.0)))));
@@ -105,8 +106,7 @@ fn light_paths_reaching_the_lens_sensor_are_recorded_with_their_pixel_and_leave_
 #[test]
 fn a_fraction_records_about_that_share_of_the_paths_and_the_same_ones_every_run() {
     let sc = scene(MIRROR_SCENE);
-    let (scratch_a, scratch_b) = (scratch("fraction-a"), scratch("fraction-b"));
-    let (a, b) = (scratch_a.path().to_path_buf(), scratch_b.path().to_path_buf());
+    let ((_scratch_a, a), (_scratch_b, b)) = (scratch("fraction-a"), scratch("fraction-b"));
     render(&sc, Method::Pbpm, 4, Some((&a, 0.25)));
     render(&sc, Method::Pbpm, 4, Some((&b, 0.25)));
     let (_, pa, _) = read_all(&a).unwrap();
@@ -123,8 +123,7 @@ fn a_fraction_records_about_that_share_of_the_paths_and_the_same_ones_every_run(
 #[test]
 fn in_the_mirror_scene_every_path_reaching_the_mirrored_spot_is_selected_by_a_reflection_at_the_mirror() {
     let sc = scene(MIRROR_SCENE);
-    let scratch_dir = scratch("mirror");
-    let dir = scratch_dir.path().to_path_buf();
+    let (_scratch, dir) = scratch("mirror");
     render(&sc, Method::Pbpm, 6, Some((&dir, 1.0)));
     let (header, paths, cut) = read_all(&dir).unwrap();
     assert_eq!(cut, 0);
@@ -199,8 +198,7 @@ fn write_map(dir: &Path, paths: &[RecordedPath]) -> PathBuf {
 
 #[test]
 fn recorded_paths_read_back_exactly_across_many_portions() {
-    let scratch_dir = scratch("round-trip");
-    let dir = scratch_dir.path().to_path_buf();
+    let (_scratch, dir) = scratch("round-trip");
     // Enough paths for several 1 MiB portions.
     let paths = fabricated(40_000);
     let file = write_map(&dir, &paths);
@@ -217,8 +215,7 @@ fn recorded_paths_read_back_exactly_across_many_portions() {
 
 #[test]
 fn a_truncated_map_reads_every_whole_portion_and_says_what_it_left() {
-    let scratch_dir = scratch("truncated");
-    let dir = scratch_dir.path().to_path_buf();
+    let (_scratch, dir) = scratch("truncated");
     let paths = fabricated(40_000);
     let file = write_map(&dir, &paths);
     let bytes = std::fs::read(&file).unwrap();
@@ -231,8 +228,7 @@ fn a_truncated_map_reads_every_whole_portion_and_says_what_it_left() {
 
 #[test]
 fn a_corrupt_portion_is_an_error_naming_its_byte_after_the_whole_portions_before_it() {
-    let scratch_dir = scratch("corrupt");
-    let dir = scratch_dir.path().to_path_buf();
+    let (_scratch, dir) = scratch("corrupt");
     let paths = fabricated(40_000);
     let file = write_map(&dir, &paths);
     let mut bytes = std::fs::read(&file).unwrap();
@@ -276,8 +272,7 @@ fn read_stream(path: &Path, feed: Option<Vec<u8>>) -> (bool, Vec<RecordedPath>, 
 
 #[test]
 fn a_stream_that_cannot_be_mapped_is_read_from_a_pipe_with_the_same_paths_and_cut_as_the_mapped_file() {
-    let scratch_dir = scratch("pipe");
-    let dir = scratch_dir.path().to_path_buf();
+    let (_scratch, dir) = scratch("pipe");
     let paths = fabricated(40_000);
     let file = write_map(&dir, &paths);
     let bytes = std::fs::read(&file).unwrap();
@@ -306,8 +301,7 @@ fn a_stream_that_cannot_be_mapped_is_read_from_a_pipe_with_the_same_paths_and_cu
 
 #[test]
 fn another_format_version_or_a_foreign_file_is_refused_with_a_clear_error() {
-    let scratch_dir = scratch("version");
-    let dir = scratch_dir.path().to_path_buf();
+    let (_scratch, dir) = scratch("version");
     let file = write_map(&dir, &fabricated(10));
     let mut bytes = std::fs::read(&file).unwrap();
     bytes[8..12].copy_from_slice(&(VERSION + 1).to_le_bytes());
