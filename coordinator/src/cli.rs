@@ -113,6 +113,11 @@ pub struct ReferenceArgs {
     /// Seed, kept apart from the bench's (1, 2, …) so the reference's noise is independent of the runs'.
     #[arg(long, default_value_t = 1000)]
     pub seed: u64,
+    /// A PBPM reference's initial photon radius in pixel footprints (`render --radius-scale`): smaller than the
+    /// scene's where its photon discs blur a sharp caustic, so that the reference's own bias stays below its
+    /// noise.
+    #[arg(long)]
+    pub radius_scale: Option<f32>,
     /// Folder for <scene>-<path|pbpm>.exr and .json.
     #[arg(long, default_value = "scenes/references")]
     pub out: PathBuf,

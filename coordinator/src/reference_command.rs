@@ -37,6 +37,9 @@ pub fn run(args: ReferenceArgs) -> Result<()> {
     if let Some(t) = &args.topology {
         command.extend(["--topology".into(), t.clone()]);
     }
+    if let Some(r) = args.radius_scale {
+        command.extend(["--radius-scale".into(), r.to_string()]);
+    }
     let exe = std::env::current_exe().context("cannot find this program")?;
     eprintln!("rendering the reference: coordinator {}", command.join(" "));
     let status = std::process::Command::new(exe)

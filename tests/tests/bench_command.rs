@@ -116,6 +116,9 @@ fn reference_command_keeps_the_image_and_how_to_remake_it_and_never_overwrites_b
 
     let again = reference(&[]);
     assert!(!again.status.success() && String::from_utf8_lossy(&again.stderr).contains("--force"));
-    let forced = reference(&["--force"]);
+    let forced = reference(&["--force", "--radius-scale", "2"]);
     assert!(forced.status.success(), "{}", String::from_utf8_lossy(&forced.stderr));
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("cornell-path.json")).unwrap()).unwrap();
+    assert!(record["command"].as_str().unwrap().ends_with("--seed 1000 --radius-scale 2"), "{}", record["command"]);
 }
