@@ -168,10 +168,8 @@ impl PhotonMap {
         self.copy_lists(lists, Executor::CurrentPool);
     }
 
-    /// Replaces the photons by the lists' photons, in list order, and builds the grid over them, both with
-    /// `exec`'s threads: the same grid, entry for entry, whatever the executor.
-    /// The grid is built over the lists where they lie, and each photon is then copied once, straight to its
-    /// place in grid order.
+    /// Builds the grid over the lists' photons where they lie, with `exec`'s threads, and copies each photon once,
+    /// straight to its place in grid order: the same map, entry for entry, as copying the lists and building.
     pub fn build_from_lists(&mut self, lists: &[Vec<BackwardPhoton>], exec: Executor) {
         let mut firsts = Vec::with_capacity(lists.len());
         let mut total = 0;
