@@ -161,13 +161,6 @@ impl PhotonMap {
         self.photons.extend_from_slice(photons);
     }
 
-    /// Replaces the photons by the lists' photons, in list order, copying the lists with the threads of the
-    /// current rayon pool; call `build_parallel` before gathering. The buffer is sized once for as many photons
-    /// as the lists have room for, so that it never grows by doubling past them.
-    pub fn copy_from_lists(&mut self, lists: &[Vec<BackwardPhoton>]) {
-        self.copy_lists(lists, Executor::CurrentPool);
-    }
-
     /// Builds the grid over the lists' photons where they lie, with `exec`'s threads, and copies each photon once,
     /// straight to its place in grid order: the same map, entry for entry, as copying the lists and building.
     pub fn build_from_lists(&mut self, lists: &[Vec<BackwardPhoton>], exec: Executor) {
@@ -177,6 +170,8 @@ impl PhotonMap {
             firsts.push(total);
             total += list.len();
         }
+        // Room for as many photons as the lists have room for, so that the buffer never grows by doubling past
+        // them.
         let room = lists.iter().map(Vec::capacity).sum::<usize>().max(total);
         if self.photons.capacity() < room {
             self.photons.reserve_exact(room - self.photons.len());
@@ -204,28 +199,6 @@ impl PhotonMap {
         let mut photons = std::mem::take(&mut self.photons);
         photons.clear();
         photons
-    }
-
-    fn copy_lists(&mut self, lists: &[Vec<BackwardPhoton>], exec: Executor) {
-        self.built = false;
-        let total = lists.iter().map(Vec::len).sum();
-        let room = lists.iter().map(Vec::capacity).sum::<usize>().max(total);
-        if self.photons.capacity() < room {
-            self.photons.reserve_exact(room - self.photons.len());
-        }
-        // Every slot is overwritten below: only a buffer longer than last phase's has new slots to fill first.
-        match lists.iter().find_map(|l| l.first()) {
-            Some(&any) => self.photons.resize(total, any),
-            None => self.photons.clear(),
-        }
-        let mut rest = &mut self.photons[..];
-        let mut targets = Vec::with_capacity(lists.len());
-        for list in lists {
-            let (target, tail) = rest.split_at_mut(list.len());
-            targets.push((target, list));
-            rest = tail;
-        }
-        exec.run(targets.into_par_iter()).for_each(|(target, list)| target.copy_from_slice(list));
     }
 
     /// Bytes held by the map's buffers.
@@ -482,7 +455,8 @@ mod tests {
         for threads in [1, 2, 3, 4] {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
             pool.install(|| {
-                parallel.copy_from_lists(&lists);
+                parallel.clear();
+                parallel.extend(&photons);
                 parallel.build_parallel();
             });
             assert_eq!(parallel.photons, sequential.photons, "{threads} threads");
@@ -497,9 +471,13 @@ mod tests {
                 assert_eq!(from_lists.entries, sequential.entries, "{threads} threads, {exec:?}");
             }
         }
-        // Fewer photons than last phase: the buffer shrinks to the new lists.
-        parallel.copy_from_lists(&lists[..1]);
-        assert_eq!(parallel.photons, photons[..1000]);
+        // Fewer photons than last phase: the map holds the new lists' photons only.
+        let mut from_lists = PhotonMap::new();
+        from_lists.build_from_lists(&lists, Executor::CallingThread);
+        from_lists.build_from_lists(&lists[..1], Executor::CallingThread);
+        let mut pixels: Vec<u32> = from_lists.photons.iter().map(|p| p.pixel).collect();
+        pixels.sort();
+        assert_eq!(pixels, (0..1000).collect::<Vec<u32>>());
     }
 
     #[test]
