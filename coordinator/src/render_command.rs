@@ -699,14 +699,17 @@ fn finish(engine: &mut dyn Progressive, outputs: &Outputs, history: &mut Vec<His
 fn print_summary(record: &RunRecord, reason: StopReason, dir: &Path) {
     let e = record.error;
     say!(
-        "{} phases in {:.1} s ({}), {:.2} M backward + {:.2} M forward rays, δ {:.2}% (unlit pixels) / {:.2}% (all pixels)",
+        "{} phases in {:.1} s ({}), {:.2} M backward + {:.2} M forward rays, δ {:.2}% (unlit pixels) / {:.2}% (all \
+         pixels), the photon discs' blur {:.2}% / {:.2}% of it (in quadrature)",
         record.totals.phases,
         record.wall_time_s,
         reason.name(),
         record.totals.backward_rays as f64 / 1e6,
         record.totals.forward_rays as f64 / 1e6,
         100.0 * e.delta_unlit,
-        100.0 * e.delta_all
+        100.0 * e.delta_all,
+        100.0 * e.blur_unlit,
+        100.0 * e.blur_all
     );
     for flag in &record.flags {
         eprintln!("note: {flag}");

@@ -2,6 +2,7 @@
 //! whoever merges them computes δ over the merged sums.
 
 pub mod auxiliary;
+pub mod blur;
 pub mod delta;
 pub mod lit_mask;
 mod non_finite;
@@ -86,13 +87,20 @@ pub struct Accumulator {
     pub aux: AuxSums,
 }
 
-/// δ over the image and over the pixels that do not see a light directly.
+/// δ over the image and over the pixels that do not see a light directly: the noise of paper eq. 6 and the
+/// photon discs' measured blur (`blur`), as √(noise² + blur²).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ErrorEstimate {
-    /// Paper eq. 6 over every pixel (dominated by directly visible lights).
+    /// δ over every pixel (dominated by directly visible lights).
     pub delta_all: f64,
-    /// Eq. 6 restricted to the pixels the run's `LitMask` leaves unlit: the figure stopping rules use.
+    /// δ restricted to the pixels the run's `LitMask` leaves unlit: the figure stopping rules use.
     pub delta_unlit: f64,
+    /// The blur's part of `delta_all`, relative to the image as δ is (0 where nothing is gathered).
+    #[serde(default)]
+    pub blur_all: f64,
+    /// The blur's part of `delta_unlit`.
+    #[serde(default)]
+    pub blur_unlit: f64,
     /// Fewest phases at any pixel (δ needs at least two).
     pub min_phases: u32,
 }
@@ -217,25 +225,38 @@ impl Accumulator {
         self.pixels.iter().map(|p| p.phases).min().unwrap_or(0)
     }
 
-    /// δ (paper eq. 6, with `replicate_sem2` for the SEM) over all pixels and over the pixels `lit` does not
-    /// mark as seeing a light.
+    /// δ over all pixels and over the pixels `lit` does not mark as seeing a light: paper eq. 6 with
+    /// `replicate_sem2` for the SEM², plus each pixel's estimated squared blur (`blur::pixel_bias2`) where the
+    /// image keeps the blur layers.
     pub fn error(&self, lit: &LitMask) -> ErrorEstimate {
         assert_eq!(lit.len(), self.pixels.len(), "a lit mask of another image");
-        let (mut num_all, mut den_all, mut num_unlit, mut den_unlit) = (0.0, 0.0, 0.0, 0.0);
+        let blur_offset = self.aux.layout().offset(blur::BLUR_LAYER);
+        let (mut noise_all, mut blur_all, mut den_all) = (0.0, 0.0, 0.0);
+        let (mut noise_unlit, mut blur_unlit, mut den_unlit) = (0.0, 0.0, 0.0);
         for i in 0..self.pixels.len() {
             let l = luminance_f64(self.mean_total(i));
             let s = self.replicate_sem2(i);
-            num_all += s;
+            let b = blur_offset.map_or(0.0, |o| {
+                let d = &self.aux.pixel(i)[o..o + 2];
+                blur::pixel_bias2(self.pixels[i].phases, d[0], d[1])
+            });
+            noise_all += s;
+            blur_all += b;
             den_all += l * l;
             if !lit.is_lit(i) {
-                num_unlit += s;
+                noise_unlit += s;
+                blur_unlit += b;
                 den_unlit += l * l;
             }
         }
+        // The squared blur is summed unbiased, so noise can take it below zero where there is no blur.
+        let (blur_all, blur_unlit) = (blur_all.max(0.0), blur_unlit.max(0.0));
         let ratio = |n: f64, d: f64| if d > 0.0 { (n / d).sqrt() } else { f64::INFINITY };
         ErrorEstimate {
-            delta_all: ratio(num_all, den_all),
-            delta_unlit: ratio(num_unlit, den_unlit),
+            delta_all: ratio(noise_all + blur_all, den_all),
+            delta_unlit: ratio(noise_unlit + blur_unlit, den_unlit),
+            blur_all: ratio(blur_all, den_all),
+            blur_unlit: ratio(blur_unlit, den_unlit),
             min_phases: self.min_phases(),
         }
     }

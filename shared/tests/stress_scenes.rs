@@ -66,9 +66,11 @@ impl<'s> Run<'s> {
         assert_finite(&self.engine);
     }
 
-    /// δ over the pixels that do not see a light directly (the figure the project's stopping rules use).
+    /// The noise part of δ over the pixels that do not see a light directly (the figure the project's stopping
+    /// rules use, less the photon discs' blur, which falls with the radius, not with the phases' spread).
     fn delta(&self) -> f64 {
-        self.engine.sums().error(&self.lit).delta_unlit
+        let e = self.engine.sums().error(&self.lit);
+        (e.delta_unlit.powi(2) - e.blur_unlit.powi(2)).max(0.0).sqrt()
     }
 
     /// Mean and SEM of region `r` over the first `phases` phases.

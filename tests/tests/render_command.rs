@@ -31,7 +31,7 @@ fn render_writes_layers_preview_and_a_complete_run_record() {
     let layers = photonfarm::image_io::exr_file::read_exr(&out.join("image.exr")).unwrap();
     let mut names: Vec<&str> = layers.iter().map(|l| l.name.as_str()).collect();
     names.sort();
-    assert_eq!(names, ["caustic", "direct", "indirect", "lit", "phases", "sem", "total", "visible_lights"]);
+    assert_eq!(names, ["blur", "caustic", "direct", "indirect", "lit", "phases", "sem", "total", "visible_lights"]);
     assert!(layers.iter().all(|l| l.rgb.iter().flatten().all(|v| v.is_finite())));
     assert!(std::fs::metadata(out.join("preview.png")).unwrap().len() > 1000);
     let r = record(&out);

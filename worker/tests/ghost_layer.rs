@@ -179,13 +179,16 @@ fn the_memory_estimate_adds_exactly_the_ghost_planes_and_covers_what_an_engine_w
         let config = EngineConfig::for_method(method, 2, 1, vec![0, 1]).unwrap();
         // Per pixel of an image of the lens's size, for both scenes.
         let pixels = 72 * 48;
-        let before = estimate_without_auxiliary_layers(&config, pixels, bdd);
-        // No ghost planes: the estimate is what it was.
+        let coverage = if config.masks { 1 } else { config.groups } as f64;
+        // The two grey blur layers every image keeps: f64 sums in the merged image, and per pixel a group covers
+        // f64 sums and f32 buffers of the camera pass and of each buffer of gathered light.
+        let blur = 2.0 * (8.0 + coverage * (8.0 + 4.0 + 4.0 * gather_buffers(&config) as f64));
+        let before = estimate_without_auxiliary_layers(&config, pixels, bdd) + blur;
+        // No ghost planes: the estimate is the one without auxiliary layers and the blur layers.
         assert_eq!(config.bytes_per_pixel(pixels, bdd, &AuxLayout::for_scene(&cornell, 0)), before, "{method:?}");
         // Ghost planes: 3 f64 sums in the merged image, and per pixel a group covers 3 f64 sums and f32 buffers
         // of the camera pass and of each buffer of gathered light, twice there (the ghost layer and the visible
         // light registered on the sensor); a group with a mask holds a u32 per image pixel for the sensor.
-        let coverage = if config.masks { 1 } else { config.groups } as f64;
         let estimate = config.bytes_per_pixel(pixels, bdd, &AuxLayout::for_scene(&lens, 0));
         let gathered = 2.0 * 4.0 * gather_buffers(&config) as f64;
         let tables = if config.masks { 4.0 * config.groups as f64 } else { 0.0 };

@@ -1,8 +1,9 @@
-//! Auxiliary layers: optional extra running sums kept beside the fixed `PixelSums` (the ghost layer is the
-//! first; per-wavelength bands can follow). Each is an overlay of the total, a part of the light the fixed
-//! layers already hold, so it has no squared sums: δ, the SEM and the fixed sums never depend on it. A scene
-//! that needs none allocates none, and its sums, snapshots and memory stay as they were.
+//! Auxiliary layers: extra running sums kept beside the fixed `PixelSums`: the ghost layer where a scene can
+//! make ghosts, the blur layers every image has, and per-wavelength bands on request. The ghost layer and the
+//! bands are overlays of the total, a part of the light the fixed layers already hold, with no squared sums;
+//! the blur layers hold the photon discs' measured blur and its square, which δ adds (`super::blur`).
 
+use super::blur::{BLUR_LAYER, BLUR_SQUARES_LAYER};
 use super::non_finite::sanitize_slice;
 use crate::ghost::{scene_can_make_ghosts, GHOST_LAYER};
 use crate::scene::Scene;
@@ -43,13 +44,15 @@ impl AuxLayout {
     }
 
     /// The layers a render of `scene` fills: the ghost layer when the scene can make ghosts
-    /// (`ghost::scene_can_make_ghosts`), then `spectral_bands` wavelength bands (`--spectral-output`, one grey
-    /// channel each); nothing otherwise.
+    /// (`ghost::scene_can_make_ghosts`), the two blur layers, side by side, then `spectral_bands` wavelength
+    /// bands (`--spectral-output`, one grey channel each).
     pub fn for_scene(scene: &Scene, spectral_bands: u32) -> Self {
         let mut layers = Vec::new();
         if scene_can_make_ghosts(scene) {
             layers.push(AuxLayer { name: GHOST_LAYER.into(), channels: 3 });
         }
+        layers.push(AuxLayer { name: BLUR_LAYER.into(), channels: 1 });
+        layers.push(AuxLayer { name: BLUR_SQUARES_LAYER.into(), channels: 1 });
         for b in 0..spectral_bands {
             layers.push(AuxLayer { name: band_name(b, spectral_bands), channels: 1 });
         }

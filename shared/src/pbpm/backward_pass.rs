@@ -2,9 +2,11 @@
 //! MIS, paper eq. 5) to their pixel and store backward photons at their first `backward_diffuse_depth`
 //! diffuse vertices.
 
-use super::gather_disc::gather_disc_area;
+use super::gather_disc::gather_disc_areas;
+use super::inner_disc::inner_share;
 use super::photon::BackwardPhoton;
 use super::radius::RadiusSchedule;
+use super::PhotonKind;
 use crate::camera::CameraRay;
 use crate::color::Rgb;
 use crate::geometry::{ray::offset_origin, Ray};
@@ -181,8 +183,8 @@ fn camera_path<const S: bool>(
                 let r = settings.radius.radius(path_length, settings.phase);
                 let normal = if wo.dot(hit.ng) >= 0.0 { hit.ng } else { -hit.ng };
                 // eq. 4's τ · f / (π r²), with the disc's area on the surface for π r² (`gather_disc`).
-                let area = gather_disc_area(&scene.geometry, &hit, r);
-                let weight = beta * albedo * (std::f32::consts::FRAC_1_PI / area);
+                let areas = gather_disc_areas(&scene.geometry, &hit, r);
+                let weight = beta * albedo * (std::f32::consts::FRAC_1_PI / areas.whole);
                 if weight.is_finite() && r > 0.0 {
                     stats.photons += 1;
                     store(BackwardPhoton {
@@ -191,10 +193,10 @@ fn camera_path<const S: bool>(
                         weight,
                         radius2: r * r,
                         pixel,
-                        k: k as u8,
+                        kind: PhotonKind::new(k as u8, ghost.is_some()),
                         segments: segments.min(255) as u8,
                         spectrum: path.tag(),
-                        ghost: ghost.is_some(),
+                        inner_share: inner_share(areas),
                     });
                 }
             }

@@ -1,8 +1,9 @@
 //! The forward pass (paper §2 step 3): light paths that gather into the backward photon map at their diffuse
 //! vertices y_m, m ≥ 2, adding τ · f · ΔΦ / (π r²) (paper eq. 4) to the photon's pixel.
 
+use super::inner_disc::merge_blur;
 use super::photon_map::PhotonMap;
-use crate::color::Rgb;
+use crate::color::{luminance, Rgb};
 use crate::geometry::{ray::offset_origin, Ray, SurfaceHit};
 use crate::integrator::Layer;
 use crate::material::Transport;
@@ -43,6 +44,14 @@ impl std::ops::Add for ForwardStats {
 /// light is ghost light too, τ · f · ΔΦ / (π r²)).
 pub trait Gather {
     fn add(&mut self, pixel: u32, layer: Layer, ghost: bool, value: Rgb);
+
+    /// True when the sink keeps the pixels' blur difference D (`inner_disc`); gathers skip it otherwise.
+    fn measures_blur(&self) -> bool {
+        false
+    }
+
+    /// Adds a merge's part of a pixel's blur difference D.
+    fn add_blur(&mut self, _pixel: u32, _d: f32) {}
 }
 
 impl<F: FnMut(u32, Layer, bool, Rgb)> Gather for F {
@@ -411,6 +420,7 @@ fn gather_in<const S: bool>(
     sink: &mut impl Gather,
 ) -> u64 {
     let mut merges = 0;
+    let blur = sink.measures_blur();
     for b in map.containing_in(bucket, v.p) {
         if v.wi.dot(b.normal) <= 0.0
             || v.ng.dot(b.normal).abs() < NORMAL_AGREEMENT
@@ -419,7 +429,7 @@ fn gather_in<const S: bool>(
             continue;
         }
         // DESIGN §1's partition: every light path is counted by exactly one photon depth.
-        let layer = match (b.k, v.all_specular) {
+        let layer = match (b.kind.k(), v.all_specular) {
             (1, true) => Layer::Caustic,
             (1, false) if backward_diffuse_depth == 1 => Layer::Indirect,
             (1, false) => continue,
@@ -428,7 +438,10 @@ fn gather_in<const S: bool>(
         merges += 1;
         // eq. 4
         let value = if S { join(b.weight, b.spectrum, v.flux, v.spectrum, phase) } else { b.weight * v.flux };
-        sink.add(b.pixel, layer, b.ghost, value);
+        sink.add(b.pixel, layer, b.kind.ghost(), value);
+        if blur {
+            sink.add_blur(b.pixel, merge_blur(luminance(value), (b.position - v.p).length_squared(), b));
+        }
     }
     merges
 }

@@ -1,10 +1,12 @@
 //! Where the forward pass's gathered light waits for the phase to close: f32 (indirect, caustic) RGB per local
-//! pixel of the phase, then the pixel's auxiliary channels (the ghost layer's gathered light), then, in an image
+//! pixel of the phase, then the pixel's auxiliary channels (the ghost layer's gathered light, the blur
+//! difference D), then, in an image
 //! with a ghost layer, the visible light that ghost chains brought to the sensor. A plain buffer
 //! takes the adds of one thread; an atomic one takes adds from any thread, for light paths of other groups
 //! gathering into an open map (paper §4.2) and for groups whose threads share their own map.
 
 use super::forward_pass::Gather;
+use crate::accumulation::blur::BLUR_LAYER;
 use crate::accumulation::AuxLayout;
 use crate::color::Rgb;
 use crate::ghost::GHOST_LAYER;
@@ -21,14 +23,16 @@ const FIXED: usize = 6;
 struct Stride {
     values: usize,
     ghost: Option<usize>,
+    blur: Option<usize>,
     visible: Option<usize>,
 }
 
 impl Stride {
     fn of(aux: &AuxLayout) -> Self {
         let ghost = aux.offset(GHOST_LAYER).map(|o| FIXED + o);
+        let blur = aux.offset(BLUR_LAYER).map(|o| FIXED + o);
         let visible = ghost.map(|_| FIXED + aux.channels());
-        Stride { values: FIXED + aux.channels() + if visible.is_some() { 3 } else { 0 }, ghost, visible }
+        Stride { values: FIXED + aux.channels() + if visible.is_some() { 3 } else { 0 }, ghost, blur, visible }
     }
 
     /// The value indices an add of `value` to `layer` (and to the ghost layer, for ghost light) touches, with
@@ -142,6 +146,18 @@ impl Gather for GatherBuffer {
             }
         }
     }
+
+    #[inline]
+    fn measures_blur(&self) -> bool {
+        self.stride.blur.is_some()
+    }
+
+    #[inline]
+    fn add_blur(&mut self, pixel: u32, d: f32) {
+        if let Some(b) = self.stride.blur {
+            self.values[pixel as usize * self.stride.values + b] += d;
+        }
+    }
 }
 
 /// Gathered light of one phase added from any thread by f32 compare-and-swap loops, with a count of the merges
@@ -233,14 +249,19 @@ pub struct AtomicSink<'a> {
 
 impl AtomicSink<'_> {
     #[inline]
+    fn add_one(&self, a: &AtomicU32, c: f32) {
+        if self.sole {
+            a.store((f32::from_bits(a.load(Ordering::Relaxed)) + c).to_bits(), Ordering::Relaxed);
+        } else {
+            add_f32(a, c);
+        }
+    }
+
+    #[inline]
     fn add_rgb(&self, first: usize, value: Rgb) {
         let values = &self.buffer.values[first..first + 3];
         for (a, c) in values.iter().zip([value.x, value.y, value.z]) {
-            if self.sole {
-                a.store((f32::from_bits(a.load(Ordering::Relaxed)) + c).to_bits(), Ordering::Relaxed);
-            } else {
-                add_f32(a, c);
-            }
+            self.add_one(a, c);
         }
     }
 }
@@ -252,6 +273,18 @@ impl Gather for AtomicSink<'_> {
         self.add_rgb(usual, value);
         if let Some(g) = ghost {
             self.add_rgb(g, value);
+        }
+    }
+
+    #[inline]
+    fn measures_blur(&self) -> bool {
+        self.buffer.stride.blur.is_some()
+    }
+
+    #[inline]
+    fn add_blur(&mut self, pixel: u32, d: f32) {
+        if let Some(b) = self.buffer.stride.blur {
+            self.add_one(&self.buffer.values[pixel as usize * self.buffer.stride.values + b], d);
         }
     }
 }

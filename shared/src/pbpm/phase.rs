@@ -21,6 +21,7 @@ use super::photon::BackwardPhoton;
 use super::photon_map::PhotonMap;
 use super::radius::RadiusSchedule;
 use super::sorted_gather::SortedGathers;
+use crate::accumulation::blur::BLUR_LAYER;
 use crate::accumulation::{auxiliary::add_phase_to, AuxLayout, AuxSums, PixelSums};
 use crate::color::Rgb;
 use crate::integrator::{Layer, LayerValues};
@@ -411,7 +412,7 @@ impl PhaseBuffers {
         let expected = 6 + self.aux.channels() + if visible.is_some() { 3 } else { 0 };
         assert_eq!((sums.len(), gathered.stride()), (pixels, expected), "closing other pixels");
         let stride = gathered.stride();
-        let closing = Closing { inv_n: 1.0 / light_paths.max(1) as f32, bands: self.aux.bands(), visible };
+        let closing = Closing::new(light_paths, &self.aux, visible);
         let channels = self.aux.channels();
         let chunk_len = self.chunk;
         let chunks = self
@@ -454,9 +455,17 @@ pub struct Closing {
     pub bands: Option<(usize, usize)>,
     /// Where the visible light registered on the sensor lies among a pixel's gathered values, if anywhere.
     pub visible: Option<usize>,
+    /// Where the blur difference D lies among the auxiliary channels (its square follows it).
+    pub blur: Option<usize>,
 }
 
 impl Closing {
+    /// Closing over `light_paths` light paths counted against the map, with the auxiliary layers `aux` and the
+    /// sensor's visible light at `visible` among the gathered values.
+    pub fn new(light_paths: u64, aux: &AuxLayout, visible: Option<usize>) -> Self {
+        Closing { inv_n: 1.0 / light_paths.max(1) as f32, bands: aux.bands(), visible, blur: aux.offset(BLUR_LAYER) }
+    }
+
     /// Closes one pixel: its phase value L_ij is the camera pass's `value` plus the `gathered` light over the
     /// light paths (DESIGN §1 step 4), counted in the pixel's `replicate`; the auxiliary channels (`aux`,
     /// started by `start_aux`, and the pixel's wavelength) get their gathered light too and the spectral bands
@@ -488,6 +497,9 @@ impl Closing {
             }
             if let (Some((offset, n)), Some(w)) = (self.bands, wavelength) {
                 band_values(v.iter().sum(), &w, &mut aux[offset..offset + n]);
+            }
+            if let Some(b) = self.blur {
+                aux[b + 1] = aux[b] * aux[b];
             }
             add_phase_to(aux_sums, aux);
         }

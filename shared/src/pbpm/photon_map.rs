@@ -407,10 +407,10 @@ mod tests {
             weight: Rgb::ONE,
             radius2: r * r,
             pixel,
-            k: 1,
+            kind: crate::pbpm::PhotonKind::new(1, false),
             segments: 1,
             spectrum: 0,
-            ghost: false,
+            inner_share: 128,
         }
     }
 

@@ -122,7 +122,7 @@ mod tests {
     use crate::color::Rgb;
     use crate::integrator::Layer;
     use crate::pbpm::forward_pass::gather_point;
-    use crate::pbpm::BackwardPhoton;
+    use crate::pbpm::{BackwardPhoton, PhotonKind};
     use crate::sampling::{Pass, Sampler};
     use glam::Vec3;
 
@@ -157,10 +157,10 @@ mod tests {
                 weight: Rgb::new(s.next_f32(), s.next_f32(), s.next_f32()),
                 radius2: r * r,
                 pixel: i % 997,
-                k: 1 + (i % 2) as u8,
+                kind: PhotonKind::new(1 + (i % 2) as u8, i % 7 == 0),
                 segments: 1 + (i % 5) as u8,
                 spectrum: 0,
-                ghost: i % 7 == 0,
+                inner_share: 100 + (i % 50) as u8,
             });
         }
         map.build();

@@ -176,11 +176,7 @@ impl<'s> Engine<'s> {
         // paths keep the ghost chains.
         let sensor_ghosts = crate::ghost::sensor_ghosts(scene) && self.settings.spectral_bands == 0;
         let light = if sensor_ghosts { self.sensor_light_paths(phase) } else { ForwardStats::default() };
-        let closing = Closing {
-            inv_n: 1.0 / light.light_paths.max(1) as f32,
-            bands: aux.bands(),
-            visible: self.gathered.visible_offset(),
-        };
+        let closing = Closing::new(light.light_paths, &aux, self.gathered.visible_offset());
         let stride = self.gathered.stride();
         let mut aux_phase = vec![0.0; channels];
         let mut log = RecordedPath::new(PathKind::Camera, 0, 0, 0);

@@ -1,12 +1,14 @@
 //! Images made from the running sums: the mean of every layer, the total and the per-pixel SEM.
 
+use crate::accumulation::blur::{BIAS_PER_DIFFERENCE, BLUR_LAYER, BLUR_SQUARES_LAYER};
 use crate::accumulation::{Accumulator, LitMask, LIT_LAYER};
 use crate::color::luminance_f64;
 use crate::image_io::exr_file::LayerImage;
 use crate::integrator::Layer;
 
 /// Layers written to the EXR: the four components, their total, the total's standard error (grey), and the
-/// auxiliary layers the image has (e.g. `ghost`; a one-channel layer as grey).
+/// auxiliary layers the image has (e.g. `ghost`; a one-channel layer as grey), with `blur` as each pixel's
+/// estimated bias (signed) and without the squares behind it.
 pub fn layer_images(sums: &Accumulator) -> Vec<LayerImage> {
     let (w, h) = (sums.width as usize, sums.height as usize);
     let mut out: Vec<LayerImage> = Layer::ALL.iter().map(|l| LayerImage::new(l.name(), w, h)).collect();
@@ -25,11 +27,15 @@ pub fn layer_images(sums: &Accumulator) -> Vec<LayerImage> {
     }
     out.push(total);
     out.push(sem);
-    for layer in sums.aux.layout().layers() {
+    for layer in sums.aux.layout().layers().iter().filter(|l| l.name != BLUR_SQUARES_LAYER) {
         let mut image = LayerImage::new(layer.name.clone(), w, h);
         for (i, px) in image.rgb.iter_mut().enumerate() {
             let m = sums.aux_mean(i, &layer.name).expect("the layer is in the layout");
-            *px = [m[0] as f32, m[1] as f32, m[2] as f32];
+            *px = if layer.name == BLUR_LAYER {
+                [(BIAS_PER_DIFFERENCE * m[0]) as f32; 3]
+            } else {
+                [m[0] as f32, m[1] as f32, m[2] as f32]
+            };
         }
         out.push(image);
     }

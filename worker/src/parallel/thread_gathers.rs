@@ -164,7 +164,7 @@ mod tests {
     use super::*;
     use glam::Vec3;
     use photonfarm::color::Rgb;
-    use photonfarm::pbpm::{gather_point, BackwardPhoton};
+    use photonfarm::pbpm::{gather_point, BackwardPhoton, PhotonKind};
     use photonfarm::sampling::{Pass, Sampler};
 
     const PIXELS: u32 = 500;
@@ -182,10 +182,10 @@ mod tests {
                 weight: Rgb::new(s.next_f32(), s.next_f32(), s.next_f32()),
                 radius2: r * r,
                 pixel: i % PIXELS,
-                k: 1 + (i % 2) as u8,
+                kind: PhotonKind::new(1 + (i % 2) as u8, i % 5 == 0),
                 segments: 1 + (i % 5) as u8,
                 spectrum: 0,
-                ghost: i % 5 == 0,
+                inner_share: 100 + (i % 50) as u8,
             });
         }
         map.build();
