@@ -5,7 +5,7 @@
 //! pixel's bias (one Richardson step). Its square, less D̄'s own variance so that noise alone adds nothing on
 //! average, joins the SEM² in δ.
 
-/// The EXR and auxiliary layer of D, and after the render of the estimated bias 2 D̄ per pixel.
+/// The auxiliary layer of D; the EXR layer of the same name holds each pixel's estimated bias 2 D̄.
 pub const BLUR_LAYER: &str = "blur";
 /// The auxiliary layer of D², for D̄'s own variance; not written to the EXR.
 pub const BLUR_SQUARES_LAYER: &str = "blur_sq";

@@ -1,8 +1,7 @@
 //! Where the forward pass's gathered light waits for the phase to close: f32 (indirect, caustic) RGB per local
 //! pixel of the phase, then the pixel's auxiliary channels (the ghost layer's gathered light, the blur
-//! difference D), then, in an image
-//! with a ghost layer, the visible light that ghost chains brought to the sensor. A plain buffer
-//! takes the adds of one thread; an atomic one takes adds from any thread, for light paths of other groups
+//! difference D), then, in an image with a ghost layer, the visible light that ghost chains brought to the
+//! sensor. A plain buffer takes the adds of one thread; an atomic one takes adds from any thread, for light paths of other groups
 //! gathering into an open map (paper §4.2) and for groups whose threads share their own map.
 
 use super::forward_pass::Gather;

@@ -5,9 +5,10 @@
 //! normalised by the area of the disc on the surface, which is π r² wherever the surface goes on. The inner
 //! disc that measures the photon's blur (`inner_disc`) gets its area on the surface from the same cuts.
 
+use super::inner_disc::INNER_RADIUS2;
 use crate::geometry::{SceneGeometry, SurfaceHit};
 use glam::Vec3;
-use std::f32::consts::{FRAC_1_SQRT_2, PI};
+use std::f32::consts::PI;
 
 /// The disc is never taken for less than this share of π r²: a photon in the very tip of a thin sliver would
 /// otherwise carry a weight without bound for the little light that lands there.
@@ -16,8 +17,8 @@ const MIN_SHARE: f32 = 0.05;
 /// Points of the disc where two or more ends of the surface cut it, a sunflower (Vogel) spiral of equal areas.
 const SPIRAL_POINTS: usize = 256;
 
-/// The areas on the surface of a photon's disc and of its inner disc, the concentric one of half its area
-/// (radius r/√2).
+/// The areas on the surface of a photon's disc and of its inner disc, the concentric one of radius r/√2 and
+/// half its area (`inner_disc::INNER_RADIUS2`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DiscAreas {
     pub whole: f32,
@@ -31,7 +32,7 @@ pub struct DiscAreas {
 /// reach.
 pub fn gather_disc_areas(geometry: &SceneGeometry, hit: &SurfaceHit, r: f32) -> DiscAreas {
     let full = PI * r * r;
-    let whole_disc = DiscAreas { whole: full, inner: 0.5 * full };
+    let whole_disc = DiscAreas { whole: full, inner: INNER_RADIUS2 * full };
     if hit.triangle == u32::MAX {
         return whole_disc;
     }
@@ -55,13 +56,16 @@ pub fn gather_disc_areas(geometry: &SceneGeometry, hit: &SurfaceHit, r: f32) -> 
     }
     let (whole, inner) = match n {
         0 => return whole_disc,
-        1 => (full - circular_segment(r, cuts[0].1), 0.5 * full - circular_segment(r * FRAC_1_SQRT_2, cuts[0].1)),
+        1 => (
+            full - circular_segment(r, cuts[0].1),
+            INNER_RADIUS2 * full - circular_segment(r * INNER_RADIUS2.sqrt(), cuts[0].1),
+        ),
         _ => {
             let (whole, inner) = spiral_shares(&cuts[..n], r);
-            (full * whole, 0.5 * full * inner)
+            (full * whole, INNER_RADIUS2 * full * inner)
         }
     };
-    DiscAreas { whole: whole.max(MIN_SHARE * full), inner: inner.max(MIN_SHARE * 0.5 * full) }
+    DiscAreas { whole: whole.max(MIN_SHARE * full), inner: inner.max(MIN_SHARE * INNER_RADIUS2 * full) }
 }
 
 /// Area of the part of a disc of radius r beyond a chord at distance d ≤ r from its centre.
@@ -87,7 +91,8 @@ fn spiral_shares(cuts: &[(Vec3, f32)], r: f32) -> (f32, f32) {
         let q = u * (rho * c) + v * (rho * s);
         cuts.iter().all(|&(inward, d)| q.dot(inward) + d >= 0.0)
     };
-    let half = SPIRAL_POINTS / 2;
+    // The points of an equal-area spiral within r/√2 are its first INNER_RADIUS2 share.
+    let half = (SPIRAL_POINTS as f32 * INNER_RADIUS2) as usize;
     let inner = (0..half).filter(inside).count();
     let outer = (half..SPIRAL_POINTS).filter(inside).count();
     ((inner + outer) as f32 / SPIRAL_POINTS as f32, inner as f32 / half as f32)
