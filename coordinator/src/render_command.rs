@@ -636,9 +636,9 @@ fn progress(
 ) -> String {
     let secs = entry.time_s.max(1e-9);
     let rays = (entry.backward_rays + entry.forward_rays) as f64;
-    let delta = match error_over {
-        ErrorOver::Unlit => entry.delta_unlit,
-        ErrorOver::All => entry.delta_all,
+    let (delta, blur) = match error_over {
+        ErrorOver::Unlit => (entry.delta_unlit, entry.blur_unlit),
+        ErrorOver::All => (entry.delta_all, entry.blur_all),
     };
     let workers = workers.map(|w| {
         let count = |p: &dyn Fn(&WorkerState) -> bool| w.iter().filter(|w| p(&w.state)).count();
@@ -652,11 +652,13 @@ fn progress(
     });
     let left = forecast.latest().map(|f| format!("  about {} to the target", short_duration(f.remaining_s)));
     format!(
-        "phase {}  {:.2} Mrays/s  δ {} {}{}{}",
+        "phase {}  {:.2} Mrays/s  δ {} ({}{}){}{}",
         entry.phase,
         rays / secs / 1e6,
         if delta.is_finite() { format!("{:.2}%", 100.0 * delta) } else { "–".to_string() },
-        if error_over == ErrorOver::Unlit { "(unlit pixels)" } else { "(all pixels)" },
+        if error_over == ErrorOver::Unlit { "unlit pixels" } else { "all pixels" },
+        // The blur's part only once it is a visible share of δ: elsewhere it is its estimate's noise.
+        if delta.is_finite() && blur > 0.1 * delta { format!(", blur {:.2}%", 100.0 * blur) } else { String::new() },
         left.unwrap_or_default(),
         workers.unwrap_or_default(),
     )
@@ -693,6 +695,8 @@ fn finish(engine: &mut dyn Progressive, outputs: &Outputs, history: &mut Vec<His
         true_all: truth.as_ref().map(|t| t.rmse_all),
         true_unlit: truth.as_ref().map(|t| t.rmse_unlit),
         active_tiles: history.last().and_then(|h| h.active_tiles),
+        blur_all: e.blur_all,
+        blur_unlit: e.blur_unlit,
     });
 }
 
@@ -813,6 +817,23 @@ mod tests {
         let argv = [&["coordinator", "render", "scene.toml"][..], extra].concat();
         let Command::Render(args) = Cli::try_parse_from(argv).unwrap().command else { panic!("not a render") };
         *args
+    }
+
+    #[test]
+    fn the_progress_line_names_the_blur_once_it_is_a_visible_share_of_delta() {
+        let entry = |blur_unlit| HistoryEntry {
+            phase: 12,
+            time_s: 2.0,
+            delta_unlit: 0.08,
+            delta_all: 0.02,
+            blur_unlit,
+            ..HistoryEntry::default()
+        };
+        let line = |blur| progress(&entry(blur), ErrorOver::Unlit, &Forecast::new(None), None);
+        assert!(line(0.05).contains("δ 8.00% (unlit pixels, blur 5.00%)"), "{}", line(0.05));
+        assert!(line(0.001).contains("δ 8.00% (unlit pixels)"), "{}", line(0.001));
+        let all = progress(&entry(0.05), ErrorOver::All, &Forecast::new(None), None);
+        assert!(all.contains("δ 2.00% (all pixels)"), "{all}");
     }
 
     #[test]

@@ -14,8 +14,9 @@ use std::path::Path;
 
 /// 2: the sums' auxiliary layers (the ghost layer) are kept. 3: the settings hold the spectral-output bands.
 /// 4: the totals count the light paths counted against photon maps. 5: the sums keep their replicates.
-/// 6: the history says how many tiles each step rendered.
-const FORMAT: u32 = 6;
+/// 6: the history says how many tiles each step rendered. 7: the sums keep the photon discs' blur layers, and
+/// the history the blur's part of δ.
+const FORMAT: u32 = 7;
 
 /// Everything a resumed run continues from.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

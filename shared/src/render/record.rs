@@ -34,6 +34,11 @@ pub struct HistoryEntry {
     /// Tiles the step rendered, with adaptive tiles (null when every tile rendered every step).
     #[serde(default)]
     pub active_tiles: Option<u32>,
+    /// The photon discs' blur's part of `delta_all` and `delta_unlit` (`ErrorEstimate`).
+    #[serde(default)]
+    pub blur_all: f64,
+    #[serde(default)]
+    pub blur_unlit: f64,
 }
 
 /// Error against a reference image.

@@ -219,6 +219,8 @@ pub fn run<R: Progressive + ?Sized>(
             forward_rays: t.forward_rays,
             light_paths_per_pixel: light,
             active_tiles,
+            blur_all: e.blur_all,
+            blur_unlit: e.blur_unlit,
             ..HistoryEntry::default()
         };
         history.push(entry);
