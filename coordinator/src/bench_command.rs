@@ -246,6 +246,7 @@ fn read_run(path: &Path, key: RunKey, plan: Planned) -> Result<Run> {
             true_unlit: h["true_unlit"].as_f64(),
             true_all: h["true_all"].as_f64(),
             tiles: key.target.map(|(t, _)| t.to_string()).unwrap_or_default(),
+            blur_unlit: f(&h["blur_unlit"]),
         })
         .collect();
     let reached_s = key.target.and_then(|(_, d)| series.iter().find(|p| p.delta_unlit <= d)).map(|p| p.time_s);
@@ -293,6 +294,7 @@ fn read_run(path: &Path, key: RunKey, plan: Planned) -> Result<Run> {
         tiles: key.target.map(|(t, _)| t.to_string()).unwrap_or_default(),
         target_error: key.target.map(|(_, d)| d),
         reached_s,
+        blur_unlit: f(&r["error"]["blur_unlit"]),
     };
     Ok(Run { row, series, snapshot_bytes })
 }
@@ -759,6 +761,7 @@ mod tests {
             tiles: String::new(),
             target_error: None,
             reached_s: None,
+            blur_unlit: 0.0,
         };
         Run { row, series: Vec::new(), snapshot_bytes: None }
     }

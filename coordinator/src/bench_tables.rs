@@ -60,6 +60,10 @@ pub struct ResultsRow {
     pub target_error: Option<f64>,
     #[serde(default)]
     pub reached_s: Option<f64>,
+    /// The photon discs' blur's part of `delta_unlit` (0 for a path tracer, and in a bench of an earlier
+    /// version).
+    #[serde(default)]
+    pub blur_unlit: f64,
 }
 
 /// One step of a run (a phase, a round or a merged snapshot): its error against time and rays.
@@ -80,6 +84,9 @@ pub struct SeriesRow {
     /// "adaptive" or "uniform" with `--target-error`, empty otherwise.
     #[serde(default)]
     pub tiles: String,
+    /// The photon discs' blur's part of `delta_unlit`.
+    #[serde(default)]
+    pub blur_unlit: f64,
 }
 
 /// A row type of a CSV table the bench writes.
@@ -98,11 +105,12 @@ impl TableRow for ResultsRow {
         "tiles",
         "target_error",
         "reached_s",
+        "blur_unlit",
     ];
 }
 
 impl TableRow for SeriesRow {
-    const OPTIONAL_COLUMNS: &'static [&'static str] = &["tiles"];
+    const OPTIONAL_COLUMNS: &'static [&'static str] = &["tiles", "blur_unlit"];
 }
 
 /// Writes `rows` as a CSV table with a header line.
@@ -234,6 +242,7 @@ mod tests {
             tiles: "adaptive".into(),
             target_error: Some(0.03),
             reached_s: Some(7.5),
+            blur_unlit: 0.01,
         }
     }
 
@@ -249,7 +258,7 @@ mod tests {
             "scene,method,topology,processes,groups,threads_per_group,threads,repeat,wall_s,backward_rays,\
              forward_rays,merges,light_paths,map_light_paths,phases,delta_unlit,delta_all,true_unlit,true_all,\
              peak_memory_bytes,bytes_per_pixel,idle_fraction,reference_delta_unlit,mean_difference_unlit,\
-             mean_difference_all,tiles,target_error,reached_s"
+             mean_difference_all,tiles,target_error,reached_s,blur_unlit"
         );
         assert!(text.lines().nth(1).unwrap().starts_with("cornell,three-level,synthetic pack:1 numa:2"), "{text}");
         let back: Vec<ResultsRow> = read_table(&path).unwrap();
@@ -271,14 +280,15 @@ mod tests {
             true_unlit: None,
             true_all: Some(0.5),
             tiles: String::new(),
+            blur_unlit: 0.0625,
         };
         let path = dir.join("series.csv");
         write_table(&path, std::slice::from_ref(&step)).unwrap();
         let text = std::fs::read_to_string(&path).unwrap();
         assert_eq!(
             text,
-            "scene,method,threads,repeat,time_s,rays,delta_unlit,delta_all,true_unlit,true_all,tiles\n\
-             caustic,two-level,4,1,0.5,12345,0.25,0.125,,0.5,\n"
+            "scene,method,threads,repeat,time_s,rays,delta_unlit,delta_all,true_unlit,true_all,tiles,blur_unlit\n\
+             caustic,two-level,4,1,0.5,12345,0.25,0.125,,0.5,,0.0625\n"
         );
         assert_eq!(read_table::<SeriesRow>(&path).unwrap(), [step]);
         std::fs::remove_dir_all(&dir).ok();

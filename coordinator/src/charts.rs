@@ -932,6 +932,7 @@ mod tests {
             true_unlit: Some(0.12),
             true_all: Some(0.12),
             tiles: String::new(),
+            blur_unlit: 0.0,
         }
     }
 
