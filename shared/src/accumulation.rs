@@ -230,15 +230,15 @@ impl Accumulator {
     /// image keeps the blur layers.
     pub fn error(&self, lit: &LitMask) -> ErrorEstimate {
         assert_eq!(lit.len(), self.pixels.len(), "a lit mask of another image");
-        let blur_offset = self.aux.layout().offset(blur::BLUR_LAYER);
+        let blur_offsets = blur::blur_offsets(self.aux.layout());
         let (mut noise_all, mut blur_all, mut den_all) = (0.0, 0.0, 0.0);
         let (mut noise_unlit, mut blur_unlit, mut den_unlit) = (0.0, 0.0, 0.0);
         for i in 0..self.pixels.len() {
             let l = luminance_f64(self.mean_total(i));
             let s = self.replicate_sem2(i);
-            let b = blur_offset.map_or(0.0, |o| {
-                let d = &self.aux.pixel(i)[o..o + 2];
-                blur::pixel_bias2(self.pixels[i].phases, d[0], d[1])
+            let b = blur_offsets.map_or(0.0, |(d, d2)| {
+                let aux = self.aux.pixel(i);
+                blur::pixel_bias2(self.pixels[i].phases, aux[d], aux[d2])
             });
             noise_all += s;
             blur_all += b;

@@ -44,7 +44,7 @@ impl AuxLayout {
     }
 
     /// The layers a render of `scene` fills: the ghost layer when the scene can make ghosts
-    /// (`ghost::scene_can_make_ghosts`), the two blur layers, side by side, then `spectral_bands` wavelength
+    /// (`ghost::scene_can_make_ghosts`), the two blur layers, then `spectral_bands` wavelength
     /// bands (`--spectral-output`, one grey channel each).
     pub fn for_scene(scene: &Scene, spectral_bands: u32) -> Self {
         let mut layers = Vec::new();

@@ -5,10 +5,18 @@
 //! pixel's bias (one Richardson step). Its square, less D̄'s own variance so that noise alone adds nothing on
 //! average, joins the SEM² in δ.
 
+use super::AuxLayout;
+
 /// The auxiliary layer of D; the EXR layer of the same name holds each pixel's estimated bias 2 D̄.
 pub const BLUR_LAYER: &str = "blur";
 /// The auxiliary layer of D², for D̄'s own variance; not written to the EXR.
 pub const BLUR_SQUARES_LAYER: &str = "blur_sq";
+
+/// Where the `blur` and `blur_sq` layers' channels lie among a pixel's auxiliary channels, if the layout has
+/// them.
+pub fn blur_offsets(layout: &AuxLayout) -> Option<(usize, usize)> {
+    Some((layout.offset(BLUR_LAYER)?, layout.offset(BLUR_SQUARES_LAYER)?))
+}
 
 /// The bias of a disc of radius r over its difference from the inner disc's: b(r) / (b(r) − b(r/√2)) where b
 /// grows as r².

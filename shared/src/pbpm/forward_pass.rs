@@ -421,7 +421,7 @@ fn gather_in<const S: bool>(
 ) -> u64 {
     let mut merges = 0;
     let blur = sink.measures_blur();
-    for b in map.containing_in(bucket, v.p) {
+    for (b, d2) in map.containing_in(bucket, v.p) {
         if v.wi.dot(b.normal) <= 0.0
             || v.ng.dot(b.normal).abs() < NORMAL_AGREEMENT
             || b.segments as u32 + v.m > max_depth
@@ -440,7 +440,7 @@ fn gather_in<const S: bool>(
         let value = if S { join(b.weight, b.spectrum, v.flux, v.spectrum, phase) } else { b.weight * v.flux };
         sink.add(b.pixel, layer, b.kind.ghost(), value);
         if blur {
-            sink.add_blur(b.pixel, merge_blur(luminance(value), (b.position - v.p).length_squared(), b));
+            sink.add_blur(b.pixel, merge_blur(luminance(value), d2, b));
         }
     }
     merges

@@ -21,7 +21,7 @@ use super::photon::BackwardPhoton;
 use super::photon_map::PhotonMap;
 use super::radius::RadiusSchedule;
 use super::sorted_gather::SortedGathers;
-use crate::accumulation::blur::BLUR_LAYER;
+use crate::accumulation::blur::blur_offsets;
 use crate::accumulation::{auxiliary::add_phase_to, AuxLayout, AuxSums, PixelSums};
 use crate::color::Rgb;
 use crate::integrator::{Layer, LayerValues};
@@ -455,15 +455,15 @@ pub struct Closing {
     pub bands: Option<(usize, usize)>,
     /// Where the visible light registered on the sensor lies among a pixel's gathered values, if anywhere.
     pub visible: Option<usize>,
-    /// Where the blur difference D lies among the auxiliary channels (its square follows it).
-    pub blur: Option<usize>,
+    /// Where the blur difference D and its square lie among the auxiliary channels.
+    pub blur: Option<(usize, usize)>,
 }
 
 impl Closing {
     /// Closing over `light_paths` light paths counted against the map, with the auxiliary layers `aux` and the
     /// sensor's visible light at `visible` among the gathered values.
     pub fn new(light_paths: u64, aux: &AuxLayout, visible: Option<usize>) -> Self {
-        Closing { inv_n: 1.0 / light_paths.max(1) as f32, bands: aux.bands(), visible, blur: aux.offset(BLUR_LAYER) }
+        Closing { inv_n: 1.0 / light_paths.max(1) as f32, bands: aux.bands(), visible, blur: blur_offsets(aux) }
     }
 
     /// Closes one pixel: its phase value L_ij is the camera pass's `value` plus the `gathered` light over the
@@ -498,8 +498,8 @@ impl Closing {
             if let (Some((offset, n)), Some(w)) = (self.bands, wavelength) {
                 band_values(v.iter().sum(), &w, &mut aux[offset..offset + n]);
             }
-            if let Some(b) = self.blur {
-                aux[b + 1] = aux[b] * aux[b];
+            if let Some((d, d2)) = self.blur {
+                aux[d2] = aux[d] * aux[d];
             }
             add_phase_to(aux_sums, aux);
         }

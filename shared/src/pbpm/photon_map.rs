@@ -379,18 +379,22 @@ impl PhotonMap {
     /// Exactly the photons whose sphere contains `p`.
     #[inline]
     pub fn containing(&self, p: Vec3) -> impl Iterator<Item = &BackwardPhoton> {
-        self.containing_in(self.bucket_of(p), p)
+        self.containing_in(self.bucket_of(p), p).map(|(b, _)| b)
     }
 
-    /// `containing(p)` for a `p` in `bucket`, found before by `bucket_of(p)`.
+    /// `containing(p)` for a `p` in `bucket`, found before by `bucket_of(p)`, each photon with its squared
+    /// distance from `p`.
     #[inline]
-    pub fn containing_in(&self, bucket: u32, p: Vec3) -> impl Iterator<Item = &BackwardPhoton> {
+    pub fn containing_in(&self, bucket: u32, p: Vec3) -> impl Iterator<Item = (&BackwardPhoton, f32)> {
         let b = bucket as usize;
         let range = if self.built { self.starts[b] as usize..self.starts[b + 1] as usize } else { 0..0 };
         self.entries[range]
             .iter()
-            .map(move |&i| &self.photons[i as usize])
-            .filter(move |b| (b.position - p).length_squared() <= b.radius2)
+            .map(move |&i| {
+                let b = &self.photons[i as usize];
+                (b, (b.position - p).length_squared())
+            })
+            .filter(|(b, d2)| *d2 <= b.radius2)
     }
 }
 
