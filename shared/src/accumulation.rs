@@ -236,10 +236,7 @@ impl Accumulator {
         for i in 0..self.pixels.len() {
             let l = luminance_f64(self.mean_total(i));
             let s = self.replicate_sem2(i);
-            let b = blur_offsets.map_or(0.0, |(d, d2)| {
-                let aux = self.aux.pixel(i);
-                blur::pixel_bias2(self.pixels[i].phases, aux[d], aux[d2])
-            });
+            let b = self.blur2_at(blur_offsets, i);
             noise_all += s;
             blur_all += b;
             den_all += l * l;
@@ -259,6 +256,21 @@ impl Accumulator {
             blur_unlit: ratio(blur_unlit, den_unlit),
             min_phases: self.min_phases(),
         }
+    }
+
+    /// Each pixel's estimated squared blur (`blur::pixel_bias2`), pixel by index: unbiased and so sometimes
+    /// negative, to be summed over pixels before clamping; zero when the image keeps no blur layers.
+    pub fn blur2_by_pixel(&self) -> impl Fn(usize) -> f64 + '_ {
+        let offsets = blur::blur_offsets(self.aux.layout());
+        move |pixel| self.blur2_at(offsets, pixel)
+    }
+
+    #[inline]
+    fn blur2_at(&self, offsets: Option<(usize, usize)>, pixel: usize) -> f64 {
+        offsets.map_or(0.0, |(d, d2)| {
+            let aux = self.aux.pixel(pixel);
+            blur::pixel_bias2(self.pixels[pixel].phases, aux[d], aux[d2])
+        })
     }
 
     /// Σ over pixels of the luminance of the ghost layer's sums and of the total's sums (sums, not means: their

@@ -19,6 +19,14 @@
 //! stay longer than one that missed, and its own data would still decide when it stops.
 //! Retiring a tile once its own δ (the same formula over its pixels) is below D instead keeps dark tiles, whose
 //! relative error is high but whose weight in δ is small, rendering long after they matter.
+//!
+//! δ² also holds the photon discs' blur (`accumulation::blur`): B_t, the squared blur summed over the tile's
+//! pixels, which falls as N_t^(−β) as the radii shrink with the pixels' phases (β = 2 (1 − α), `blur_decay`).
+//! The shares then minimise Σ N_t under Σ_t (S_t / N_t + C_t N_t^(−β)) = D² Λ with C_t = B_t n_t^β at the
+//! tile's n_t phases now: the marginal gain S_t / N_t² + β C_t N_t^(−β−1) equal in every tile, solved per tile
+//! by Newton's method and for the common gain by bisection (`phase_shares`). Without blur this is the closed
+//! form above. A tile left to retire by its noise alone would keep its blur, which no other tile's phases
+//! reduce.
 
 use super::session::ErrorOver;
 use crate::accumulation::{Accumulator, LitMask};
@@ -160,6 +168,18 @@ impl ActiveTiles {
             .collect()
     }
 
+    /// Each tile's squared blur B_t over its pixels of the class `over` selects: the pixels' unbiased
+    /// estimates summed, then clamped at zero (noise alone can take the sum below it).
+    pub fn blurs(&self, sums: &Accumulator, lit: &LitMask, over: ErrorOver) -> Vec<f64> {
+        let blur2 = sums.blur2_by_pixel();
+        (0..self.len())
+            .map(|t| {
+                let class = self.pixels_of(t).map(|p| p as usize).filter(|&p| over == ErrorOver::All || !lit.is_lit(p));
+                class.map(&blur2).sum::<f64>().max(0.0)
+            })
+            .collect()
+    }
+
     /// Each tile's per-phase variance S_t over its pixels of the class `over` selects (Σ n_p · SEM²_p with
     /// the replicate SEM that δ uses; infinite while a pixel has fewer than two phases), and the image's
     /// Λ = Σ mean² over the class.
@@ -214,28 +234,32 @@ impl ActiveTiles {
 
     /// Decides the tiles of the next rounds from the merged sums: a tile is active while it has fewer than
     /// `MIN_TILE_PHASES` phases at some pixel or fewer than its share N*_t of the work to reach `target`, from
-    /// the judged variances (see the module's notes), so a retired tile whose share grew as the estimates improved comes back. With a
+    /// the judged variances and the blurs, which fall as the phases to the power −`blur_decay` (see the
+    /// module's notes), so a retired tile whose share grew as the estimates improved comes back. With a
     /// target over unlit pixels a tile also needs its share of the same target over all pixels, so the pixels
     /// that see a light are not left at a few phases. If that leaves no tile, every tile is active: the target
     /// cannot be met by retiring tiles. Returns true when the set changed.
-    pub fn update(&mut self, sums: &Accumulator, lit: &LitMask, over: ErrorOver, target: f64) -> bool {
+    pub fn update(&mut self, sums: &Accumulator, lit: &LitMask, over: ErrorOver, target: f64, blur_decay: f64) -> bool {
         let classes: &[ErrorOver] = match over {
             ErrorOver::Unlit => &[ErrorOver::Unlit, ErrorOver::All],
             ErrorOver::All => &[ErrorOver::All],
         };
+        let phases: Vec<u32> = (0..self.len())
+            .map(|t| self.pixels_of(t).map(|p| sums.pixels[p as usize].phases).min().unwrap_or(0))
+            .collect();
         let mut shares = vec![0.0f64; self.len()];
         for &class in classes {
             let (variances, lambda) = self.judged_variances(sums, lit, class);
-            let roots: f64 = variances.iter().map(|v| v.sqrt()).sum();
-            for (share, v) in shares.iter_mut().zip(&variances) {
-                let needed = v.sqrt() * roots / (target * target * lambda);
+            let blurs = self.blurs(sums, lit, class);
+            let needed = phase_shares(&variances, &blurs, &phases, blur_decay, target * target * lambda);
+            for (share, needed) in shares.iter_mut().zip(needed) {
                 // No light in the class at all (Λ = 0) leaves nothing to share: the tile stays active.
                 *share = if needed.is_nan() || needed > *share { needed } else { *share };
             }
         }
         let mut next: Vec<bool> = (0..self.len())
             .map(|t| {
-                let phases = self.pixels_of(t).map(|p| sums.pixels[p as usize].phases).min().unwrap_or(0);
+                let phases = phases[t];
                 // A NaN share (no light in the class) keeps the tile active.
                 phases < MIN_TILE_PHASES || shares[t].is_nan() || (phases as f64) < shares[t]
             })
@@ -249,11 +273,96 @@ impl ActiveTiles {
     }
 }
 
+/// The exponent β with which a pixel's squared blur falls with its phases N: each phase's bias grows as r²,
+/// which the radius schedule shrinks as j^(α−1), so the mean over N phases falls as N^(α−1) and its square as
+/// N^(−2 (1 − α)).
+pub fn blur_decay(radius_alpha: f32) -> f64 {
+    2.0 * (1.0 - radius_alpha as f64)
+}
+
+/// The fewest phases N_t per tile that bring Σ_t (S_t / N_t + C_t N_t^(−β)) down to `budget` (D² Λ), with
+/// C_t = B_t n_t^β from the blur B_t measured at the tile's `phases` n_t (see the module's notes). Infinite
+/// for every tile while any variance is (a pixel with fewer than two phases); NaN for every tile when the
+/// budget is not positive (no light in the class).
+fn phase_shares(variances: &[f64], blurs: &[f64], phases: &[u32], beta: f64, budget: f64) -> Vec<f64> {
+    let n = variances.len();
+    if variances.iter().any(|v| !v.is_finite()) {
+        return vec![f64::INFINITY; n];
+    }
+    if budget.is_nan() || budget <= 0.0 || budget.is_infinite() {
+        return vec![f64::NAN; n];
+    }
+    let weights: Vec<f64> =
+        blurs.iter().zip(phases).map(|(&b, &p)| if b > 0.0 { b * (p.max(1) as f64).powf(beta) } else { 0.0 }).collect();
+    if weights.iter().all(|&c| c == 0.0) {
+        // S_t / N_t² equal in every tile: N_t = √S_t Σ_u √S_u / budget.
+        let roots: f64 = variances.iter().map(|v| v.sqrt()).sum();
+        return variances.iter().map(|v| v.sqrt() * roots / budget).collect();
+    }
+    // The phases of each tile at the common marginal gain `gain`: the root of S/N² + β C N^(−β−1) = gain,
+    // which decreases in N; Newton's method in ln N from below converges without overshooting (the left side
+    // is convex in ln N).
+    let phases_at = |s: f64, c: f64, gain: f64| -> f64 {
+        if s == 0.0 && c == 0.0 {
+            return 0.0;
+        }
+        let (noise_alone, blur_alone) = ((s / gain).sqrt(), (beta * c / gain).powf(1.0 / (1.0 + beta)));
+        let mut x = noise_alone.max(blur_alone).ln();
+        for _ in 0..50 {
+            let (a, b) = (s * (-2.0 * x).exp(), beta * c * (-(1.0 + beta) * x).exp());
+            let step = (a + b - gain) / (2.0 * a + (1.0 + beta) * b);
+            x += step;
+            if step.abs() < 1e-9 {
+                break;
+            }
+        }
+        x.exp()
+    };
+    let total = |gain: f64| -> f64 {
+        variances
+            .iter()
+            .zip(&weights)
+            .map(|(&s, &c)| {
+                let phases = phases_at(s, c, gain);
+                if phases > 0.0 {
+                    s / phases + c * phases.powf(-beta)
+                } else {
+                    0.0
+                }
+            })
+            .sum()
+    };
+    // The total error falls as the common gain falls: bracket the gain that meets the budget, then bisect in
+    // its logarithm.
+    let (mut low, mut high) = (1.0f64, 1.0f64);
+    while total(low) > budget && low > 1e-300 {
+        low *= 1e-3;
+    }
+    while total(high) < budget && high < 1e300 {
+        high *= 1e3;
+    }
+    for _ in 0..100 {
+        let mid = (low * high).sqrt();
+        if total(mid) > budget {
+            high = mid;
+        } else {
+            low = mid;
+        }
+        if high / low < 1.0 + 1e-9 {
+            break;
+        }
+    }
+    variances.iter().zip(&weights).map(|(&s, &c)| phases_at(s, c, low)).collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::color::Rgb;
     use crate::integrator::LayerValues;
+
+    /// The blur decay of the default radius schedule (the sums of these tests keep no blur layers).
+    const DECAY: f64 = 2.0 / 3.0;
 
     fn value(x: f32) -> LayerValues {
         [Rgb::ZERO, Rgb::splat(x), Rgb::ZERO, Rgb::ZERO]
@@ -306,7 +415,7 @@ mod tests {
         let lit = LitMask::none(4, 2);
         let mut t = ActiveTiles::all(4, 2, 2).unwrap();
         // Too few phases: both stay, whatever the target.
-        assert!(!t.update(&sums(MIN_TILE_PHASES - 1), &lit, ErrorOver::All, 1e3));
+        assert!(!t.update(&sums(MIN_TILE_PHASES - 1), &lit, ErrorOver::All, 1e3, DECAY));
         assert!(t.all_active());
         let acc = sums(MIN_TILE_PHASES);
         let (v, lambda) = t.variances(&acc, &lit, ErrorOver::All);
@@ -321,14 +430,14 @@ mod tests {
         // that share is the phases it has. Tile 0's share is 1/√2 of tile 1's.
         let d1 = (v[1].sqrt() * (judged[0].sqrt() + v[1].sqrt()) / (MIN_TILE_PHASES as f64 * lambda)).sqrt();
         // A target just above D₁: both tiles have their share: every tile would retire, so every tile renders.
-        assert!(!t.update(&acc, &lit, ErrorOver::All, d1 * 1.01));
+        assert!(!t.update(&acc, &lit, ErrorOver::All, d1 * 1.01, DECAY));
         assert!(t.all_active());
         // Just below: tile 1 needs more phases, tile 0 retires.
-        assert!(t.update(&acc, &lit, ErrorOver::All, d1 * 0.99));
+        assert!(t.update(&acc, &lit, ErrorOver::All, d1 * 0.99, DECAY));
         assert_eq!(t.flags(), &[false, true]);
         assert_eq!(t.active_pixels(), vec![2, 3, 6, 7]);
         // A larger target again: tile 1 retires, which leaves none, so both come back.
-        assert!(t.update(&acc, &lit, ErrorOver::All, d1 * 1.01));
+        assert!(t.update(&acc, &lit, ErrorOver::All, d1 * 1.01, DECAY));
         assert!(t.all_active());
     }
 
@@ -353,7 +462,7 @@ mod tests {
             if acc.min_phases() >= MIN_TILE_PHASES && acc.error(&lit).delta_all <= target {
                 break;
             }
-            tiles.update(&acc, &lit, ErrorOver::All, target);
+            tiles.update(&acc, &lit, ErrorOver::All, target, DECAY);
         }
         acc
     }
@@ -395,7 +504,72 @@ mod tests {
         let mut t = ActiveTiles::all(4, 2, 2).unwrap();
         // Above δ over all pixels by a fifth, tile 1 still needs more phases towards it; tile 0, judged by
         // half tile 1's variance, does not (its share is 1/√2 of tile 1's).
-        assert!(t.update(&acc, &lit, ErrorOver::Unlit, e.delta_all * 1.2));
+        assert!(t.update(&acc, &lit, ErrorOver::Unlit, e.delta_all * 1.2, DECAY));
         assert_eq!(t.flags(), &[false, true]);
+    }
+
+    /// Σ_t (S_t / N_t + C_t N_t^(−β)) for the given phases, as `phase_shares` models it.
+    fn modelled_error(variances: &[f64], blurs: &[f64], now: &[u32], beta: f64, phases: &[f64]) -> f64 {
+        (0..variances.len()).map(|t| variances[t] / phases[t] + blurs[t] * (now[t] as f64 / phases[t]).powf(beta)).sum()
+    }
+
+    #[test]
+    fn shares_with_blur_meet_the_budget_at_the_fewest_phases() {
+        let (variances, blurs, now, beta) = ([4.0, 1.0, 0.5], [0.0, 0.3, 2.0], [10, 10, 20], 2.0 / 3.0);
+        let budget = 0.4;
+        let shares = phase_shares(&variances, &blurs, &now, beta, budget);
+        let error = modelled_error(&variances, &blurs, &now, beta, &shares);
+        assert!((error - budget).abs() < 1e-6 * budget, "{error} against {budget}");
+        // No other split of the same phases does better: moving phases between any two tiles raises the error.
+        let total: f64 = shares.iter().sum();
+        for (from, to) in [(0, 1), (1, 2), (2, 0), (1, 0)] {
+            let mut moved = shares.clone();
+            moved[from] -= 0.01 * total;
+            moved[to] += 0.01 * total;
+            assert!(modelled_error(&variances, &blurs, &now, beta, &moved) > error, "moving {from} → {to}");
+        }
+        // Without blur the shares are the closed form √S_t Σ √S_u / budget.
+        let plain = phase_shares(&variances, &[0.0; 3], &now, beta, budget);
+        let roots: f64 = variances.iter().map(|v: &f64| v.sqrt()).sum();
+        for (share, v) in plain.iter().zip(variances) {
+            assert!((share - v.sqrt() * roots / budget).abs() < 1e-9 * share);
+        }
+        // Unknown variances keep every tile rendering; no light in the class leaves nothing to share.
+        assert!(phase_shares(&[f64::INFINITY, 1.0], &[0.0, 1.0], &[2, 2], beta, 1.0).iter().all(|s| s.is_infinite()));
+        assert!(phase_shares(&variances, &blurs, &now, beta, 0.0).iter().all(|s| s.is_nan()));
+    }
+
+    #[test]
+    fn a_tile_whose_error_is_blur_keeps_rendering_after_its_noise_has_its_share() {
+        use crate::accumulation::auxiliary::{AuxLayer, AuxLayout};
+        use crate::accumulation::blur::{BLUR_LAYER, BLUR_SQUARES_LAYER};
+        let layout = AuxLayout::new(vec![
+            AuxLayer { name: BLUR_LAYER.into(), channels: 1 },
+            AuxLayer { name: BLUR_SQUARES_LAYER.into(), channels: 1 },
+        ]);
+        let plain = sums(MIN_TILE_PHASES);
+        let mut blurred = Accumulator::with_aux(4, 2, layout);
+        blurred.pixels = plain.pixels.clone();
+        // Tile 0 (pixels 0, 1, 4, 5) has no noise but a steady disc difference D = 0.2: its squared bias is
+        // (2 D)² per pixel, which only more phases (smaller discs) take down.
+        for p in [0, 1, 4, 5] {
+            for _ in 0..MIN_TILE_PHASES {
+                blurred.aux.add_phase(p, &[0.2, 0.04]);
+            }
+        }
+        let lit = LitMask::none(4, 2);
+        // A target between the noise's δ and the blurred image's.
+        let target = plain.error(&lit).delta_all * 1.2;
+        assert!(blurred.error(&lit).delta_all > 1.2 * target);
+        // By noise alone tile 0 has its share, and it keeps nothing of the error: it retires.
+        let mut by_noise = ActiveTiles::all(4, 2, 2).unwrap();
+        by_noise.update(&plain, &lit, ErrorOver::All, target, DECAY);
+        assert_eq!(by_noise.flags(), &[false, true]);
+        // With its blur counted it stays, as it must for δ (which holds the blur) to reach the target.
+        let mut with_blur = ActiveTiles::all(4, 2, 2).unwrap();
+        with_blur.update(&blurred, &lit, ErrorOver::All, target, DECAY);
+        assert!(with_blur.is_active(0), "{:?}", with_blur.flags());
+        assert!(with_blur.blurs(&blurred, &lit, ErrorOver::All)[0] > 0.0);
+        assert_eq!(with_blur.blurs(&blurred, &lit, ErrorOver::All)[1], 0.0);
     }
 }
