@@ -258,11 +258,17 @@ impl Accumulator {
         }
     }
 
-    /// Each pixel's estimated squared blur (`blur::pixel_bias2`), pixel by index: unbiased and so sometimes
-    /// negative, to be summed over pixels before clamping; zero when the image keeps no blur layers.
-    pub fn blur2_by_pixel(&self) -> impl Fn(usize) -> f64 + '_ {
+    /// Each pixel's estimated squared blur (`blur::pixel_bias2`), pixel by index, and that estimate's variance
+    /// where there is no blur (`blur::pixel_bias2_noise`). The estimate is unbiased and so sometimes negative,
+    /// to be summed over pixels before clamping; both are zero when the image keeps no blur layers.
+    pub fn blur2_by_pixel(&self) -> impl Fn(usize) -> (f64, f64) + '_ {
         let offsets = blur::blur_offsets(self.aux.layout());
-        move |pixel| self.blur2_at(offsets, pixel)
+        move |pixel| {
+            offsets.map_or((0.0, 0.0), |(d, d2)| {
+                let (aux, phases) = (self.aux.pixel(pixel), self.pixels[pixel].phases);
+                (blur::pixel_bias2(phases, aux[d], aux[d2]), blur::pixel_bias2_noise(phases, aux[d], aux[d2]))
+            })
+        }
     }
 
     #[inline]

@@ -36,6 +36,21 @@ pub fn pixel_bias2(phases: u32, sum: f64, sum_sq: f64) -> f64 {
     BIAS_PER_DIFFERENCE * BIAS_PER_DIFFERENCE * (mean * mean - variance_of_mean)
 }
 
+/// The variance of `pixel_bias2`'s estimate at a pixel without blur, where only D̄'s noise makes it: with D̄ of
+/// variance v about zero, 4 (D̄² − v̂) has variance 16 (2 v² + 2 v² / (n − 1)). A sum of estimates that stands
+/// a few of these spreads above zero is blur; one within them may be noise alone. Zero below two phases.
+#[inline]
+pub fn pixel_bias2_noise(phases: u32, sum: f64, sum_sq: f64) -> f64 {
+    if phases < 2 {
+        return 0.0;
+    }
+    let n = phases as f64;
+    let mean = sum / n;
+    let v = (sum_sq / n - mean * mean).max(0.0) / (n - 1.0);
+    let k2 = BIAS_PER_DIFFERENCE * BIAS_PER_DIFFERENCE;
+    k2 * k2 * 2.0 * v * v * (1.0 + 1.0 / (n - 1.0))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -72,5 +87,34 @@ mod tests {
         }
         let mean = total / pixels as f64;
         assert!((mean - 0.36).abs() < 0.01, "{mean}");
+    }
+
+    #[test]
+    fn the_noise_of_the_squared_bias_estimate_is_its_spread_without_blur() {
+        // Pixels whose D is pure noise (uniform, variance 1/12) over 8 phases: the estimates' spread matches
+        // the predicted one.
+        let mut state = 777u64;
+        let mut next = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let (pixels, n) = (40_000, 8u32);
+        let (mut sum, mut sum_sq, mut predicted) = (0.0, 0.0, 0.0);
+        for _ in 0..pixels {
+            let (mut s, mut s2) = (0.0, 0.0);
+            for _ in 0..n {
+                let d = next();
+                s += d;
+                s2 += d * d;
+            }
+            let b = pixel_bias2(n, s, s2);
+            sum += b;
+            sum_sq += b * b;
+            predicted += pixel_bias2_noise(n, s, s2);
+        }
+        let measured = sum_sq / pixels as f64 - (sum / pixels as f64).powi(2);
+        let predicted = predicted / pixels as f64;
+        assert!((measured / predicted - 1.0).abs() < 0.2, "measured {measured}, predicted {predicted}");
+        assert_eq!(pixel_bias2_noise(1, 1.0, 1.0), 0.0);
     }
 }

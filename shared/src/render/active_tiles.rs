@@ -22,7 +22,8 @@
 //!
 //! δ² also holds the photon discs' blur (`accumulation::blur`): B_t, the squared blur summed over the tile's
 //! pixels, which falls as N_t^(−β) as the radii shrink with the pixels' phases (β = 2 (1 − α), `blur_decay`).
-//! The shares then minimise Σ N_t under Σ_t (S_t / N_t + C_t N_t^(−β)) = D² Λ with C_t = B_t n_t^β at the
+//! Only the part of a tile's summed blur estimate that stands out of its noise counts (`blurs`). The shares
+//! then minimise Σ N_t under Σ_t (S_t / N_t + C_t N_t^(−β)) = D² Λ with C_t = B_t n_t^β at the
 //! tile's n_t phases now: the marginal gain S_t / N_t² + β C_t N_t^(−β−1) equal in every tile, solved per tile
 //! by Newton's method and for the common gain by bisection (`phase_shares`). Without blur this is the closed
 //! form above. A tile left to retire by its noise alone would keep its blur, which no other tile's phases
@@ -39,6 +40,10 @@ pub const DEFAULT_TILE: u32 = 32;
 /// Phases every pixel of a tile needs before the tile may retire: its δ is judged from the spread of the
 /// pixels' replicate means (four replicates), which needs a few phases in each.
 pub const MIN_TILE_PHASES: u32 = 8;
+
+/// How many spreads of its noise a tile's summed blur estimate must exceed before it counts (one-sided: noise
+/// alone passes two spreads about one time in forty).
+pub const BLUR_SPREADS: f64 = 2.0;
 
 /// Which tiles of an image a round renders, tile by tile in row-major order.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -168,14 +173,23 @@ impl ActiveTiles {
             .collect()
     }
 
-    /// Each tile's squared blur B_t over its pixels of the class `over` selects: the pixels' unbiased
-    /// estimates summed, then clamped at zero (noise alone can take the sum below it).
+    /// Each tile's squared blur B_t over its pixels of the class `over` selects, as far as it stands out of its
+    /// estimate's noise: the pixels' unbiased estimates summed, less `BLUR_SPREADS` times the spread that sum
+    /// has without blur, and zero below that. Clamping each tile's noisy sum at zero alone would give every
+    /// blur-free tile a positive blur on average, and keep it rendering for nothing.
     pub fn blurs(&self, sums: &Accumulator, lit: &LitMask, over: ErrorOver) -> Vec<f64> {
         let blur2 = sums.blur2_by_pixel();
         (0..self.len())
             .map(|t| {
-                let class = self.pixels_of(t).map(|p| p as usize).filter(|&p| over == ErrorOver::All || !lit.is_lit(p));
-                class.map(&blur2).sum::<f64>().max(0.0)
+                let (mut sum, mut noise) = (0.0, 0.0);
+                for p in self.pixels_of(t).map(|p| p as usize) {
+                    if over == ErrorOver::All || !lit.is_lit(p) {
+                        let (b, n) = blur2(p);
+                        sum += b;
+                        noise += n;
+                    }
+                }
+                (sum - BLUR_SPREADS * noise.sqrt()).max(0.0)
             })
             .collect()
     }
@@ -571,5 +585,35 @@ mod tests {
         assert!(with_blur.is_active(0), "{:?}", with_blur.flags());
         assert!(with_blur.blurs(&blurred, &lit, ErrorOver::All)[0] > 0.0);
         assert_eq!(with_blur.blurs(&blurred, &lit, ErrorOver::All)[1], 0.0);
+    }
+
+    #[test]
+    fn a_tiles_blur_counts_only_where_it_stands_out_of_its_noise() {
+        use crate::accumulation::auxiliary::{AuxLayer, AuxLayout};
+        use crate::accumulation::blur::{BLUR_LAYER, BLUR_SQUARES_LAYER};
+        use rand_core::{RngCore, SeedableRng};
+        let layout = AuxLayout::new(vec![
+            AuxLayer { name: BLUR_LAYER.into(), channels: 1 },
+            AuxLayer { name: BLUR_SQUARES_LAYER.into(), channels: 1 },
+        ]);
+        let mut rng = rand_pcg::Pcg32::seed_from_u64(5);
+        let mut uniform = move || rng.next_u32() as f32 / 4294967296.0 - 0.5;
+        let w = 64;
+        let mut acc = Accumulator::with_aux(w, w, layout);
+        let tiles = ActiveTiles::all(w, w, 8).unwrap();
+        // Every pixel's D is noise of variance 1/12; tile 0's also has a mean of 0.1.
+        let blurred: Vec<u32> = tiles.pixels_of(0).collect();
+        for p in 0..(w * w) as usize {
+            for _ in 0..12 {
+                let d = uniform() + if blurred.contains(&(p as u32)) { 0.1 } else { 0.0 };
+                acc.add_phase(p, &value(1.0), 1, 0);
+                acc.aux.add_phase(p, &[d, d * d]);
+            }
+        }
+        let b = tiles.blurs(&acc, &LitMask::none(w, w), ErrorOver::All);
+        assert!(b[0] > 0.0, "a blur of 0.1 per pixel over 64 pixels counts");
+        // Clamping alone would leave about half the blur-free tiles with a blur; a few of them may pass.
+        let counted = b[1..].iter().filter(|&&b| b > 0.0).count();
+        assert!(counted <= 6, "{counted} of 63 blur-free tiles count a blur");
     }
 }
