@@ -317,16 +317,20 @@ fn phase_shares(variances: &[f64], blurs: &[f64], phases: &[u32], beta: f64, bud
     // which decreases in N; Newton's method in ln N from below converges without overshooting (the left side
     // is convex in ln N).
     let phases_at = |s: f64, c: f64, gain: f64| -> f64 {
-        if s == 0.0 && c == 0.0 {
-            return 0.0;
+        let noise_alone = (s / gain).sqrt();
+        if c == 0.0 {
+            return noise_alone;
         }
-        let (noise_alone, blur_alone) = ((s / gain).sqrt(), (beta * c / gain).powf(1.0 / (1.0 + beta)));
+        let blur_alone = (beta * c / gain).powf(1.0 / (1.0 + beta));
+        if s == 0.0 {
+            return blur_alone;
+        }
         let mut x = noise_alone.max(blur_alone).ln();
         for _ in 0..50 {
             let (a, b) = (s * (-2.0 * x).exp(), beta * c * (-(1.0 + beta) * x).exp());
             let step = (a + b - gain) / (2.0 * a + (1.0 + beta) * b);
             x += step;
-            if step.abs() < 1e-9 {
+            if step < 1e-7 {
                 break;
             }
         }
@@ -347,23 +351,24 @@ fn phase_shares(variances: &[f64], blurs: &[f64], phases: &[u32], beta: f64, bud
             .sum()
     };
     // The total error falls as the common gain falls: bracket the gain that meets the budget, then bisect in
-    // its logarithm.
-    let (mut low, mut high) = (1.0f64, 1.0f64);
-    while total(low) > budget && low > 1e-300 {
-        low *= 1e-3;
-    }
+    // its logarithm. The noise alone meets the budget at the closed form's gain (Σ √S_u / budget)², so with
+    // the blur the gain lies below it.
+    let roots: f64 = variances.iter().map(|v| v.sqrt()).sum();
+    let mut high = if roots > 0.0 { (roots / budget).powi(2) } else { 1.0 };
     while total(high) < budget && high < 1e300 {
         high *= 1e3;
     }
-    for _ in 0..100 {
+    let mut low = high;
+    while total(low) > budget && low > 1e-300 {
+        low *= 1e-3;
+    }
+    // Shares are compared with whole phases: a relative precision of 10⁻⁶ in the gain is plenty.
+    while high / low > 1.0 + 1e-6 {
         let mid = (low * high).sqrt();
         if total(mid) > budget {
             high = mid;
         } else {
             low = mid;
-        }
-        if high / low < 1.0 + 1e-9 {
-            break;
         }
     }
     variances.iter().zip(&weights).map(|(&s, &c)| phases_at(s, c, low)).collect()
