@@ -22,18 +22,26 @@ pub fn blur_offsets(layout: &AuxLayout) -> Option<(usize, usize)> {
 /// grows as r².
 pub const BIAS_PER_DIFFERENCE: f64 = 2.0;
 
+/// D̄ and its variance from a pixel's `phases`, Σ D and Σ D²; None below two phases, where the variance is
+/// unknown.
+#[inline]
+fn mean_and_its_variance(phases: u32, sum: f64, sum_sq: f64) -> Option<(f64, f64)> {
+    if phases < 2 {
+        return None;
+    }
+    let n = phases as f64;
+    let mean = sum / n;
+    Some((mean, (sum_sq / n - mean * mean).max(0.0) / (n - 1.0)))
+}
+
 /// The estimated squared bias of a pixel's mean from its `phases`, Σ D and Σ D²: (2 D̄)² less 4 × D̄'s
 /// variance, which makes it unbiased and so sometimes negative (callers sum it over pixels before they clamp).
 /// Zero below two phases, where D̄'s variance is unknown.
 #[inline]
 pub fn pixel_bias2(phases: u32, sum: f64, sum_sq: f64) -> f64 {
-    if phases < 2 {
-        return 0.0;
-    }
-    let n = phases as f64;
-    let mean = sum / n;
-    let variance_of_mean = (sum_sq / n - mean * mean).max(0.0) / (n - 1.0);
-    BIAS_PER_DIFFERENCE * BIAS_PER_DIFFERENCE * (mean * mean - variance_of_mean)
+    mean_and_its_variance(phases, sum, sum_sq).map_or(0.0, |(mean, variance_of_mean)| {
+        BIAS_PER_DIFFERENCE * BIAS_PER_DIFFERENCE * (mean * mean - variance_of_mean)
+    })
 }
 
 /// The variance of `pixel_bias2`'s estimate at a pixel without blur, where only D̄'s noise makes it: with D̄ of
@@ -41,14 +49,10 @@ pub fn pixel_bias2(phases: u32, sum: f64, sum_sq: f64) -> f64 {
 /// a few of these spreads above zero is blur; one within them may be noise alone. Zero below two phases.
 #[inline]
 pub fn pixel_bias2_noise(phases: u32, sum: f64, sum_sq: f64) -> f64 {
-    if phases < 2 {
-        return 0.0;
-    }
-    let n = phases as f64;
-    let mean = sum / n;
-    let v = (sum_sq / n - mean * mean).max(0.0) / (n - 1.0);
-    let k2 = BIAS_PER_DIFFERENCE * BIAS_PER_DIFFERENCE;
-    k2 * k2 * 2.0 * v * v * (1.0 + 1.0 / (n - 1.0))
+    mean_and_its_variance(phases, sum, sum_sq).map_or(0.0, |(_, v)| {
+        let k2 = BIAS_PER_DIFFERENCE * BIAS_PER_DIFFERENCE;
+        k2 * k2 * 2.0 * v * v * (1.0 + 1.0 / (phases as f64 - 1.0))
+    })
 }
 
 #[cfg(test)]
