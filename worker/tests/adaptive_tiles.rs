@@ -4,12 +4,10 @@
 
 mod common;
 
-use common::{scene, variance_ratio};
+use common::{scene, true_error_unlit, variance_ratio};
 use photonfarm::accumulation::{Accumulator, LitMask};
 use photonfarm::color::luminance_f64;
-use photonfarm::image_io::exr_file::{find_layer, read_exr};
 use photonfarm::render::forecast::Forecast;
-use photonfarm::render::images::luminance_of;
 use photonfarm::render::record::HistoryEntry;
 use photonfarm::render::session::{self, ErrorOver, Progressive, StopReason, StopRule, Tracking};
 use photonfarm::render::{ActiveTiles, Engine, Method, RenderSettings};
@@ -236,25 +234,14 @@ fn assert_retired_and_converged(
 fn delta_of_an_adaptive_run_is_calibrated_against_the_reference() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
     let sc = Scene::load(&dir.join("cornell.toml")).unwrap();
-    let path = dir.join("references/cornell-path.exr");
-    let layers = read_exr(&path).unwrap();
-    let reference = find_layer(&layers, &path, "total").unwrap();
-    let ref_sem = find_layer(&layers, &path, "sem").unwrap();
     let lit = LitMask::of_scene(&sc, RenderSettings::for_scene(&sc, Method::Pbpm, 1).max_depth);
     let mut e = engine(&sc, ParallelMethod::TwoLevel, 2024);
     let (reason, history) = run_adaptive(&mut e, &lit, 0.07, 32, Duration::from_secs(60));
     assert_eq!(reason, StopReason::TargetError);
     assert!(history.iter().filter_map(|h| h.active_tiles).min().unwrap() < 64, "no tile retired");
     let sums = e.sums();
-    let (mut sem2, mut ref_sem2, mut err2, mut norm) = (0.0, 0.0, 0.0, 0.0);
-    for i in (0..sums.pixels.len()).filter(|&i| !lit.is_lit(i)) {
-        let theirs = luminance_of(reference.rgb[i]);
-        sem2 += sums.replicate_sem2(i);
-        ref_sem2 += luminance_of(ref_sem.rgb[i]).powi(2);
-        err2 += (luminance_f64(sums.mean_total(i)) - theirs).powi(2);
-        norm += theirs * theirs;
-    }
-    let (delta, delta_ref, true_error) = ((sem2 / norm).sqrt(), (ref_sem2 / norm).sqrt(), (err2 / norm).sqrt());
+    let (true_error, delta_ref) = true_error_unlit(sums, &lit, "cornell-path");
+    let delta = sums.error(&lit).delta_unlit;
     let ratio = true_error / delta.hypot(delta_ref);
     eprintln!(
         "δ {:.2}%, reference δ {:.2}%, true error {:.2}%, ratio {ratio:.2}",
@@ -271,10 +258,6 @@ fn where_blur_is_most_of_delta_an_adaptive_run_keeps_it_calibrated() {
     // around the caustic need their phases for the blur as much as for the noise (the shares count both).
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
     let sc = Scene::load(&dir.join("caustic.toml")).unwrap();
-    let path = dir.join("references/caustic-pbpm.exr");
-    let layers = read_exr(&path).unwrap();
-    let reference = find_layer(&layers, &path, "total").unwrap();
-    let ref_sem = find_layer(&layers, &path, "sem").unwrap();
     let mut settings = RenderSettings::for_scene(&sc, Method::Pbpm, 7);
     settings.radius_scale = 3.0;
     let lit = LitMask::of_scene(&sc, settings.max_depth);
@@ -287,14 +270,7 @@ fn where_blur_is_most_of_delta_an_adaptive_run_keeps_it_calibrated() {
     let sums = e.sums();
     let estimate = sums.error(&lit);
     assert!(estimate.blur_unlit > 0.5 * estimate.delta_unlit, "the blur is not most of δ: {estimate:?}");
-    let (mut ref_sem2, mut err2, mut norm) = (0.0, 0.0, 0.0);
-    for i in (0..sums.pixels.len()).filter(|&i| !lit.is_lit(i)) {
-        let theirs = luminance_of(reference.rgb[i]);
-        ref_sem2 += luminance_of(ref_sem.rgb[i]).powi(2);
-        err2 += (luminance_f64(sums.mean_total(i)) - theirs).powi(2);
-        norm += theirs * theirs;
-    }
-    let (delta_ref, true_error) = ((ref_sem2 / norm).sqrt(), (err2 / norm).sqrt());
+    let (true_error, delta_ref) = true_error_unlit(sums, &lit, "caustic-pbpm");
     let ratio = true_error / estimate.delta_unlit.hypot(delta_ref);
     eprintln!(
         "δ {:.2}% (blur {:.2}%), reference δ {:.2}%, true error {:.2}%, ratio {ratio:.2}",

@@ -64,3 +64,23 @@ pub fn variance_ratio(a: &Accumulator, b: &Accumulator, lit: &LitMask) -> Varian
     let spread = left_out.iter().map(|r| (r - mean) * (r - mean)).sum::<f64>();
     VarianceRatio { value: d2_all / s2_all, standard_error: ((n - 1.0) / n * spread).sqrt() }
 }
+
+/// The true error of `sums` over the pixels `lit` leaves unlit, against the shipped reference
+/// `scenes/references/NAME.exr`, and that reference's own δ over the same pixels: sqrt(Σ (m − ref)² / Σ ref²)
+/// and sqrt(Σ SEM_ref² / Σ ref²), in luminance.
+pub fn true_error_unlit(sums: &Accumulator, lit: &LitMask, reference: &str) -> (f64, f64) {
+    use photonfarm::image_io::exr_file::{find_layer, read_exr};
+    use photonfarm::render::images::luminance_of;
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/references").join(format!("{reference}.exr"));
+    let layers = read_exr(&path).unwrap();
+    let total = find_layer(&layers, &path, "total").unwrap();
+    let sem = find_layer(&layers, &path, "sem").unwrap();
+    let (mut err2, mut sem2, mut norm) = (0.0, 0.0, 0.0);
+    for i in (0..sums.pixels.len()).filter(|&i| !lit.is_lit(i)) {
+        let theirs = luminance_of(total.rgb[i]);
+        err2 += (luminance_f64(sums.mean_total(i)) - theirs).powi(2);
+        sem2 += luminance_of(sem.rgb[i]).powi(2);
+        norm += theirs * theirs;
+    }
+    ((err2 / norm).sqrt(), (sem2 / norm).sqrt())
+}
