@@ -59,6 +59,20 @@ pub fn pixel_bias2_noise(phases: u32, sum: f64, sum_sq: f64) -> f64 {
 mod tests {
     use super::*;
 
+    /// Uniform numbers in [−0.5, 0.5) from a seeded linear congruential generator.
+    fn centred_uniform(seed: u64) -> impl FnMut() -> f64 {
+        let mut state = seed;
+        move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        }
+    }
+
+    /// Σ D and Σ D² over `phases` draws of D.
+    fn sums_of(phases: u32, mut draw: impl FnMut() -> f64) -> (f64, f64) {
+        (0..phases).map(|_| draw()).fold((0.0, 0.0), |(s, s2), d| (s + d, s2 + d * d))
+    }
+
     #[test]
     fn noise_alone_gives_no_bias_on_average_and_a_steady_difference_gives_twice_itself() {
         // D = ±1 in turn: mean 0, so the squared bias estimate averages out to about zero.
@@ -73,20 +87,11 @@ mod tests {
     #[test]
     fn the_squared_bias_estimate_is_unbiased_for_noisy_differences() {
         // D = 0.3 + uniform noise of variance 1/12 over many pixels of 8 phases: the mean estimate is 0.36.
-        let mut state = 12345u64;
-        let mut next = || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut next = centred_uniform(12345);
         let pixels = 20_000;
         let mut total = 0.0;
         for _ in 0..pixels {
-            let (mut s, mut s2) = (0.0, 0.0);
-            for _ in 0..8 {
-                let d = 0.3 + next();
-                s += d;
-                s2 += d * d;
-            }
+            let (s, s2) = sums_of(8, || 0.3 + next());
             total += pixel_bias2(8, s, s2);
         }
         let mean = total / pixels as f64;
@@ -97,20 +102,11 @@ mod tests {
     fn the_noise_of_the_squared_bias_estimate_is_its_spread_without_blur() {
         // Pixels whose D is pure noise (uniform, variance 1/12) over 8 phases: the estimates' spread matches
         // the predicted one.
-        let mut state = 777u64;
-        let mut next = || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut next = centred_uniform(777);
         let (pixels, n) = (40_000, 8u32);
         let (mut sum, mut sum_sq, mut predicted) = (0.0, 0.0, 0.0);
         for _ in 0..pixels {
-            let (mut s, mut s2) = (0.0, 0.0);
-            for _ in 0..n {
-                let d = next();
-                s += d;
-                s2 += d * d;
-            }
+            let (s, s2) = sums_of(n, &mut next);
             let b = pixel_bias2(n, s, s2);
             sum += b;
             sum_sq += b * b;
