@@ -264,10 +264,11 @@ impl Accumulator {
     pub fn blur2_by_pixel(&self) -> impl Fn(usize) -> (f64, f64) + '_ {
         let offsets = blur::blur_offsets(self.aux.layout());
         move |pixel| {
-            offsets.map_or((0.0, 0.0), |(d, d2)| {
-                let (aux, phases) = (self.aux.pixel(pixel), self.pixels[pixel].phases);
-                (blur::pixel_bias2(phases, aux[d], aux[d2]), blur::pixel_bias2_noise(phases, aux[d], aux[d2]))
-            })
+            let noise = offsets.map_or(0.0, |(d, d2)| {
+                let aux = self.aux.pixel(pixel);
+                blur::pixel_bias2_noise(self.pixels[pixel].phases, aux[d], aux[d2])
+            });
+            (self.blur2_at(offsets, pixel), noise)
         }
     }
 

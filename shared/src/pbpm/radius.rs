@@ -25,6 +25,13 @@ impl RadiusSchedule {
     pub fn shrink(&self, phase: u64) -> f32 {
         (phase.max(1) as f32).powf((self.alpha - 1.0) * 0.5)
     }
+
+    /// The exponent β with which a pixel's squared blur falls with its phases N under a schedule of this
+    /// `alpha`: each phase's bias grows as r², which shrinks as j^(α−1), so the mean over N phases falls as
+    /// N^(α−1) and its square as N^(−2 (1 − α)).
+    pub fn blur_decay(alpha: f32) -> f64 {
+        2.0 * (1.0 - alpha as f64)
+    }
 }
 
 /// Who else renders a pixel's phases, so that the schedule's j counts every phase the pixel has had across

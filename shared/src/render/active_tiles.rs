@@ -21,13 +21,13 @@
 //! relative error is high but whose weight in δ is small, rendering long after they matter.
 //!
 //! δ² also holds the photon discs' blur (`accumulation::blur`): B_t, the squared blur summed over the tile's
-//! pixels, which falls as N_t^(−β) as the radii shrink with the pixels' phases (β = 2 (1 − α), `blur_decay`).
-//! Only the part of a tile's summed blur estimate that stands out of its noise counts (`blurs`). The shares
-//! then minimise Σ N_t under Σ_t (S_t / N_t + C_t N_t^(−β)) = D² Λ with C_t = B_t n_t^β at the
-//! tile's n_t phases now: the marginal gain S_t / N_t² + β C_t N_t^(−β−1) equal in every tile, solved per tile
-//! by Newton's method and for the common gain by bisection (`phase_shares`). Without blur this is the closed
-//! form above. A tile left to retire by its noise alone would keep its blur, which no other tile's phases
-//! reduce.
+//! pixels, which falls as N_t^(−β) as the radii shrink with the pixels' phases (β = 2 (1 − α),
+//! `RadiusSchedule::blur_decay`). Only the part of a tile's summed blur estimate that stands out of its noise
+//! counts (`blurs`). The shares then minimise Σ N_t under Σ_t (S_t / N_t + C_t N_t^(−β)) = D² Λ with
+//! C_t = B_t n_t^β at the tile's n_t phases now: the marginal gain S_t / N_t² + β C_t N_t^(−β−1) equal in every
+//! tile, solved per tile by Newton's method and for the common gain by bisection (`phase_shares`). Without
+//! blur this is the closed form above. A tile left to retire by its noise alone would keep its blur, which no
+//! other tile's phases reduce.
 
 use super::session::ErrorOver;
 use crate::accumulation::{Accumulator, LitMask};
@@ -287,13 +287,6 @@ impl ActiveTiles {
     }
 }
 
-/// The exponent β with which a pixel's squared blur falls with its phases N: each phase's bias grows as r²,
-/// which the radius schedule shrinks as j^(α−1), so the mean over N phases falls as N^(α−1) and its square as
-/// N^(−2 (1 − α)).
-pub fn blur_decay(radius_alpha: f32) -> f64 {
-    2.0 * (1.0 - radius_alpha as f64)
-}
-
 /// The fewest phases N_t per tile that bring Σ_t (S_t / N_t + C_t N_t^(−β)) down to `budget` (D² Λ), with
 /// C_t = B_t n_t^β from the blur B_t measured at the tile's `phases` n_t (see the module's notes). Infinite
 /// for every tile while any variance is (a pixel with fewer than two phases); NaN for every tile when the
@@ -308,9 +301,9 @@ fn phase_shares(variances: &[f64], blurs: &[f64], phases: &[u32], beta: f64, bud
     }
     let weights: Vec<f64> =
         blurs.iter().zip(phases).map(|(&b, &p)| if b > 0.0 { b * (p.max(1) as f64).powf(beta) } else { 0.0 }).collect();
+    let roots: f64 = variances.iter().map(|v| v.sqrt()).sum();
     if weights.iter().all(|&c| c == 0.0) {
         // S_t / N_t² equal in every tile: N_t = √S_t Σ_u √S_u / budget.
-        let roots: f64 = variances.iter().map(|v| v.sqrt()).sum();
         return variances.iter().map(|v| v.sqrt() * roots / budget).collect();
     }
     // The phases of each tile at the common marginal gain `gain`: the root of S/N² + β C N^(−β−1) = gain,
@@ -353,7 +346,6 @@ fn phase_shares(variances: &[f64], blurs: &[f64], phases: &[u32], beta: f64, bud
     // The total error falls as the common gain falls: bracket the gain that meets the budget, then bisect in
     // its logarithm. The noise alone meets the budget at the closed form's gain (Σ √S_u / budget)², so with
     // the blur the gain lies below it.
-    let roots: f64 = variances.iter().map(|v| v.sqrt()).sum();
     let mut high = if roots > 0.0 { (roots / budget).powi(2) } else { 1.0 };
     while total(high) < budget && high < 1e300 {
         high *= 1e3;

@@ -1,6 +1,6 @@
 //! A progressive run: phases until a time, phase or error target is met, or the user interrupts.
 
-use super::active_tiles::{blur_decay, ActiveTiles};
+use super::active_tiles::ActiveTiles;
 use super::engine::Engine;
 use super::forecast::Forecast;
 use super::light_balance::LightBalance;
@@ -8,6 +8,7 @@ use super::record::HistoryEntry;
 use super::settings::RenderSettings;
 use super::totals::RayTotals;
 use crate::accumulation::{Accumulator, LitMask};
+use crate::pbpm::RadiusSchedule;
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -184,7 +185,7 @@ pub fn run<R: Progressive + ?Sized>(
     let adaptive = target.is_some();
     let decide = |engine: &mut R, tiles: &mut Option<&mut ActiveTiles>| {
         if let (Some(t), Some(target)) = (tiles.as_deref_mut(), target) {
-            let decay = blur_decay(engine.settings().radius_alpha);
+            let decay = RadiusSchedule::blur_decay(engine.settings().radius_alpha);
             if t.update(engine.sums(), lit, stop.error_over, target, decay) {
                 engine.set_active_tiles(t);
             }
