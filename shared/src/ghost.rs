@@ -34,6 +34,13 @@ pub fn sensor_ghosts(scene: &Scene) -> bool {
 /// camera paths than it gives the ghost layer (docs/measurements.md, "Ghost pairs").
 pub const GHOST_PATHS_PER_LIGHT_PATH: u32 = 1;
 
+/// The radius in pixels, at the first phase, of the disc a ghost chain's registration is spread over on the
+/// sensor unless the scene sets `[render] ghost_radius` (`crate::pbpm::sensor_kernel`).
+pub const GHOST_RADIUS: f32 = 8.0;
+
+/// The largest `ghost_radius` a scene may ask for: a disc of a few thousand pixels per registration.
+pub const MAX_GHOST_RADIUS: f32 = 32.0;
+
 /// The most ghost paths per light path a scene may ask for.
 pub const MAX_GHOST_PATHS: u32 = 64;
 

@@ -335,3 +335,11 @@ fn too_many_ghost_paths_are_refused_with_the_limit() {
     let t = format!("[render]\nghost_paths = 1000\n{GOOD}");
     expect_error(&t, line_of(&t, "ghost_paths"), &["render.ghost_paths", "at most 64", "1000"]);
 }
+
+#[test]
+fn a_ghost_radius_outside_its_range_is_refused_with_the_range() {
+    for bad in ["-1.0", "100.0", "nan"] {
+        let t = format!("[render]\nghost_radius = {bad}\n{GOOD}");
+        expect_error(&t, line_of(&t, "ghost_radius"), &["render.ghost_radius", "in [0, 32] (pixels)"]);
+    }
+}

@@ -25,13 +25,15 @@ fn scene(ghost_light_paths: bool) -> Scene {
     scene_with_glass(ghost_light_paths, 3.0)
 }
 
-/// `scene` with a window of refractive index `ior`.
+/// `scene` with a window of refractive index `ior`. Each ghost chain registers on its own pixel (`ghost_radius =
+/// 0`): the partition is a property of the registrations, proved here without the sensor's disc.
 fn scene_with_glass(ghost_light_paths: bool, ior: f32) -> Scene {
-    scene_with_glass_and(ghost_light_paths, ior, "")
+    scene_with_glass_and(ghost_light_paths, ior, 0.0, "")
 }
 
-/// `scene_with_glass` with more of the scene file's text after it.
-fn scene_with_glass_and(ghost_light_paths: bool, ior: f32, more: &str) -> Scene {
+/// `scene_with_glass` with ghost registrations spread over a sensor disc of `ghost_radius` pixels at the first
+/// phase, and more of the scene file's text after it.
+fn scene_with_glass_and(ghost_light_paths: bool, ior: f32, ghost_radius: f32, more: &str) -> Scene {
     // The lamp's chains reach the sensor from about one light path in 500: enough paths per phase that most
     // pixels get some in every batch of phases, so that their standard errors can be estimated.
     let light_paths = if ghost_light_paths { 16 } else { 1 };
@@ -41,6 +43,7 @@ fn scene_with_glass_and(ghost_light_paths: bool, ior: f32, more: &str) -> Scene 
 max_depth = 16
 light_paths_per_pixel = {light_paths}
 ghost_light_paths = {ghost_light_paths}
+ghost_radius = {ghost_radius}
 
 [camera]
 type = "sensor"
@@ -319,7 +322,7 @@ name = "screen"
 material = "black"
 quad = { corner = [-0.5, -0.5, 0.002], edge1 = [0.0, 1.0, 0.0], edge2 = [0.5, 0.0, 0.0] }
 "#;
-    let scene = scene_with_glass_and(true, 1.5, screen);
+    let scene = scene_with_glass_and(true, 1.5, 0.0, screen);
     let pairs = scene.ghost_pairs.as_ref().expect("a table for a sensor scene");
     let (best, _) = pairs.iter().enumerate().max_by(|a, b| a.1 .1.total_cmp(&b.1 .1)).expect("pairs");
     let grid = pairs.aim(best);
@@ -339,4 +342,41 @@ quad = { corner = [-0.5, -0.5, 0.002], edge1 = [0.0, 1.0, 0.0], edge2 = [0.5, 0.
     println!("{hidden:.3} of the best pair's aimed paths go to the hidden half of the window");
     assert!(hidden < 0.3, "the hidden half keeps {hidden} of the aimed paths");
     assert_ghost_paths_bring_what_light_paths_bring(&scene);
+}
+
+#[test]
+fn ghost_chains_spread_over_the_sensors_disc_keep_the_ghost_layers_light_with_less_noise_and_a_measured_blur() {
+    // A disc of 6 pixels at the first phase on the 16 × 12 sensor, still 2 pixels after the 400 phases. Both
+    // runs draw the same paths (same seed), so a disc that keeps each registration's light gives the same sum.
+    let (spread, point) = (scene_with_glass_and(true, 3.0, 6.0, ""), scene(true));
+    let (a, b) = (render(&spread, Method::Pbpm, 4, 40, 10), render(&point, Method::Pbpm, 4, 40, 10));
+    let (sum_a, sum_b) = (image_sum(&a.ghost), image_sum(&b.ghost));
+    println!(
+        "ghost layer over the image: disc {:.6} ± {:.4}, own pixel {:.6} ± {:.4}",
+        sum_a.0, sum_a.1, sum_b.0, sum_b.1
+    );
+    assert!((sum_a.0 - sum_b.0).abs() < 1e-5 * sum_b.0, "the disc changed the ghost light over the image");
+    // Each pixel averages the chains of its disc: the per-pixel noise falls.
+    let noise = |e: &PixelEstimates| e.ghost.iter().map(|g| g.1 * g.1).sum::<f64>();
+    println!("Σ SEM² of the ghost layer: disc {:.4e}, own pixel {:.4e}", noise(&a), noise(&b));
+    assert!(noise(&a) < 0.5 * noise(&b), "the disc did not lower the ghost layer's noise");
+    // The disc's blur of the lamp's ghost shows in the blur the run measures: Σ blur² over the pixels, and the
+    // spread that sum would have without blur.
+    let blur = |scene: &Scene| {
+        let mut engine = Engine::new(scene, common::settings(scene, Method::Pbpm, 6));
+        for _ in 0..100 {
+            engine.run_phase();
+        }
+        let sums = engine.sums();
+        let by_pixel = sums.blur2_by_pixel();
+        let (blur, noise) = (0..sums.pixels.len()).map(&by_pixel).fold((0.0, 0.0), |(b, n), p| (b + p.0, n + p.1));
+        (blur, noise.sqrt())
+    };
+    let (disc, own) = (blur(&spread), blur(&point));
+    println!(
+        "Σ blur² after 100 phases (and its spread without blur): disc {:.4e} ({:.1e}), own pixel {:.4e} ({:.1e})",
+        disc.0, disc.1, own.0, own.1
+    );
+    assert!(disc.0 > 4.0 * disc.1, "the disc's blur does not stand out of its noise");
+    assert!(disc.0 > 10.0 * own.0.max(own.1), "the disc's blur is not measured");
 }

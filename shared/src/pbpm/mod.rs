@@ -17,6 +17,7 @@ pub mod phase;
 pub mod photon;
 pub mod photon_map;
 pub mod radius;
+pub mod sensor_kernel;
 pub mod sorted_gather;
 
 pub use backward_pass::{trace_camera_path, BackwardSettings};
@@ -30,5 +31,6 @@ pub use ghost_paths::{trace_ghost_paths, GhostPair, GhostPairs};
 pub use phase::{LocalPixels, Phase, PhaseBuffers};
 pub use photon::{BackwardPhoton, PhotonKind};
 pub use photon_map::PhotonMap;
-pub use radius::{PhaseNumbering, RadiusSchedule};
+pub use radius::{mean_phase, PhaseNumbering, RadiusSchedule};
+pub use sensor_kernel::SensorKernel;
 pub use sorted_gather::{SortedGathers, SORTED_GATHER_BATCH};

@@ -20,10 +20,11 @@ use super::ghost_paths::trace_ghost_paths;
 use super::photon::BackwardPhoton;
 use super::photon_map::PhotonMap;
 use super::radius::RadiusSchedule;
+use super::sensor_kernel::SensorKernel;
 use super::sorted_gather::SortedGathers;
 use crate::accumulation::blur::blur_offsets;
 use crate::accumulation::{auxiliary::add_phase_to, AuxLayout, AuxSums, PixelSums};
-use crate::color::Rgb;
+use crate::color::{luminance, Rgb};
 use crate::integrator::{Layer, LayerValues};
 use crate::ray_map::{PathKind, RecordedPath, Recorder};
 use crate::sampling::{replicate_of, Sampler};
@@ -54,6 +55,8 @@ pub struct Phase<'a> {
     pub sensor_ghosts: bool,
     /// Ghost paths per light path (`crate::ghost::ghost_paths`).
     pub ghost_paths: u32,
+    /// The disc each ghost chain's registration is spread over on the sensor (`Phase::at_pixel_phase`).
+    pub sensor_kernel: SensorKernel,
 }
 
 /// Which local pixel of a phase an image pixel is, for light that registers on the sensor: the identity when
@@ -99,6 +102,15 @@ impl LocalPixels {
 }
 
 impl Phase<'_> {
+    /// The phase with the sensor's disc for ghost chains of the phase whose pixels are at phase j = `j`: their
+    /// mean j, where tiles give the pixels different counts, so that one registration keeps one disc.
+    pub fn at_pixel_phase(mut self, j: u64) -> Self {
+        if self.sensor_ghosts {
+            self.sensor_kernel = SensorKernel::at_phase(self.scene.render.ghost_radius, &self.radius, j);
+        }
+        self
+    }
+
     /// Traces light path number `index` of the phase and hands each vertex that may gather (DESIGN §1 step 3)
     /// and each ghost chain that reaches the sensor to `visit`.
     #[inline]
@@ -158,16 +170,34 @@ impl Phase<'_> {
         }
     }
 
-    /// Adds a chain's light registered on the sensor to its pixel's visible lights (and a ghost's to the ghost
-    /// layer), if the phase renders the pixel.
+    /// Adds a chain's light registered on the sensor to its pixel's visible lights, if the phase renders the
+    /// pixel; a ghost chain's goes to the pixels of the phase's sensor disc about it, and to the ghost layer.
     #[inline]
     pub fn register(&self, pixels: &LocalPixels, hit: &SensorHit, sink: &mut impl Gather) {
-        let Some(local) = pixels.local(hit.pixel) else { return };
         // A pixel whose camera paths are spectral from their first vertex (spectral output) takes the light of
         // its own wavelength class only, as a photon does.
-        let tag = if self.spectrum.from_start { PhaseSpectrum::class_of(local as u64) + 1 } else { 0 };
-        let value = join(Rgb::ONE, tag, hit.value, hit.spectrum, &self.spectrum);
-        sink.add(local, Layer::VisibleLights, hit.ghost, value);
+        let value_at = |local: u32| {
+            let tag = if self.spectrum.from_start { PhaseSpectrum::class_of(local as u64) + 1 } else { 0 };
+            join(Rgb::ONE, tag, hit.value, hit.spectrum, &self.spectrum)
+        };
+        if !hit.ghost || self.sensor_kernel.is_point() {
+            let Some(local) = pixels.local(hit.pixel) else { return };
+            sink.add(local, Layer::VisibleLights, hit.ghost, value_at(local));
+            return;
+        }
+        // A ghost chain is a point of a defocused image: its light is spread over the sensor's disc (eq. 4 on
+        // the sensor), and its blur measured against the inner disc's as a photon's is.
+        let blur = sink.measures_blur();
+        let camera = &self.scene.camera;
+        let common = (!self.spectrum.from_start).then(|| value_at(0));
+        self.sensor_kernel.spread(hit.pixel, camera.width, camera.height, |pixel, share, d| {
+            let Some(local) = pixels.local(pixel) else { return };
+            let value = common.unwrap_or_else(|| value_at(local));
+            sink.add(local, Layer::VisibleLights, true, value * share);
+            if blur {
+                sink.add_blur(local, luminance(value) * d);
+            }
+        });
     }
 
     /// Traces light paths `indices` into one map and its buffer: the forward pass of a map nobody shares, over

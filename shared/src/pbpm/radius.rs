@@ -60,6 +60,15 @@ impl PhaseNumbering {
     }
 }
 
+/// The mean of `next_phase` (a local pixel's j) over a phase's `pixels` local pixels, rounded; 1 for none.
+pub fn mean_phase(pixels: usize, next_phase: impl Fn(usize) -> u64) -> u64 {
+    if pixels == 0 {
+        return 1;
+    }
+    let sum: u128 = (0..pixels).map(|i| next_phase(i) as u128).sum();
+    ((sum + pixels as u128 / 2) / pixels as u128) as u64
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -10,7 +10,7 @@ use crate::integrator::path_tracer;
 use crate::pbpm::forward_pass::{trace_light_path_logged, LightEvent};
 use crate::pbpm::ghost_paths::trace_ghost_paths;
 use crate::pbpm::phase::{start_aux, Closing, LocalPixels};
-use crate::pbpm::{Executor, ForwardStats, GatherBuffer, PhaseBuffers, PhotonMap, SortedGathers};
+use crate::pbpm::{mean_phase, Executor, ForwardStats, GatherBuffer, PhaseBuffers, PhotonMap, SortedGathers};
 use crate::ray_map::{PathKind, RecordedPath, Recorder};
 use crate::sampling::{replicate_of, Sampler};
 use crate::scene::Scene;
@@ -231,7 +231,7 @@ impl<'s> Engine<'s> {
     fn sensor_light_paths(&mut self, phase: u64) -> ForwardStats {
         let scene = self.scene;
         // The camera paths' wavelength keys are phase << 32 | pixel; this one is no pixel's.
-        let mut p = self.settings.phase(scene, phase);
+        let mut p = self.settings.phase(scene, phase).at_pixel_phase(phase);
         p.spectrum = self.settings.phase_spectrum(scene, phase << 32 | u32::MAX as u64);
         let light = p.light_settings(false);
         let mut stats = ForwardStats::default();
@@ -261,11 +261,12 @@ impl<'s> Engine<'s> {
     fn pbpm_phase(&mut self) -> PhaseReport {
         let number = self.totals.phases + 1;
         let exec = Executor::CallingThread;
-        let phase = self.settings.phase(self.scene, number);
         let mask = self.tiles.as_ref().map(|t| &t.mask[..]);
         let pixels = &self.sums.pixels;
         // A pixel's phase j is its own phase count plus one: the engine's phase count unless tiles have retired.
         let next_phase = |local: usize| pixels[mask.map_or(local, |m| m[local] as usize)].phases as u64 + 1;
+        let rendered = mask.map_or(pixels.len(), <[u32]>::len);
+        let phase = self.settings.phase(self.scene, number).at_pixel_phase(mean_phase(rendered, next_phase));
         let backward = self.buffers.camera_pass(exec, &phase, mask, next_phase, &mut self.map);
         self.buffers.build_map(exec, &mut self.map);
         let (local, rendered) = TilePixels::rendered(&self.tiles, self.scene);

@@ -81,6 +81,7 @@ impl RenderSettings {
             spectrum: self.phase_spectrum(scene, key),
             sensor_ghosts: crate::ghost::sensor_ghosts(scene),
             ghost_paths: crate::ghost::ghost_paths(scene),
+            sensor_kernel: crate::pbpm::SensorKernel::POINT,
         }
     }
 

@@ -29,6 +29,7 @@ pub struct RenderSection {
     pub light_paths_per_pixel: Option<Spanned<f32>>,
     pub ghost_light_paths: Option<bool>,
     pub ghost_paths: Option<Spanned<u32>>,
+    pub ghost_radius: Option<Spanned<f32>>,
 }
 
 /// The camera.

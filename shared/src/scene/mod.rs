@@ -45,6 +45,9 @@ pub struct SceneRenderSettings {
     /// Ghost paths traced per light path where light paths bring the ghost chains (`crate::ghost`); 0 leaves
     /// the chains to the light paths themselves.
     pub ghost_paths: u32,
+    /// The radius in pixels, at the first phase, of the disc on the sensor each ghost chain's registration is
+    /// spread over (`crate::pbpm::sensor_kernel`); below 1, a chain registers on its pixel alone.
+    pub ghost_radius: f32,
 }
 
 impl Default for SceneRenderSettings {
@@ -56,6 +59,7 @@ impl Default for SceneRenderSettings {
             light_paths_per_pixel: None,
             ghost_light_paths: true,
             ghost_paths: crate::ghost::GHOST_PATHS_PER_LIGHT_PATH,
+            ghost_radius: crate::ghost::GHOST_RADIUS,
         }
     }
 }

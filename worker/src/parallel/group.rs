@@ -6,7 +6,8 @@ use super::thread_gathers::{batch_per_map, GatherRules, ThreadGathers};
 use photonfarm::accumulation::AuxLayout;
 use photonfarm::accumulation::{AuxSums, PixelSums};
 use photonfarm::pbpm::{
-    AtomicGatherBuffer, Executor, ForwardStats, LightEvent, LocalPixels, Phase, PhaseBuffers, PhaseNumbering, PhotonMap,
+    mean_phase, AtomicGatherBuffer, Executor, ForwardStats, LightEvent, LocalPixels, Phase, PhaseBuffers,
+    PhaseNumbering, PhotonMap,
 };
 use photonfarm::render::RenderSettings;
 use photonfarm::scene::Scene;
@@ -306,6 +307,7 @@ impl Group {
         let slot = &ctx.slots[self.index];
         let (phases_before, sums) = (&self.phases_before, &self.sums);
         let next_phase = |local: usize| numbering.next_phase(phases_before[local] as u64, sums[local].phases as u64);
+        let phase = phase.at_pixel_phase(mean_phase(self.mask.len(), next_phase));
         let map = &mut slot.data_mut(&mut self.token).photons;
         let backward = self.buffers.camera_pass(exec, &phase, Some(&self.mask), next_phase, map);
         self.stats.backward_rays += backward.rays;

@@ -188,6 +188,16 @@ impl Loader<'_> {
             }
             s.ghost_paths = *k.get_ref();
         }
+        if let Some(x) = &r.ghost_radius {
+            let max = crate::ghost::MAX_GHOST_RADIUS;
+            s.ghost_radius = self.scalar(
+                *x.get_ref(),
+                &x.span(),
+                "render.ghost_radius",
+                |v| (0.0..=max).contains(&v),
+                &format!("in [0, {max}] (pixels)"),
+            )?;
+        }
         Ok(s)
     }
 }
