@@ -4,8 +4,9 @@
 //! of `caustic` that see the ceiling light through the glass sphere. Builds that decide their own lit masks
 //! differently are compared over the same pixels this way.
 //!
-//! `cargo run --release -p photonfarm --example pixel_set_errors -- REF.exr MASK.exr FROM_ROW RUN.exr...`
-//! (MASK.exr: any image.exr with a `lit` layer). Prints one tab-separated line per run.
+//! `cargo run --release -p photonfarm --example pixel_set_errors -- [--layer NAME] REF.exr MASK.exr FROM_ROW
+//! RUN.exr...` (MASK.exr: any image.exr with a `lit` layer). Prints one tab-separated line per run. With
+//! `--layer` the runs' and the reference's layer NAME (such as `ghost`) is compared instead of their total.
 
 use photonfarm::image_io::exr_file::{find_layer, read_exr, LayerImage};
 use photonfarm::render::images::luminance_of;
@@ -34,14 +35,22 @@ fn luminances(layer: &LayerImage) -> Vec<f64> {
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
+    let mut args: Vec<String> = std::env::args().skip(1).collect();
+    let compared = match args.first().map(String::as_str) {
+        Some("--layer") if args.len() > 1 => {
+            let name = args[1].clone();
+            args.drain(..2);
+            name
+        }
+        _ => "total".to_string(),
+    };
     if args.len() < 4 {
-        return Err("usage: pixel_set_errors REF.exr MASK.exr FROM_ROW RUN.exr...".into());
+        return Err("usage: pixel_set_errors [--layer NAME] REF.exr MASK.exr FROM_ROW RUN.exr...".into());
     }
     let (ref_path, mask_path) = (PathBuf::from(&args[0]), PathBuf::from(&args[1]));
     let from_row: usize = args[2].parse().map_err(|_| format!("FROM_ROW must be a row number, not {}", args[2]))?;
     let reference_layers = read_exr(&ref_path)?;
-    let total = layer(&reference_layers, &ref_path, "total")?;
+    let total = layer(&reference_layers, &ref_path, &compared)?;
     let reference = luminances(total);
     let sees_light: Vec<bool> =
         layer(&reference_layers, &ref_path, "visible_lights")?.rgb.iter().map(|p| p.iter().any(|&c| c > 0.0)).collect();
@@ -58,7 +67,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for run in &args[3..] {
         let path = PathBuf::from(run);
         let layers = read_exr(&path)?;
-        let image = luminances(layer(&layers, &path, "total")?);
+        let image = luminances(layer(&layers, &path, &compared)?);
         if image.len() != reference.len() {
             return Err(format!("{run} and the reference differ in size").into());
         }
