@@ -55,9 +55,9 @@ impl SensorKernel {
         let inner = Disc::new(self.radius2 * super::inner_disc::INNER_RADIUS2, x, y, width, height);
         let (w_outer, w_inner) = (1.0 / outer.count() as f32, 1.0 / inner.count() as f32);
         for py in outer.rows() {
-            let (outer_x, inner_x) = (outer.columns(py), inner.columns(py));
+            let (Some(outer_x), inner_x) = (outer.columns(py), inner.columns(py)) else { continue };
             for px in outer_x {
-                let in_inner = inner_x.contains(&px);
+                let in_inner = inner_x.as_ref().is_some_and(|c| c.contains(&px));
                 let d = if in_inner { w_outer - w_inner } else { w_outer };
                 add(py as u32 * width + px as u32, w_outer, d * self.blur_scale);
             }
@@ -84,15 +84,19 @@ impl Disc {
         (self.y - self.reach).max(0)..=(self.y + self.reach).min(self.height - 1)
     }
 
-    /// The columns of row `py` (one of `rows`) inside the disc and the image.
-    fn columns(&self, py: i32) -> std::ops::RangeInclusive<i32> {
+    /// The columns of row `py` inside the disc and the image; None for a row the disc does not reach.
+    fn columns(&self, py: i32) -> Option<std::ops::RangeInclusive<i32>> {
         let dy = (py - self.y) as f32;
-        let half = (self.radius2 - dy * dy).max(0.0).sqrt() as i32;
-        (self.x - half).max(0)..=(self.x + half).min(self.width - 1)
+        let left = self.radius2 - dy * dy;
+        if left < 0.0 {
+            return None;
+        }
+        let half = left.sqrt() as i32;
+        Some((self.x - half).max(0)..=(self.x + half).min(self.width - 1))
     }
 
     fn count(&self) -> u32 {
-        self.rows().map(|py| self.columns(py).count() as u32).sum()
+        self.rows().filter_map(|py| self.columns(py)).map(|c| c.count() as u32).sum()
     }
 }
 
