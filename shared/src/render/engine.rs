@@ -231,7 +231,9 @@ impl<'s> Engine<'s> {
     fn sensor_light_paths(&mut self, phase: u64) -> ForwardStats {
         let scene = self.scene;
         // The camera paths' wavelength keys are phase << 32 | pixel; this one is no pixel's.
-        let mut p = self.settings.phase(scene, phase).at_pixel_phase(phase);
+        // The reference path tracer stays unbiased: its ghost chains register on their own pixels, without the
+        // sensor's disc.
+        let mut p = self.settings.phase(scene, phase);
         p.spectrum = self.settings.phase_spectrum(scene, phase << 32 | u32::MAX as u64);
         let light = p.light_settings(false);
         let mut stats = ForwardStats::default();
