@@ -83,6 +83,14 @@ mod tests {
     }
 
     #[test]
+    fn the_mean_phase_of_a_phases_pixels_is_rounded_and_one_without_pixels() {
+        assert_eq!(mean_phase(4, |i| [3, 3, 4, 4][i]), 4);
+        assert_eq!(mean_phase(3, |i| [3, 3, 4][i]), 3);
+        assert_eq!(mean_phase(2, |_| u64::MAX / 2), u64::MAX / 2);
+        assert_eq!(mean_phase(0, |_| unreachable!()), 1);
+    }
+
+    #[test]
     fn phase_numbers_of_sharers_interleave_without_gaps_or_repeats() {
         // Two groups over one image in two processes: their first three phases each take j = 1..12 once.
         let mut seen = Vec::new();
