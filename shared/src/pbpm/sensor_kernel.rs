@@ -105,19 +105,17 @@ impl Disc {
 /// (b(outer) − b(inner)) = m_outer / (m_outer − m_inner), which is the 2 of `accumulation::blur` for continuous
 /// discs and differs from it on a grid of a few pixels.
 fn blur_scale(radius2: f32) -> f32 {
+    // The disc's offsets, as a disc about the centre of an image just large enough to hold it.
     let mean_square = |r2: f32| {
         let reach = r2.sqrt() as i32;
-        let (mut sum, mut count) = (0.0f64, 0u32);
-        for dy in -reach..=reach {
-            for dx in -reach..=reach {
-                let d2 = (dx * dx + dy * dy) as f32;
-                if d2 <= r2 {
-                    sum += d2 as f64;
-                    count += 1;
-                }
-            }
-        }
-        sum / count as f64
+        let side = (2 * reach + 1) as u32;
+        let disc = Disc::new(r2, reach, reach, side, side);
+        let sum: f64 = disc
+            .rows()
+            .filter_map(|py| Some((py - reach, disc.columns(py)?)))
+            .flat_map(|(dy, columns)| columns.map(move |px| ((px - reach).pow(2) + dy * dy) as f64))
+            .sum();
+        sum / disc.count() as f64
     };
     let (outer, inner) = (mean_square(radius2), mean_square(radius2 * super::inner_disc::INNER_RADIUS2));
     if outer <= inner {
