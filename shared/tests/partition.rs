@@ -127,3 +127,25 @@ fn check_partition(sc: &photonfarm::scene::Scene, pbpm_phases: usize, path_phase
     eprintln!("relative RMSE {rmse:.4}; δ PBPM {:.4}, δ path {:.4}", e.delta_all, f.delta_all);
     assert!(rmse < 0.02, "PBPM and the path tracer differ by {:.2}% relative RMSE", 100.0 * rmse);
 }
+
+#[test]
+fn the_first_diffuse_vertex_s_direct_light_is_the_same_estimator_whatever_the_backward_depth() {
+    // A path that ends at its first diffuse vertex still traces its BSDF ray to find the emitter it hits, so
+    // that next-event estimation keeps its multiple-importance partner (eq. 5). With the same seed, both depths
+    // draw the same numbers up to that ray: every pixel's direct layer must be the same.
+    let sc = scene(SCENE);
+    let direct = |depth| {
+        let mut s = settings(&sc, Method::Pbpm, 5);
+        s.backward_diffuse_depth = depth;
+        let mut engine = Engine::new(&sc, s);
+        for _ in 0..20 {
+            engine.run_phase();
+        }
+        let sums = engine.sums();
+        (0..sums.pixels.len()).map(|i| luminance_f64(sums.mean(i, Layer::Direct))).collect::<Vec<_>>()
+    };
+    let (one, two) = (direct(1), direct(2));
+    let worst = one.iter().zip(&two).map(|(a, b)| (a - b).abs() / b.abs().max(1e-12)).fold(0.0, f64::max);
+    assert!(two.iter().sum::<f64>() > 0.0, "the test scene's direct layer is dark");
+    assert!(worst < 1e-9, "a pixel's direct light differs by {:.3e} (relative) between depths 1 and 2", worst);
+}

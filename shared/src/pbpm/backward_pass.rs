@@ -118,6 +118,9 @@ fn camera_path<const S: bool>(
     // Set when the previous vertex was diffuse vertex D_k at `p` with BSDF pdf `pdf`: an emitter hit now is
     // D_k's direct light, weighted against its next-event estimate.
     let mut from_diffuse: Option<(Vec3, f32)> = None;
+    // Set when the path ends at its first diffuse vertex but traces one more BSDF-sampled ray there, only to
+    // find the emitter it may hit: the direct layer keeps both of eq. 5's strategies.
+    let mut emitter_ray = false;
     if let Some(l) = log.as_deref_mut() {
         l.begin(ray.origin, Vec3::ZERO);
     }
@@ -154,7 +157,7 @@ fn camera_path<const S: bool>(
                 _ => {}
             }
         }
-        if segments >= settings.max_depth {
+        if emitter_ray || segments >= settings.max_depth {
             break;
         }
         let material = path.material(scene.material(&hit), &mut beta);
@@ -172,10 +175,15 @@ fn camera_path<const S: bool>(
             }
             k += 1;
             continues = k < settings.backward_diffuse_depth;
+            // Where the path ends at its first diffuse vertex, one BSDF ray still looks for an emitter: next-event
+            // estimation alone is noisy where an emitter is large or near (its solid angle, not its area, is
+            // then what to sample), and the direct layer is then the same estimator at either depth.
+            emitter_ray = !continues && k == 1;
             stats.rays += 1;
             if let Some(d) = sample_direct(scene, &hit, wo, albedo, &path, sampler) {
-                // Without a BSDF continuation nothing else finds this light: next-event estimation takes it all.
-                let w = if d.delta || !continues { 1.0 } else { power_heuristic(d.light_pdf, d.bsdf_pdf) };
+                // Without a BSDF ray nothing else finds this light: next-event estimation takes it all.
+                let w =
+                    if d.delta || !(continues || emitter_ray) { 1.0 } else { power_heuristic(d.light_pdf, d.bsdf_pdf) };
                 add_contribution(&mut out, &mut ghost, direct_layer(k), path.to_image(beta * d.value * w));
             }
             // A merge needs at least two light segments (y1 is next-event estimation's).
@@ -200,7 +208,7 @@ fn camera_path<const S: bool>(
                     });
                 }
             }
-            if !continues {
+            if !(continues || emitter_ray) {
                 break;
             }
         }
