@@ -32,10 +32,10 @@ fn rgb_scene_bytes_per_pixel_are_those_of_the_rgb_only_build() {
     assert_eq!(settings.phase_spectrum(&scene, 1), PhaseSpectrum::RGB, "cornell has no dispersive glass");
     let engine = Engine::new(&scene, settings);
     // Sums with their four replicates, the phase's layer values and replicate, two gathered layers, the map's
-    // reserve of one photon per diffuse vertex allowed to store one (backward_diffuse_depth 2), and the two grey
-    // blur layers' sums and per-phase values: 192 + 48 + 1 + 24 + 2 × 48 + 2 × (8 + 4 + 4).
-    assert_eq!(settings.backward_diffuse_depth, 2);
-    assert_eq!(engine.bytes_per_pixel(), 393.0, "cornell's bytes per pixel (spectral code compiled in: {ENABLED})");
+    // reserve of one photon per diffuse vertex allowed to store one (cornell's backward_diffuse_depth is 1),
+    // and the two grey blur layers' sums and per-phase values: 192 + 48 + 1 + 24 + 1 × 48 + 2 × (8 + 4 + 4).
+    assert_eq!(settings.backward_diffuse_depth, 1);
+    assert_eq!(engine.bytes_per_pixel(), 345.0, "cornell's bytes per pixel (spectral code compiled in: {ENABLED})");
 }
 
 #[cfg(not(feature = "spectral"))]
