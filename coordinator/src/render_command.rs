@@ -220,6 +220,7 @@ fn settings_of(args: &RenderArgs, scene: &Scene) -> Result<RenderSettings> {
             bail!("--backward-diffuse-depth must be 1 or 2");
         }
         settings.backward_diffuse_depth = d;
+        settings.adaptive_depth = false;
     }
     if let Some(r) = args.radius_scale {
         if !(r.is_finite() && r > 0.0) {
@@ -692,6 +693,7 @@ fn finish(engine: &mut dyn Progressive, outputs: &Outputs, history: &mut Vec<His
         backward_rays: t.backward_rays,
         forward_rays: t.forward_rays,
         light_paths_per_pixel: (!engine.settings().adaptive_light).then_some(engine.settings().light_paths_per_pixel),
+        backward_diffuse_depth: (!engine.settings().adaptive_depth).then_some(engine.settings().backward_diffuse_depth),
         true_all: truth.as_ref().map(|t| t.rmse_all),
         true_unlit: truth.as_ref().map(|t| t.rmse_unlit),
         active_tiles: history.last().and_then(|h| h.active_tiles),

@@ -280,6 +280,8 @@ fn a_run_chooses_its_light_paths_per_pixel_unless_they_are_fixed() {
     render(&args, &out);
     let r = record(&out);
     assert_eq!(r["settings"]["adaptive_light"], true);
+    assert_eq!(r["settings"]["adaptive_depth"], false, "--backward-diffuse-depth fixes the depth");
+    assert!(r["history"].as_array().unwrap().iter().all(|h| h["backward_diffuse_depth"] == 2));
     let light: Vec<f64> =
         r["history"].as_array().unwrap().iter().map(|h| h["light_paths_per_pixel"].as_f64().unwrap()).collect();
     assert_eq!(light.len(), 32);
@@ -296,4 +298,9 @@ fn a_run_chooses_its_light_paths_per_pixel_unless_they_are_fixed() {
     let r = record(&fixed);
     assert_eq!(r["settings"]["adaptive_light"], false);
     assert!(r["history"].as_array().unwrap().iter().all(|h| h["light_paths_per_pixel"] == 2.0));
+    // Where the scene leaves the depth open, the run's first steps try 2 and 1 in turn.
+    assert_eq!(r["settings"]["adaptive_depth"], true);
+    let depths: Vec<u64> =
+        r["history"].as_array().unwrap().iter().map(|h| h["backward_diffuse_depth"].as_u64().unwrap()).collect();
+    assert_eq!(depths, [2, 1, 2, 1]);
 }

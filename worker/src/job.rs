@@ -7,7 +7,7 @@ use crate::memory_binding::{self, MemoryBinding};
 use crate::parallel::{EngineConfig, ParallelEngine};
 use photonfarm::accumulation::delta::{encode_delta, Compression};
 use photonfarm::protocol::{Job, Snapshot, WorkerInfo};
-use photonfarm::render::light_balance::LightBalance;
+use photonfarm::render::light_balance::{LightBalance, START_DEPTH};
 use photonfarm::render::session::Progressive;
 use photonfarm::render::ActiveTiles;
 use photonfarm::scene::Scene;
@@ -140,10 +140,9 @@ pub fn run(
     if !emit(JobEvent::Started(info)) {
         return;
     }
-    // Each worker chooses its own light paths per pixel from its own phases, unless the job fixes them.
-    let mut balance = settings
-        .adaptive_light
-        .then(|| LightBalance::starting_from(settings.light_paths_per_pixel, engine.sums(), engine.totals()));
+    // Each worker chooses its own light paths per pixel and camera paths' depth from its own phases, unless the
+    // job fixes them.
+    let mut balance = LightBalance::for_run(&settings, engine.sums(), engine.totals());
     // The sums at the previous snapshot, auxiliary layers included.
     let mut base = engine.sums().clone();
     let mut seq = 0;
@@ -165,10 +164,20 @@ pub fn run(
             let round = Instant::now();
             if let Some(b) = &balance {
                 engine.set_light_paths_per_pixel(b.next());
+                if let Some(d) = b.depth() {
+                    engine.set_backward_diffuse_depth(d);
+                }
             }
             engine.run_round(stop, None);
             if let Some(b) = &mut balance {
+                let comparing = b.is_comparing_depths();
                 b.observe(engine.sums(), engine.totals());
+                if comparing && !b.is_comparing_depths() {
+                    eprintln!(
+                        "worker: camera paths end at diffuse vertex {} from here on (the smaller variance × cost of the two)",
+                        b.depth().unwrap_or(START_DEPTH)
+                    );
+                }
             }
             // A straggler idles (slowdown − 1) round times after each round, but still answers a stop at once.
             let idle_until = Instant::now() + round.elapsed().mul_f64(slowdown - 1.0);

@@ -11,7 +11,8 @@ use serde::{Deserialize, Serialize};
 /// 5: the totals count the light paths counted against photon maps. 6: snapshots carry the replicate sums.
 /// 7: the coordinator may restrict workers to the tiles still above the target error (`ActiveTiles`).
 /// 8: jobs say whether the worker chooses its light paths per pixel (`RenderSettings::adaptive_light`).
-pub const PROTOCOL_VERSION: u32 = 8;
+/// 9: and whether it chooses the camera paths' diffuse depth (`RenderSettings::adaptive_depth`).
+pub const PROTOCOL_VERSION: u32 = 9;
 
 /// Which end of a link a peer is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]

@@ -15,8 +15,9 @@ use std::path::Path;
 /// 2: the sums' auxiliary layers (the ghost layer) are kept. 3: the settings hold the spectral-output bands.
 /// 4: the totals count the light paths counted against photon maps. 5: the sums keep their replicates.
 /// 6: the history says how many tiles each step rendered. 7: the sums keep the photon discs' blur layers, and
-/// the history the blur's part of δ.
-const FORMAT: u32 = 7;
+/// the history the blur's part of δ. 8: the settings say whether the run chose the camera paths' diffuse depth,
+/// and the history which depth each step had.
+const FORMAT: u32 = 8;
 
 /// Everything a resumed run continues from.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -208,6 +209,7 @@ mod tests {
             radius_alpha: 2.0 / 3.0,
             light_paths_per_pixel: 1.0,
             adaptive_light: true,
+            adaptive_depth: true,
             spectral_bands: 0,
         };
         // History with and without a true error: bincode cannot skip a field, so every one must round-trip.

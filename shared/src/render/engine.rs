@@ -130,6 +130,11 @@ impl<'s> Engine<'s> {
         self.settings.light_paths_per_pixel = l;
     }
 
+    /// Sets the camera paths' diffuse depth (1 or 2) of the phases to come.
+    pub fn set_backward_diffuse_depth(&mut self, depth: u32) {
+        self.settings.backward_diffuse_depth = depth;
+    }
+
     /// Bytes held per pixel by the sums, the phase buffers and the photon map.
     pub fn bytes_per_pixel(&self) -> f64 {
         let pixels = self.scene.camera.pixel_count().max(1);

@@ -1,10 +1,22 @@
-//! Choosing the light paths per pixel (L) while the run goes. A phase's variance splits into a part that more
-//! light paths shrink, as 1/L, and a part they do not touch (the camera paths' own noise); its cost into the
-//! camera paths' and L times the light paths'. Their product, the variance × time that δ² × t measures, is
-//! least at L* = √(a C / (V₀ D)) for V(L) = V₀ + a/L and cost C + L D. The run alternates steps a factor
-//! `SPREAD` above and below its current L, fits V₀ and a from the two, and moves L toward L*. Every phase is
-//! normalised by its own light-path count, so the image is unbiased whatever L each phase had.
+//! Balancing camera and light work while the run goes: the light paths per pixel (L) and, where the scene
+//! leaves it open, the camera paths' diffuse depth.
+//!
+//! L: a phase's variance splits into a part that more light paths shrink, as 1/L, and a part they do not touch
+//! (the camera paths' own noise); its cost into the camera paths' and L times the light paths'. Their product,
+//! the variance × time that δ² × t measures, is least at L* = √(a C / (V₀ D)) for V(L) = V₀ + a/L and cost
+//! C + L D. The run alternates steps a factor `SPREAD` above and below its current L, fits V₀ and a from the
+//! two, and moves L toward L*. Every phase is normalised by its own light-path count, so the image is unbiased
+//! whatever L each phase had.
+//!
+//! The depth: a camera path that stops at its first diffuse vertex leaves all bounced light to the photons
+//! there; one that goes on to a second adds that vertex's one random direction. Which is less noisy for its
+//! cost depends on the scene (a closed room, whose light paths land where the camera looks, against an open
+//! scene, whose light paths mostly land out of view), so a run whose scene does not fix it renders its first
+//! steps at depth 2 and 1 in turn, at the centre L, and keeps the depth with the smaller variance × cost. Both
+//! depths converge to the same image, so the phases of the comparison count like any other; but the losing
+//! depth's phases can hold several times the variance of the winner's, so the comparison is kept short.
 
+use super::settings::RenderSettings;
 use super::totals::RayTotals;
 use crate::accumulation::Accumulator;
 use crate::color::luminance_f64;
@@ -20,6 +32,10 @@ pub const MERGE_COST: f64 = 0.33;
 /// The L a run that chooses its own starts from.
 pub const START: f32 = 1.0;
 
+/// The camera paths' diffuse depth a run that chooses its own starts from (the deeper of the two, so that memory
+/// is sized for it), and keeps where the comparison cannot tell them apart.
+pub const START_DEPTH: u32 = 2;
+
 /// The two trial L of a step pair lie this factor above and below the current L.
 pub const SPREAD: f64 = std::f64::consts::SQRT_2;
 
@@ -30,10 +46,18 @@ pub const MAX_LIGHT_PATHS_PER_PIXEL: f64 = 16.0;
 /// Image-phases each trial needs before the fit: fewer make the variance estimates too noisy to compare.
 const PHASES_PER_TRIAL: f64 = 4.0;
 
+/// Measured phases per pixel each depth needs before the choice: the depths' variances differ by several times
+/// where the choice matters, which the pixels of two phases already show.
+const PHASES_PER_DEPTH: f64 = 2.0;
+
+/// Steps the depths are compared for at most: where most pixels see a light (the lens's lamp) the trials never
+/// fill, and the run keeps `START_DEPTH`.
+const MAX_DEPTH_STEPS: u32 = 16;
+
 /// A pixel's phases before its running mean is trusted as the centre of the next phases' spread.
 const SETTLED_PHASES: u32 = 4;
 
-/// What the steps of one trial L added up to.
+/// What the steps of one trial (an L, or a depth) added up to.
 #[derive(Clone, Copy, Debug, Default)]
 struct Trial {
     /// Σ over pixels and new phases of the squared deviations (`observe`), luminance.
@@ -47,6 +71,49 @@ struct Trial {
     light_cost: f64,
 }
 
+impl Trial {
+    fn add(&mut self, step: &Trial) {
+        self.squared_deviation += step.squared_deviation;
+        self.pixel_phases += step.pixel_phases;
+        self.all_pixel_phases += step.all_pixel_phases;
+        self.backward_rays += step.backward_rays;
+        self.light_cost += step.light_cost;
+    }
+
+    /// At least `per_pixel` measured phases per pixel.
+    fn is_measured(&self, per_pixel: f64, pixels: f64) -> bool {
+        self.pixel_phases >= per_pixel * pixels
+    }
+
+    /// Variance per pixel-phase times cost per pixel-phase (camera-ray units): δ² × t up to a constant.
+    fn variance_times_cost(&self) -> f64 {
+        (self.squared_deviation / self.pixel_phases) * ((self.backward_rays + self.light_cost) / self.all_pixel_phases)
+    }
+}
+
+/// Where a run stands on the camera paths' diffuse depth (`backward_diffuse_depth`).
+#[derive(Clone, Copy, Debug)]
+enum Depth {
+    /// Fixed by the scene or the command line.
+    Fixed,
+    /// Comparing the two depths: `trials[d − 1]` holds depth d's steps, and `step` counts the comparison's
+    /// steps, at depth 2 and 1 in turn.
+    Trying { trials: [Trial; 2], step: u32 },
+    /// Chosen.
+    Chosen(u32),
+}
+
+impl Depth {
+    /// The depth of the next step, or None where the settings keep theirs.
+    fn next(&self) -> Option<u32> {
+        match *self {
+            Depth::Fixed => None,
+            Depth::Trying { step, .. } => Some(if step % 2 == 0 { 2 } else { 1 }),
+            Depth::Chosen(d) => Some(d),
+        }
+    }
+}
+
 /// The per-pixel sums the deviations are measured against: Σ luminance, Σ luminance², phases.
 #[derive(Clone, Copy, Debug, Default)]
 struct PixelMoments {
@@ -55,9 +122,12 @@ struct PixelMoments {
     phases: u32,
 }
 
-/// The controller of L: `next` before a step, `observe` after it.
+/// The controller of L and the depth: `next` and `depth` before a step, `observe` after it.
 #[derive(Clone, Debug)]
 pub struct LightBalance {
+    /// False where L is fixed: every step then renders the centre.
+    light: bool,
+    depth: Depth,
     centre: f64,
     trials: [Trial; 2],
     /// Which trial the next step renders: 0 above the centre, 1 below.
@@ -67,9 +137,11 @@ pub struct LightBalance {
 }
 
 impl LightBalance {
-    /// A controller that starts from `start` light paths per pixel.
+    /// A controller of L alone that starts from `start` light paths per pixel.
     pub fn new(start: f32) -> Self {
         LightBalance {
+            light: true,
+            depth: Depth::Fixed,
             centre: (start as f64).clamp(MIN_LIGHT_PATHS_PER_PIXEL, MAX_LIGHT_PATHS_PER_PIXEL),
             trials: [Trial::default(); 2],
             turn: 0,
@@ -78,11 +150,22 @@ impl LightBalance {
         }
     }
 
-    /// A controller that starts from `start`, measuring its first step against `sums` and `totals` as they are.
-    pub fn starting_from(start: f32, sums: &Accumulator, totals: RayTotals) -> Self {
-        let mut b = LightBalance::new(start);
-        b.observe(sums, totals);
-        b
+    /// The controller of a run with `settings`, measuring its first step against `sums` and `totals` as they
+    /// are; None when the settings fix both L and the depth.
+    pub fn for_run(settings: &RenderSettings, sums: &Accumulator, totals: RayTotals) -> Option<Self> {
+        let (light, depth) = (settings.adaptive_light, settings.adaptive_depth);
+        (light || depth).then(|| {
+            let mut b = LightBalance::new(settings.light_paths_per_pixel);
+            if !light {
+                b.light = false;
+                b.centre = settings.light_paths_per_pixel as f64;
+            }
+            if depth {
+                b.depth = Depth::Trying { trials: [Trial::default(); 2], step: 0 };
+            }
+            b.observe(sums, totals);
+            b
+        })
     }
 
     /// The L the controller is centred on (its best estimate of L*).
@@ -90,12 +173,25 @@ impl LightBalance {
         self.centre as f32
     }
 
-    /// The L of the next step.
+    /// The L of the next step: the centre while L is fixed or the depths are compared.
     pub fn next(&self) -> f32 {
+        if !self.light || self.is_comparing_depths() {
+            return self.centre as f32;
+        }
         (if self.turn == 0 { self.centre * SPREAD } else { self.centre / SPREAD }) as f32
     }
 
-    /// Takes in the step just rendered at `next()`: its new phases' spread (around their own mean where a pixel
+    /// The camera paths' diffuse depth of the next step, or None where the settings fix it.
+    pub fn depth(&self) -> Option<u32> {
+        self.depth.next()
+    }
+
+    /// True while the run is still comparing the two depths.
+    pub fn is_comparing_depths(&self) -> bool {
+        matches!(self.depth, Depth::Trying { .. })
+    }
+
+    /// Takes in the step just rendered at `next()` and `depth()`: its new phases' spread (around their own mean where a pixel
     /// got two or more, else around the pixel's earlier mean), and its rays. Pixels that have seen a light
     /// directly are left out: their camera-side noise is no part of δ over unlit pixels and does not depend on L.
     pub fn observe(&mut self, sums: &Accumulator, totals: RayTotals) {
@@ -109,7 +205,8 @@ impl LightBalance {
             self.previous_totals = totals;
             return;
         }
-        let trial = &mut self.trials[self.turn];
+        let mut step = Trial::default();
+        let trial = &mut step;
         for i in 0..sums.pixels.len() {
             let now = moments(i);
             let before = std::mem::replace(&mut self.previous[i], now);
@@ -137,9 +234,25 @@ impl LightBalance {
         trial.light_cost += LIGHT_RAY_COST * t.forward_rays.saturating_sub(p.forward_rays) as f64
             + MERGE_COST * t.merges.saturating_sub(p.merges) as f64;
         self.previous_totals = totals;
-        self.turn = 1 - self.turn;
         let pixels = sums.pixels.len().max(1) as f64;
-        if self.turn == 0 && self.trials.iter().all(|t| t.pixel_phases >= PHASES_PER_TRIAL * pixels) {
+        let depth = self.depth.next();
+        if let Depth::Trying { trials, step: n } = &mut self.depth {
+            // The comparison's steps are at the centre L: no trial of L.
+            trials[depth.unwrap_or(START_DEPTH) as usize - 1].add(&step);
+            *n += 1;
+            if *n % 2 == 0 && trials.iter().all(|t| t.is_measured(PHASES_PER_DEPTH, pixels)) {
+                let [one, two] = *trials;
+                self.depth = Depth::Chosen(if one.variance_times_cost() < two.variance_times_cost() { 1 } else { 2 });
+                self.trials = [Trial::default(); 2];
+            } else if *n >= MAX_DEPTH_STEPS {
+                self.depth = Depth::Chosen(START_DEPTH);
+                self.trials = [Trial::default(); 2];
+            }
+            return;
+        }
+        self.trials[self.turn].add(&step);
+        self.turn = 1 - self.turn;
+        if self.light && self.turn == 0 && self.trials.iter().all(|t| t.is_measured(PHASES_PER_TRIAL, pixels)) {
             self.centre = self.refit();
             self.trials = [Trial::default(); 2];
         }
@@ -243,6 +356,78 @@ mod tests {
     fn light_that_does_not_lower_the_variance_is_cut_to_the_floor() {
         let l = run(0.1, 0.0, 10.0, 10.0, 1.0, 600);
         assert!(l <= 2.0 * MIN_LIGHT_PATHS_PER_PIXEL as f32, "got {l}");
+    }
+
+    fn settings(adaptive_light: bool, adaptive_depth: bool) -> RenderSettings {
+        RenderSettings {
+            estimator: crate::render::Estimator::Pbpm,
+            seed: 1,
+            max_depth: 12,
+            backward_diffuse_depth: START_DEPTH,
+            radius_scale: 3.0,
+            radius_alpha: 2.0 / 3.0,
+            light_paths_per_pixel: 1.0,
+            adaptive_light,
+            adaptive_depth,
+            spectral_bands: 0,
+        }
+    }
+
+    /// Feeds a controller that chooses the depth one-phase steps of a synthetic renderer whose phase variance
+    /// and camera cost per pixel are `variance[d − 1]` and `cost[d − 1]` at depth d (light costs nothing and
+    /// changes nothing); returns the depth of every step.
+    fn depths(variance: [f64; 2], cost: [f64; 2], steps: usize) -> Vec<u32> {
+        let pixels = 1024;
+        let mut sums = Accumulator::new(32, 32);
+        let mut totals = RayTotals::default();
+        let mut rng = rand_pcg::Pcg32::seed_from_u64(5);
+        let mut balance = LightBalance::for_run(&settings(true, true), &sums, totals).unwrap();
+        let mut depths = Vec::with_capacity(steps);
+        for _ in 0..steps {
+            let d = balance.depth().expect("a depth while the run chooses it") as usize;
+            depths.push(d as u32);
+            let sd = variance[d - 1].sqrt();
+            for i in 0..pixels {
+                let y = 1.0 + sd * 3f64.sqrt() * (2.0 * (rng.next_u32() as f64 / 4294967296.0) - 1.0);
+                sums.add_phase(i, &[Rgb::ZERO, Rgb::splat(y as f32), Rgb::ZERO, Rgb::ZERO], 1, 0);
+            }
+            totals.phases += 1;
+            totals.backward_rays += (cost[d - 1] * pixels as f64) as u64;
+            balance.observe(&sums, totals);
+        }
+        depths
+    }
+
+    #[test]
+    fn a_run_keeps_the_depth_with_the_smaller_variance_times_cost() {
+        // Depth 2 and 1 in turn until both have two measured phases per pixel (one-phase steps measure from a
+        // pixel's fifth phase on: by step 8); then the choice holds.
+        let noisier_second_vertex = depths([0.1, 0.4], [1.0, 1.5], 40);
+        assert_eq!(noisier_second_vertex[..8], [2, 1, 2, 1, 2, 1, 2, 1]);
+        assert!(noisier_second_vertex[8..].iter().all(|&d| d == 1), "{noisier_second_vertex:?}");
+        // The same variance: the shallower depth wins on cost alone.
+        let cheaper = depths([0.2, 0.2], [1.0, 1.5], 40);
+        assert!(cheaper[8..].iter().all(|&d| d == 1), "{cheaper:?}");
+        // Photons too few to carry the bounced light: the second vertex pays for itself.
+        let photon_poor = depths([1.0, 0.2], [1.0, 1.5], 40);
+        assert!(photon_poor[8..].iter().all(|&d| d == 2), "{photon_poor:?}");
+    }
+
+    #[test]
+    fn settings_that_fix_both_need_no_controller_and_a_fixed_l_is_kept_while_the_depth_is_chosen() {
+        let sums = Accumulator::new(4, 4);
+        assert!(LightBalance::for_run(&settings(false, false), &sums, RayTotals::default()).is_none());
+        let mut b = LightBalance::for_run(&settings(false, true), &sums, RayTotals::default()).unwrap();
+        for _ in 0..MAX_DEPTH_STEPS {
+            assert!(b.is_comparing_depths());
+            assert_eq!(b.next(), 1.0);
+            b.observe(&sums, RayTotals::default());
+        }
+        // Steps that measured nothing cannot tell the depths apart: the run keeps the deeper one.
+        assert!(!b.is_comparing_depths());
+        assert_eq!(b.depth(), Some(START_DEPTH));
+        let light_only = LightBalance::for_run(&settings(true, false), &sums, RayTotals::default()).unwrap();
+        assert_eq!(light_only.depth(), None);
     }
 
     #[test]

@@ -24,6 +24,10 @@ pub struct HistoryEntry {
     /// their own.
     #[serde(default)]
     pub light_paths_per_pixel: Option<f32>,
+    /// The camera paths' diffuse depth of the step that ended here; None where a distributed run's workers
+    /// chose their own.
+    #[serde(default)]
+    pub backward_diffuse_depth: Option<u32>,
     /// Relative RMSE against the reference over all pixels and over the pixels the lit mask leaves unlit.
     /// Always serialized (null without a reference): checkpoints keep the history with bincode, which cannot
     /// skip fields.

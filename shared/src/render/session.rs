@@ -51,6 +51,11 @@ pub trait Progressive {
     fn set_light_paths_per_pixel(&mut self, _l: f32) -> bool {
         false
     }
+    /// Sets the camera paths' diffuse depth of the steps to come; false for a renderer whose workers choose
+    /// their own.
+    fn set_backward_diffuse_depth(&mut self, _depth: u32) -> bool {
+        false
+    }
     /// Renders only `tiles`' active tiles from the next step on.
     fn set_active_tiles(&mut self, tiles: &ActiveTiles);
 }
@@ -78,9 +83,20 @@ impl Progressive for Engine<'_> {
         Engine::set_light_paths_per_pixel(self, l);
         true
     }
+    fn set_backward_diffuse_depth(&mut self, depth: u32) -> bool {
+        Engine::set_backward_diffuse_depth(self, depth);
+        true
+    }
     fn set_active_tiles(&mut self, tiles: &ActiveTiles) {
         Engine::set_active_tiles(self, tiles);
     }
+}
+
+/// Gives the renderer the balance's L and depth for its next step; false for a renderer whose workers choose
+/// their own.
+fn set_balance<R: Progressive + ?Sized>(engine: &mut R, balance: &LightBalance) -> bool {
+    let light = engine.set_light_paths_per_pixel(balance.next());
+    light && balance.depth().is_none_or(|d| engine.set_backward_diffuse_depth(d))
 }
 
 /// Which δ a target error refers to.
@@ -172,12 +188,10 @@ pub fn run<R: Progressive + ?Sized>(
 ) -> StopReason {
     let Tracking { lit, forecast, elapsed_before, mut tiles } = tracking;
     let start = Instant::now();
-    // The light paths per pixel, chosen as the run goes unless they were fixed; a distributed renderer's
-    // workers choose their own.
-    let s = engine.settings();
-    let mut balance =
-        s.adaptive_light.then(|| LightBalance::starting_from(s.light_paths_per_pixel, engine.sums(), engine.totals()));
-    if balance.as_ref().is_some_and(|b| !engine.set_light_paths_per_pixel(b.next())) {
+    // The light paths per pixel and the camera paths' diffuse depth, chosen as the run goes unless they were
+    // fixed; a distributed renderer's workers choose their own.
+    let mut balance = LightBalance::for_run(engine.settings(), engine.sums(), engine.totals());
+    if balance.as_ref().is_some_and(|b| !set_balance(engine, b)) {
         balance = None;
     }
     // Tiles only retire towards a target; a resumed run starts from what its sums already say.
@@ -201,10 +215,11 @@ pub fn run<R: Progressive + ?Sized>(
         }
         let deadline = stop.time.map(|t| start + t.saturating_sub(elapsed_before));
         if let Some(b) = &balance {
-            engine.set_light_paths_per_pixel(b.next());
+            set_balance(engine, b);
         }
         let s = engine.settings();
         let light = (balance.is_some() || !s.adaptive_light).then_some(s.light_paths_per_pixel);
+        let depth = (balance.is_some() || !s.adaptive_depth).then_some(s.backward_diffuse_depth);
         let active_tiles = tiles.as_deref().filter(|_| target.is_some()).map(|t| t.active_count() as u32);
         engine.step(interrupted, deadline);
         if let Some(b) = &mut balance {
@@ -220,6 +235,7 @@ pub fn run<R: Progressive + ?Sized>(
             backward_rays: t.backward_rays,
             forward_rays: t.forward_rays,
             light_paths_per_pixel: light,
+            backward_diffuse_depth: depth,
             active_tiles,
             blur_all: e.blur_all,
             blur_unlit: e.blur_unlit,

@@ -27,6 +27,10 @@ pub struct RenderSettings {
     /// `[render]` table or `--light-paths-per-pixel` fixes them.
     #[serde(default)]
     pub adaptive_light: bool,
+    /// True when the run chooses `backward_diffuse_depth` in its first steps (`light_balance`); the scene's
+    /// `[render]` table or `--backward-diffuse-depth` fixes it.
+    #[serde(default)]
+    pub adaptive_depth: bool,
     /// Wavelength bands written as layers (`--spectral-output`); 0 for none. Any band makes every path spectral
     /// from its first vertex.
     pub spectral_bands: u32,
@@ -41,11 +45,12 @@ impl RenderSettings {
             estimator: method.estimator(),
             seed,
             max_depth,
-            backward_diffuse_depth,
+            backward_diffuse_depth: backward_diffuse_depth.unwrap_or(super::light_balance::START_DEPTH),
             radius_scale,
             radius_alpha: 2.0 / 3.0,
             light_paths_per_pixel: light_paths_per_pixel.unwrap_or(super::light_balance::START),
             adaptive_light: light_paths_per_pixel.is_none(),
+            adaptive_depth: backward_diffuse_depth.is_none(),
             spectral_bands: 0,
         }
     }
@@ -85,12 +90,15 @@ impl RenderSettings {
         }
     }
 
-    /// The settings a record keeps: a run that chose its light paths per pixel as it went keeps where it
-    /// started, which with the rest determines its result.
+    /// The settings a record keeps: a run that chose its light paths per pixel or its depth as it went keeps
+    /// where it started, which with the rest determines its result (its history says what each step had).
     pub fn as_recorded(&self) -> Self {
         let mut s = *self;
         if s.adaptive_light {
             s.light_paths_per_pixel = super::light_balance::START;
+        }
+        if s.adaptive_depth {
+            s.backward_diffuse_depth = super::light_balance::START_DEPTH;
         }
         s
     }

@@ -32,8 +32,9 @@ pub struct SceneObject {
 pub struct SceneRenderSettings {
     /// Longest path in segments over the joined camera and light sub-paths: 1 = emitters seen directly.
     pub max_depth: u32,
-    /// Diffuse vertices on a camera path that store backward photons (paper §2: 2).
-    pub backward_diffuse_depth: u32,
+    /// Diffuse vertices on a camera path that store backward photons, 1 or 2 (paper §2: 2); None: the run
+    /// chooses in its first steps (`render::light_balance`).
+    pub backward_diffuse_depth: Option<u32>,
     /// Initial photon radius in pixel footprints.
     pub radius_scale: f32,
     /// Light paths per phase, per pixel of the image; None: the run chooses them as it goes
@@ -54,7 +55,7 @@ impl Default for SceneRenderSettings {
     fn default() -> Self {
         SceneRenderSettings {
             max_depth: 12,
-            backward_diffuse_depth: 2,
+            backward_diffuse_depth: None,
             radius_scale: 3.0,
             light_paths_per_pixel: None,
             ghost_light_paths: true,

@@ -374,6 +374,11 @@ impl Progressive for ParallelEngine<'_> {
         true
     }
 
+    fn set_backward_diffuse_depth(&mut self, depth: u32) -> bool {
+        self.settings.backward_diffuse_depth = depth;
+        true
+    }
+
     fn pinned_threads(&self) -> usize {
         ParallelEngine::pinned_threads(self)
     }

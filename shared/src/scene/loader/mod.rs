@@ -160,7 +160,7 @@ impl Loader<'_> {
                     format!("must be 1 or 2, got {}", d.get_ref()),
                 ));
             }
-            s.backward_diffuse_depth = *d.get_ref();
+            s.backward_diffuse_depth = Some(*d.get_ref());
         }
         if let Some(x) = &r.radius_scale {
             s.radius_scale =
