@@ -298,7 +298,12 @@ fn a_run_chooses_its_light_paths_per_pixel_unless_they_are_fixed() {
     let r = record(&fixed);
     assert_eq!(r["settings"]["adaptive_light"], false);
     assert!(r["history"].as_array().unwrap().iter().all(|h| h["light_paths_per_pixel"] == 2.0));
+    assert_eq!(r["settings"]["adaptive_depth"], false, "cornell.toml fixes the depth");
+
     // Where the scene leaves the depth open, the run's first steps try 2 and 1 in turn.
+    let open = scratch_dir("open-depth");
+    render(&["scenes/ghost-room.toml", "--method", "pbpm", "--phases", "4", "--quiet"], &open);
+    let r = record(&open);
     assert_eq!(r["settings"]["adaptive_depth"], true);
     let depths: Vec<u64> =
         r["history"].as_array().unwrap().iter().map(|h| h["backward_diffuse_depth"].as_u64().unwrap()).collect();
