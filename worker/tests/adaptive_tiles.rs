@@ -236,7 +236,9 @@ fn delta_of_an_adaptive_run_is_calibrated_against_the_reference() {
     let sc = Scene::load(&dir.join("cornell.toml")).unwrap();
     let lit = LitMask::of_scene(&sc, RenderSettings::for_scene(&sc, Method::Pbpm, 1).max_depth);
     let mut e = engine(&sc, ParallelMethod::TwoLevel, 2024);
-    let (reason, history) = run_adaptive(&mut e, &lit, 0.07, 32, Duration::from_secs(60));
+    // 5%: at one diffuse camera vertex the box's tiles converge alike, and a run to 7% met it before any tile
+    // had had its share.
+    let (reason, history) = run_adaptive(&mut e, &lit, 0.05, 32, Duration::from_secs(60));
     assert_eq!(reason, StopReason::TargetError);
     assert!(history.iter().filter_map(|h| h.active_tiles).min().unwrap() < 64, "no tile retired");
     let sums = e.sums();
