@@ -174,7 +174,7 @@ pub fn run(
                 b.observe(engine.sums(), engine.totals());
                 if comparing && !b.is_comparing_depths() {
                     eprintln!(
-                        "worker: camera paths end at diffuse vertex {} from here on (the smaller variance × cost of the two)",
+                        "worker: backward_diffuse_depth {} from here on, chosen from the first rounds",
                         b.depth().unwrap_or(START_DEPTH)
                     );
                 }

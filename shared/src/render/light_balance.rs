@@ -191,8 +191,8 @@ impl LightBalance {
         matches!(self.depth, Depth::Trying { .. })
     }
 
-    /// Takes in the step just rendered at `next()` and `depth()`: its new phases' spread (around their own mean where a pixel
-    /// got two or more, else around the pixel's earlier mean), and its rays. Pixels that have seen a light
+    /// Takes in the step just rendered at `next()` and `depth()`: its new phases' spread (around their own mean
+    /// where a pixel got two or more, else around the pixel's earlier mean), and its rays. Pixels that have seen a light
     /// directly are left out: their camera-side noise is no part of δ over unlit pixels and does not depend on L.
     pub fn observe(&mut self, sums: &Accumulator, totals: RayTotals) {
         let moments = |i: usize| {
@@ -243,10 +243,8 @@ impl LightBalance {
             if *n % 2 == 0 && trials.iter().all(|t| t.is_measured(PHASES_PER_DEPTH, pixels)) {
                 let [one, two] = *trials;
                 self.depth = Depth::Chosen(if one.variance_times_cost() < two.variance_times_cost() { 1 } else { 2 });
-                self.trials = [Trial::default(); 2];
             } else if *n >= MAX_DEPTH_STEPS {
                 self.depth = Depth::Chosen(START_DEPTH);
-                self.trials = [Trial::default(); 2];
             }
             return;
         }
