@@ -262,6 +262,9 @@ fn where_blur_is_most_of_delta_an_adaptive_run_keeps_it_calibrated() {
     let sc = Scene::load(&dir.join("caustic.toml")).unwrap();
     let mut settings = RenderSettings::for_scene(&sc, Method::Pbpm, 7);
     settings.radius_scale = 3.0;
+    // Two diffuse camera vertices, as this test was measured with: at one (the scene's), single runs' true error
+    // over δ spread 0.86–1.41 in five runs, so a one-run bound of [0.7, 1.4] no longer holds there.
+    settings.backward_diffuse_depth = 2;
     let lit = LitMask::of_scene(&sc, settings.max_depth);
     let config = EngineConfig::for_method(ParallelMethod::TwoLevel, 2, 1, vec![0, 1]).unwrap();
     let mut e = ParallelEngine::new(&sc, settings, config).unwrap();
