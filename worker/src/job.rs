@@ -8,7 +8,7 @@ use crate::parallel::{EngineConfig, ParallelEngine};
 use photonfarm::accumulation::delta::{encode_delta, Compression};
 use photonfarm::protocol::{Job, Snapshot, WorkerInfo};
 use photonfarm::render::light_balance::{LightBalance, START_DEPTH};
-use photonfarm::render::session::Progressive;
+use photonfarm::render::session::{self, Progressive};
 use photonfarm::render::ActiveTiles;
 use photonfarm::scene::Scene;
 use std::collections::BTreeMap;
@@ -163,10 +163,7 @@ pub fn run(
         if !stopping {
             let round = Instant::now();
             if let Some(b) = &balance {
-                engine.set_light_paths_per_pixel(b.next());
-                if let Some(d) = b.depth() {
-                    engine.set_backward_diffuse_depth(d);
-                }
+                session::set_balance(&mut engine, b);
             }
             engine.run_round(stop, None);
             if let Some(b) = &mut balance {

@@ -94,7 +94,7 @@ impl Progressive for Engine<'_> {
 
 /// Gives the renderer the balance's L and depth for its next step; false for a renderer whose workers choose
 /// their own.
-fn set_balance<R: Progressive + ?Sized>(engine: &mut R, balance: &LightBalance) -> bool {
+pub fn set_balance<R: Progressive + ?Sized>(engine: &mut R, balance: &LightBalance) -> bool {
     let light = engine.set_light_paths_per_pixel(balance.next());
     light && balance.depth().is_none_or(|d| engine.set_backward_diffuse_depth(d))
 }
