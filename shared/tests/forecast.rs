@@ -24,7 +24,7 @@ fn the_prediction_made_within_twice_the_target_meets_the_actual_remaining_work_w
     let sc = cornell_at(64);
     // L fixed near where the run's own choice settles on this scene: the forecast assumes each phase's variance
     // stays as it is, and while the choice of L still moves from 1 toward it, every phase gets better and the
-    // forecast overestimates the work left (1.4–1.8× here; docs/commands.md, "How long is left").
+    // forecast overestimates the work left (docs/commands.md, "How long is left").
     let mut settings = RenderSettings::for_scene(&sc, Method::Pbpm, 11);
     settings.light_paths_per_pixel = 2.0;
     settings.adaptive_light = false;
