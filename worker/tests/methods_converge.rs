@@ -79,7 +79,8 @@ impl BlockRounds {
     }
 
     /// Each block's mean per phase and its squared standard error, with the rounds as independent samples of
-    /// the ratio Σ s / Σ n. Rounds of one quasi-random sequence are not independent, and this overstates it.
+    /// the ratio Σ s / Σ n. Rounds that draw from one quasi-random sequence are not independent: this overstates
+    /// the error of their mean.
     fn means_and_sem2(&self) -> Vec<(f64, f64)> {
         self.added
             .iter()
