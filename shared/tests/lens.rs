@@ -474,7 +474,7 @@ const BLUR_BYTES_PER_PIXEL: f64 = 2.0 * (8.0 + 4.0 + 4.0);
 fn bytes_per_pixel_without_auxiliary_layers(scene: &Scene) -> f64 {
     let pixels = scene.camera.pixel_count();
     let mut map = PhotonMap::new();
-    let depth = scene.render.backward_diffuse_depth.unwrap_or(photonfarm::render::light_balance::START_DEPTH);
+    let depth = common::settings(scene, Method::Pbpm, 1).backward_diffuse_depth;
     map.reserve(pixels * depth as usize);
     let per_pixel = std::mem::size_of::<PixelSums>() + std::mem::size_of::<LayerValues>() + 1 + 2 * 12;
     assert_eq!(std::mem::size_of::<[Rgb; 2]>(), 2 * 12);

@@ -7,7 +7,7 @@ use crate::memory_binding::{self, MemoryBinding};
 use crate::parallel::{EngineConfig, ParallelEngine};
 use photonfarm::accumulation::delta::{encode_delta, Compression};
 use photonfarm::protocol::{Job, Snapshot, WorkerInfo};
-use photonfarm::render::light_balance::{LightBalance, START_DEPTH};
+use photonfarm::render::light_balance::LightBalance;
 use photonfarm::render::session::{self, Progressive};
 use photonfarm::render::ActiveTiles;
 use photonfarm::scene::Scene;
@@ -172,7 +172,7 @@ pub fn run(
                 if comparing && !b.is_comparing_depths() {
                     eprintln!(
                         "worker: backward_diffuse_depth {} from here on, chosen from the first rounds",
-                        b.depth().unwrap_or(START_DEPTH)
+                        b.depth().expect("a chosen depth once the comparison has ended")
                     );
                 }
             }
