@@ -54,7 +54,7 @@ fn block_means(sums: &Accumulator, block: u32) -> Vec<f64> {
 
 /// What each round adds to every block's sums, so that a block mean's standard error comes from the spread of
 /// whole rounds. Pixels of one phase share light paths (with one diffuse camera vertex, a light vertex lands in
-/// the discs of neighbouring pixels), so summing pixel SEMs over a block understates its error about twofold.
+/// the discs of neighbouring pixels), so summing pixel SEMs over a block understates its error.
 struct BlockRounds {
     block: u32,
     last: Vec<(f64, f64)>,
@@ -216,8 +216,9 @@ fn every_method_and_group_size_converges_to_the_single_thread_image_on_cornell()
     // Each phase is normalised by its own light paths, so rounds at 16 times fewer and 4 times more light paths
     // per pixel than the reference's 1 (as a run that chooses them while it goes) estimate the same image. At
     // 1/16 a pixel's phase values are skewed (most gather no light path), and eq. 7's SEM from a few hundred of
-    // them is too often small: even the single-threaded engine at a constant 1/16 gives a mean z² of 2.3, 1.6,
-    // 1.3, 1.07 and 0.95 at 75, 150, 300, 600 and 2400 phases, falling as it would not with a bias. Hence 600.
+    // them is too often small: even the single-threaded engine at a constant 1/16 has a mean z² above 1 against
+    // its own L = 1 image at a few hundred phases, falling toward 1 as the phases grow, which a bias would not
+    // do. Hence 600 phases.
     let two_level = EngineConfig::for_method(ParallelMethod::TwoLevel, 2, 1, vec![0, 1]).unwrap();
     check_with(&sc, "cornell, light per pixel 1/16 and 4 in turn,", &reference, two_level, 600, true, |e, round| {
         e.set_light_paths_per_pixel(if round % 2 == 0 { 1.0 / 16.0 } else { 4.0 });
