@@ -18,6 +18,7 @@ use photonfarm::pbpm::{
     gather, trace_camera_path, trace_light_path, BackwardPhoton, BackwardSettings, ForwardStats, GatherPoint,
     LightEvent, LightSettings, LightVertex, PhotonMap, SortedGathers,
 };
+use photonfarm::ray_map::Unrecorded;
 use photonfarm::render::{Method, RenderSettings};
 use photonfarm::sampling::{Pass, Sampler};
 use photonfarm::scene::Scene;
@@ -77,7 +78,7 @@ fn backward_photons(scene: &Scene, settings: &RenderSettings) -> Vec<BackwardPho
         let (x, y) = ((pixel % cam.width as usize) as u32, (pixel / cam.width as usize) as u32);
         let mut s = Sampler::new(settings.seed, Pass::Camera, PHASE, pixel as u64);
         let ray = cam.generate_ray(x, y, s.next_2d(), s.next_2d());
-        trace_camera_path(scene, &bs, pixel as u32, ray, &mut s, &mut stats, &mut |b| photons.push(b));
+        trace_camera_path(scene, &bs, pixel as u32, ray, &mut s, &mut stats, &mut |b| photons.push(b), &mut Unrecorded);
     }
     photons
 }
@@ -89,11 +90,26 @@ fn light_vertices(scene: &Scene, settings: &RenderSettings) -> Vec<OwnedVertex> 
     for i in 0..settings.light_paths_per_phase(scene.camera.pixel_count()) {
         let mut s = Sampler::new(settings.seed, Pass::Light, PHASE, i);
         let light = LightSettings { max_depth: settings.max_depth, sensor: false, vertices: true, ghost_paths: 0 };
-        trace_light_path(scene, light, &PhaseSpectrum::RGB, i, &mut s, &mut stats, &mut |e: &LightEvent| {
-            if let LightEvent::Vertex(v) = e {
-                vertices.push(OwnedVertex { hit: *v.hit, wi: v.wi, flux: v.flux, m: v.m, all_specular: v.all_specular })
-            }
-        });
+        trace_light_path(
+            scene,
+            light,
+            &PhaseSpectrum::RGB,
+            i,
+            &mut s,
+            &mut stats,
+            &mut |e: &LightEvent| {
+                if let LightEvent::Vertex(v) = e {
+                    vertices.push(OwnedVertex {
+                        hit: *v.hit,
+                        wi: v.wi,
+                        flux: v.flux,
+                        m: v.m,
+                        all_specular: v.all_specular,
+                    })
+                }
+            },
+            &mut Unrecorded,
+        );
     }
     vertices
 }

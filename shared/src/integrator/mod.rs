@@ -1,8 +1,10 @@
 //! Camera-path pieces shared by the reference path tracer and the PBPM backward pass: the image layers and
 //! next-event estimation of direct light.
 
+pub mod camera_path;
 mod lit_pixels;
 pub mod path_tracer;
+pub mod walk;
 
 use crate::color::Rgb;
 use crate::geometry::{ray::offset_origin, SurfaceHit};

@@ -10,11 +10,9 @@
 //! synchronous group runs them over its tile mask on its pinned threads and drives step 3 itself (its light-path
 //! quota, the other groups' maps, the stop). Both reach the same image: the stages are this file's, once.
 
-use super::backward_pass::{trace_camera_path_logged, BackwardSettings, BackwardStats};
+use super::backward_pass::{trace_camera_path, BackwardSettings, BackwardStats};
 use super::executor::Executor;
-use super::forward_pass::{
-    gather, trace_light_path_logged, ForwardStats, Gather, LightEvent, LightSettings, SensorHit,
-};
+use super::forward_pass::{gather, trace_light_path, ForwardStats, Gather, LightEvent, LightSettings, SensorHit};
 use super::gather_buffer::GatherBuffer;
 use super::ghost_paths::trace_ghost_paths;
 use super::photon::BackwardPhoton;
@@ -26,7 +24,7 @@ use crate::accumulation::blur::blur_offsets;
 use crate::accumulation::{auxiliary::add_phase_to, AuxLayout, AuxSums, PixelSums};
 use crate::color::{luminance, Rgb};
 use crate::integrator::{Layer, LayerValues};
-use crate::ray_map::{PathKind, RecordedPath, Recorder};
+use crate::ray_map::{PathKind, RecordedPath, Recorder, Unrecorded};
 use crate::sampling::{replicate_of, Sampler};
 use crate::scene::Scene;
 use crate::spectrum::{band_values, join, PhaseSpectrum, Wavelength};
@@ -133,12 +131,12 @@ impl Phase<'_> {
         let (scene, spectrum) = (self.scene, &self.spectrum);
         match record {
             None => {
-                trace_light_path_logged(scene, settings, spectrum, index, &mut s, stats, visit, None);
+                trace_light_path(scene, settings, spectrum, index, &mut s, stats, visit, &mut Unrecorded);
                 trace_ghost_paths(scene, settings, spectrum, index, self.seed, self.key, stats, visit, None);
             }
             Some((recorder, number, log)) => {
                 (log.phase, log.item) = (number as u32, index as u32);
-                trace_light_path_logged(scene, settings, spectrum, index, &mut s, stats, visit, Some(log));
+                trace_light_path(scene, settings, spectrum, index, &mut s, stats, visit, log);
                 recorder.record(log);
                 let record = Some((recorder, number));
                 trace_ghost_paths(scene, settings, spectrum, index, self.seed, self.key, stats, visit, record);
@@ -395,16 +393,16 @@ impl PhaseBuffers {
                     if kept.is_some() {
                         (log.phase, log.item, log.source) = (j as u32, pixel, pixel);
                     }
-                    let (v, ghost) = trace_camera_path_logged(
-                        phase.scene,
-                        &bs,
-                        local as u32,
-                        ray,
-                        &mut s,
-                        &mut stats,
-                        &mut |b| photons.push(b),
-                        kept.is_some().then_some(&mut log),
-                    );
+                    let store = &mut |b| photons.push(b);
+                    let (v, ghost) = match kept {
+                        Some(_) => {
+                            trace_camera_path(phase.scene, &bs, local as u32, ray, &mut s, &mut stats, store, &mut log)
+                        }
+                        None => {
+                            let log = &mut Unrecorded;
+                            trace_camera_path(phase.scene, &bs, local as u32, ray, &mut s, &mut stats, store, log)
+                        }
+                    };
                     if let Some(r) = kept {
                         r.record(&log);
                     }
