@@ -14,6 +14,7 @@ use photonfarm::color::Rgb;
 use photonfarm::geometry::SurfaceHit;
 use photonfarm::integrator::Layer;
 use photonfarm::pbpm::backward_pass::BackwardStats;
+use photonfarm::pbpm::photon::PhotonLists;
 use photonfarm::pbpm::{
     gather, trace_camera_path, trace_light_path, BackwardPhoton, BackwardSettings, ForwardStats, GatherPoint,
     LightEvent, LightSettings, LightVertex, PhotonMap, SortedGathers,
@@ -50,6 +51,7 @@ impl OwnedVertex {
             flux: self.flux,
             m: self.m,
             all_specular: self.all_specular,
+            all_pass: self.all_specular,
             spectrum: 0,
             phase: &PhaseSpectrum::RGB,
         }
@@ -72,13 +74,14 @@ fn backward_photons(scene: &Scene, settings: &RenderSettings) -> Vec<BackwardPho
         spectrum: PhaseSpectrum::RGB,
         sensor_ghosts: false,
     };
-    let mut photons = Vec::new();
+    let (mut photons, mut vertices) = (Vec::new(), Vec::new());
     let mut stats = BackwardStats::default();
     for pixel in 0..cam.pixel_count() {
         let (x, y) = ((pixel % cam.width as usize) as u32, (pixel / cam.width as usize) as u32);
         let mut s = Sampler::new(settings.seed, Pass::Camera, PHASE, pixel as u64);
         let ray = cam.generate_ray(x, y, s.next_2d(), s.next_2d());
-        trace_camera_path(scene, &bs, pixel as u32, ray, &mut s, &mut stats, &mut |b| photons.push(b), &mut Unrecorded);
+        let store = &mut PhotonLists { photons: &mut photons, vertices: &mut vertices };
+        trace_camera_path(scene, &bs, pixel as u32, ray, &mut s, &mut stats, store, &mut Unrecorded);
     }
     photons
 }

@@ -1,12 +1,12 @@
 //! The path walk: the one bounce loop that every kind of path runs. It traces a segment, resolves the surface's
-//! scattering at the hit, samples the continuation, multiplies the throughput, plays Russian roulette and
-//! records all of it into the path's log. What differs between camera paths, light paths and ghost paths (what
-//! an emitter hit adds, what a vertex stores or gathers, how a dielectric chooses, when roulette starts) is the
+//! BSDF at the hit, samples the continuation, multiplies the throughput, plays Russian roulette and records all
+//! of it into the path's log. What differs between camera paths, light paths and ghost paths (what an emitter
+//! hit adds, what a vertex stores or gathers, how a dielectric chooses, when roulette starts) is the
 //! `Technique`'s; the recorder is a type parameter, so a path nobody records pays nothing for it.
 
+use crate::bsdf::{Bsdf, BsdfSample, Reflection, Transport};
 use crate::color::Rgb;
 use crate::geometry::{ray::offset_origin, Ray, SurfaceHit};
-use crate::material::{Material, Reflection, ScatterSample, Transport};
 use crate::ray_map::{events::scatter_event, Events, PathLog};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
@@ -52,19 +52,19 @@ pub trait Technique<const S: bool> {
     #[inline(always)]
     fn on_segment<L: PathLog>(&mut self, _w: &Walk<S>, _hit: Option<&SurfaceHit>, _log: &mut L) {}
 
-    /// At a surface hit, before its scattering is resolved: a camera path adds an emitter's light.
+    /// At a surface hit, before its BSDF is resolved: a camera path adds an emitter's light.
     #[inline(always)]
     fn on_hit<L: PathLog>(&mut self, _w: &mut Walk<S>, _hit: &SurfaceHit, _log: &mut L) -> bool {
         true
     }
 
-    /// At the vertex's material, before the continuation is sampled: next-event estimation, photons, gathers,
-    /// and where the path ends. `wo` points back along the path.
+    /// At the vertex's BSDF, before the continuation is sampled: next-event estimation, photons, gathers, and
+    /// where the path ends. `wo` points back along the path.
     fn at_vertex<L: PathLog>(
         &mut self,
         w: &mut Walk<S>,
         hit: &SurfaceHit,
-        material: &Material,
+        bsdf: &Bsdf,
         wo: Vec3,
         sampler: &mut Sampler,
         log: &mut L,
@@ -76,19 +76,18 @@ pub trait Technique<const S: bool> {
         Reflection::Fresnel
     }
 
-    /// After the continuation `s` was sampled and the throughput multiplied by its weight.
-    fn after_sample(
-        &mut self,
-        w: &mut Walk<S>,
-        hit: &SurfaceHit,
-        material: &Material,
-        wo: Vec3,
-        s: &ScatterSample,
-    ) -> bool;
+    /// After the continuation `s` was sampled and the throughput multiplied by its weight; `direct` is the
+    /// throughput an emitter hit right after this vertex carries (`BsdfSample::direct`).
+    fn after_sample(&mut self, w: &mut Walk<S>, hit: &SurfaceHit, bsdf: &Bsdf, s: &BsdfSample, direct: Rgb) -> bool;
 
     /// The unit Russian roulette compares the throughput's largest channel with at this vertex (the path
     /// survives with probability min(1, max β / unit)), or None where it does not play.
     fn roulette_unit(&self, w: &Walk<S>) -> Option<f32>;
+
+    /// The path survived roulette with probability `q`: whatever the technique carries besides the walk's
+    /// throughput is divided by it as the throughput was.
+    #[inline(always)]
+    fn survived(&mut self, _q: f32) {}
 }
 
 /// Walks one path from `w`'s ray until it escapes, is absorbed, loses at roulette or its technique ends it.
@@ -115,19 +114,21 @@ pub fn walk<const S: bool, T: Technique<S>, L: PathLog>(
         if !technique.on_hit(w, &hit, log) {
             break;
         }
-        let material = w.spectrum.material(scene.material(&hit), &mut w.beta);
         let wo = -w.ray.direction;
-        if !technique.at_vertex(w, &hit, &material, wo, sampler, log) {
+        let bsdf = w.spectrum.material(scene.bsdf(&hit, wo), &mut w.beta);
+        if !technique.at_vertex(w, &hit, &bsdf, wo, sampler, log) {
             break;
         }
         let choice = technique.choice(&hit);
-        let Some(s) = material.sample_reflecting(&hit, wo, sampler.next_2d(), T::MODE, choice) else {
+        let Some(s) = bsdf.sample_reflecting(wo, sampler.next_2d(), T::MODE, choice) else {
             log.event(Events::ABSORB);
             break;
         };
-        log.event(scatter_event(&material, &hit, wo, s.wi, s.delta));
+        log.event(scatter_event(&s));
+        let before = w.beta;
         w.beta *= s.weight;
-        if !technique.after_sample(w, &hit, &material, wo, &s) {
+        let direct = if s.direct == s.weight { w.beta } else { before * s.direct };
+        if !technique.after_sample(w, &hit, &bsdf, &s, direct) {
             break;
         }
         if let Some(unit) = technique.roulette_unit(w) {
@@ -137,6 +138,7 @@ pub fn walk<const S: bool, T: Technique<S>, L: PathLog>(
                 break;
             }
             w.beta /= q;
+            technique.survived(q);
         }
         w.ray = Ray::new(offset_origin(hit.p, hit.ng, s.wi), s.wi);
     }

@@ -4,20 +4,18 @@
 
 use super::gather_disc::gather_disc_areas;
 use super::inner_disc::inner_share;
-use super::photon::BackwardPhoton;
+use super::photon::{BackwardPhoton, PhotonLists, StoredVertex, LAMBERTIAN};
 use super::radius::RadiusSchedule;
 use super::PhotonKind;
 use crate::camera::CameraRay;
 use crate::color::Rgb;
-use crate::geometry::SurfaceHit;
-use crate::integrator::camera_path::{trace_camera, After, CameraRun, DiffuseVertices};
+use crate::integrator::camera_path::{trace_camera, After, CameraRun, StoredVertices, StoringVertex};
 use crate::integrator::walk::Walk;
 use crate::integrator::LayerValues;
 use crate::ray_map::PathLog;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::spectrum::PhaseSpectrum;
-use glam::Vec3;
 
 /// What the backward pass needs to know besides the scene.
 #[derive(Clone, Copy, Debug)]
@@ -53,7 +51,7 @@ impl std::ops::Add for BackwardStats {
 }
 
 /// Traces one camera path for `pixel`, returns its visible-light and next-event contributions per layer with
-/// the part of them that is ghost light (`crate::ghost`), and hands every backward photon to `store`. The
+/// the part of them that is ghost light (`crate::ghost`), and adds every backward photon to `store`. The
 /// camera ray's weight starts the path throughput, so that it also reaches the photons' filter τ and with them
 /// the forward pass's gathered light. `log` records the path (a ray map's) or, as `Unrecorded`, costs nothing;
 /// the image is the same either way.
@@ -65,7 +63,7 @@ pub fn trace_camera_path(
     camera_ray: CameraRay,
     sampler: &mut Sampler,
     stats: &mut BackwardStats,
-    store: &mut impl FnMut(BackwardPhoton),
+    store: &mut PhotonLists,
     log: &mut impl PathLog,
 ) -> (LayerValues, Rgb) {
     let run = CameraRun {
@@ -82,28 +80,26 @@ pub fn trace_camera_path(
     (out, ghost)
 }
 
-/// The backward pass's diffuse vertices: a photon at each of the first `backward_diffuse_depth`, and the path
+/// The backward pass's storing vertices: a photon at each of the first `backward_diffuse_depth`, and the path
 /// ends at the last of them.
-struct Photons<'a, F> {
+struct Photons<'a, 'b> {
     settings: &'a BackwardSettings,
     pixel: u32,
-    store: &'a mut F,
+    store: &'a mut PhotonLists<'b>,
     stored: u64,
 }
 
-impl<const S: bool, F: FnMut(BackwardPhoton)> DiffuseVertices<S> for Photons<'_, F> {
+impl<const S: bool> StoredVertices<S> for Photons<'_, '_> {
+    const STORES: bool = true;
     // Long specular chains (light trapped in glass) end by roulette, unbiased.
     const ROULETTE_FROM: u32 = 4;
-    // An emitter reached from a diffuse vertex through specular surfaces is a caustic, which the forward pass
-    // counts.
-    const LEAVES_CAUSTICS: bool = true;
 
     #[inline(always)]
     fn after(&self, k: u32) -> After {
         if k < self.settings.backward_diffuse_depth {
             After::Continue
         } else if k == 1 {
-            // Where the path ends at its first diffuse vertex, one BSDF ray still looks for an emitter:
+            // Where the path ends at its first storing vertex, one BSDF ray still looks for an emitter:
             // next-event estimation alone is noisy where an emitter is large or near (its solid angle, not its
             // area, is then what to sample), and the direct layer is then the same estimator at either depth.
             After::EmitterRay
@@ -113,29 +109,36 @@ impl<const S: bool, F: FnMut(BackwardPhoton)> DiffuseVertices<S> for Photons<'_,
     }
 
     #[inline(always)]
-    fn store(&mut self, w: &Walk<S>, hit: &SurfaceHit, wo: Vec3, albedo: Rgb, k: u32, ghost: bool) {
+    fn store(&mut self, w: &Walk<S>, v: StoringVertex) {
         let settings = self.settings;
         // A merge needs at least two light segments (y1 is next-event estimation's).
         if w.segments + 2 > settings.max_depth {
             return;
         }
         let r = settings.radius.radius(w.length, settings.phase);
-        let normal = if wo.dot(hit.ng) >= 0.0 { hit.ng } else { -hit.ng };
-        // eq. 4's τ · f / (π r²), with the disc's area on the surface for π r² (`gather_disc`).
-        let areas = gather_disc_areas(&w.scene.geometry, hit, r);
-        let weight = w.beta * albedo * (std::f32::consts::FRAC_1_PI / areas.whole);
+        // eq. 4's τ · f / (π r²), with the disc's area on the surface for π r² (`gather_disc`); a Lambertian
+        // photon carries f = ρ/π, any other carries its BSDF to evaluate at the gather.
+        let areas = gather_disc_areas(&w.scene.geometry, v.hit, r);
+        let (weight, stored) = match v.bsdf.lambertian() {
+            Some(albedo) => (w.beta * albedo * (std::f32::consts::FRAC_1_PI / areas.whole), LAMBERTIAN),
+            None => (w.beta * (1.0 / areas.whole), self.store.vertices.len() as u32),
+        };
         if weight.is_finite() && r > 0.0 {
+            if stored != LAMBERTIAN {
+                self.store.vertices.push(StoredVertex { bsdf: *v.bsdf, wo: v.wo });
+            }
             self.stored += 1;
-            (self.store)(BackwardPhoton {
-                position: hit.p,
-                normal,
+            self.store.photons.push(BackwardPhoton {
+                position: v.hit.p,
+                normal: v.bsdf.geometric_normal(),
                 weight,
                 radius2: r * r,
                 pixel: self.pixel,
-                kind: PhotonKind::new(k as u8, ghost),
+                kind: PhotonKind::new(v.k as u8, v.first, v.ghost),
                 segments: w.segments.min(255) as u8,
                 spectrum: w.spectrum.tag(),
                 inner_share: inner_share(areas),
+                stored,
             });
         }
     }

@@ -3,11 +3,11 @@
 
 use super::inner_disc::merge_blur;
 use super::photon_map::PhotonMap;
+use crate::bsdf::{Bsdf, BsdfSample, Transport};
 use crate::color::{luminance, Rgb};
 use crate::geometry::{ray::offset_origin, Ray, SurfaceHit};
 use crate::integrator::walk::{walk, Technique, Walk};
 use crate::integrator::Layer;
-use crate::material::{Material, ScatterSample, Transport};
 use crate::ray_map::PathLog;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
@@ -76,8 +76,11 @@ pub struct LightVertex<'a> {
     pub flux: Rgb,
     /// Light segments from the light to this vertex.
     pub m: u32,
-    /// True when y1 … y_{m−1} are all specular.
+    /// True when y1 … y_{m−1} all scattered through delta lobes.
     pub all_specular: bool,
+    /// True when y1 … y_{m−1} all scattered through pass lobes (delta or sharp glossy: none a photon could
+    /// have gathered).
+    pub all_pass: bool,
     /// 0 for an RGB light path; 1 + its wavelength class once it turned spectral, and `flux` then holds its
     /// value at that wavelength in every channel.
     pub spectrum: u8,
@@ -173,6 +176,7 @@ fn light_path<const S: bool>(
         visit,
         beta0: beta.max_element(),
         all_specular: true,
+        all_pass: true,
         ghost_chain: false,
         // The light's image through the lens is the light side's too: a segment after at least one specular
         // vertex that crosses the sensor registers, as a camera path of two segments or more would have hit
@@ -198,8 +202,10 @@ struct LightPath<'a, V> {
     visit: &'a mut V,
     /// The throughput's largest channel at the light, roulette's unit.
     beta0: f32,
-    /// True while y1 … y_m are all specular.
+    /// True while y1 … y_m all scattered through delta lobes.
     all_specular: bool,
+    /// True while y1 … y_m all scattered through pass lobes.
+    all_pass: bool,
     /// Set once the all-specular chain so far took a reflection at a dielectric: from then on, until a diffuse
     /// vertex, a segment that crosses the sensor is a ghost the light side owns.
     ghost_chain: bool,
@@ -237,32 +243,31 @@ impl<const S: bool, V: FnMut(&LightEvent)> Technique<S> for LightPath<'_, V> {
         &mut self,
         w: &mut Walk<S>,
         hit: &SurfaceHit,
-        material: &Material,
+        bsdf: &Bsdf,
         wo: Vec3,
         _sampler: &mut Sampler,
         _log: &mut L,
     ) -> bool {
         let (m, max_depth) = (w.segments, self.settings.max_depth);
-        if material.diffuse_albedo().is_some() {
-            if !self.settings.vertices {
-                return false;
-            }
-            if m >= 2 && m < max_depth {
-                (self.visit)(&LightEvent::Vertex(LightVertex {
-                    hit,
-                    wi: wo,
-                    flux: w.beta,
-                    m,
-                    all_specular: self.all_specular,
-                    spectrum: w.spectrum.tag(),
-                    phase: self.spectrum,
-                }));
-            }
-            self.all_specular = false;
+        let delta = bsdf.flags().is_specular();
+        if !self.settings.vertices && !delta {
+            return false;
+        }
+        if self.settings.vertices && bsdf.has_stored() && m >= 2 && m < max_depth {
+            (self.visit)(&LightEvent::Vertex(LightVertex {
+                hit,
+                wi: wo,
+                flux: w.beta,
+                m,
+                all_specular: self.all_specular,
+                all_pass: self.all_pass,
+                spectrum: w.spectrum.tag(),
+                phase: self.spectrum,
+            }));
         }
         // The next vertex y_{m+1} can still merge only with a photon one segment from the eye; a ghost chain may
         // still reach the sensor on segment m + 1.
-        let sensor_next = self.settings.sensor && self.all_specular && m < max_depth;
+        let sensor_next = self.settings.sensor && self.all_specular && delta && m < max_depth;
         if m + 2 > max_depth && !sensor_next {
             self.capped = w.beta != Rgb::ZERO;
             return false;
@@ -271,19 +276,14 @@ impl<const S: bool, V: FnMut(&LightEvent)> Technique<S> for LightPath<'_, V> {
     }
 
     #[inline(always)]
-    fn after_sample(
-        &mut self,
-        _: &mut Walk<S>,
-        hit: &SurfaceHit,
-        material: &Material,
-        wo: Vec3,
-        s: &ScatterSample,
-    ) -> bool {
-        if self.settings.sensor && self.all_specular && crate::ghost::is_dielectric_reflection(material, hit, wo, s.wi)
-        {
+    fn after_sample(&mut self, _: &mut Walk<S>, _: &SurfaceHit, bsdf: &Bsdf, s: &BsdfSample, _: Rgb) -> bool {
+        if self.settings.sensor && self.all_specular && bsdf.is_dielectric_reflection(s) {
             self.ghost_chain = true;
         }
-        true
+        self.all_specular &= s.is_delta();
+        self.all_pass &= !s.stored;
+        // A path that only brings chains to the sensor ends where its chain leaves the delta lobes.
+        self.settings.vertices || s.is_delta()
     }
 
     #[inline(always)]
@@ -340,6 +340,7 @@ pub struct GatherPoint {
     pub flux: Rgb,
     pub m: u32,
     pub all_specular: bool,
+    pub all_pass: bool,
     pub spectrum: u8,
 }
 
@@ -354,6 +355,7 @@ impl LightVertex<'_> {
             flux: self.flux,
             m: self.m,
             all_specular: self.all_specular,
+            all_pass: self.all_pass,
             spectrum: self.spectrum,
         }
     }
@@ -422,16 +424,28 @@ fn gather_in<const S: bool>(
         {
             continue;
         }
-        // DESIGN §1's partition: every light path is counted by exactly one photon depth.
-        let layer = match (b.kind.k(), v.all_specular) {
-            (1, true) => Layer::Caustic,
+        // The partition of docs/estimator.md ("Layers"): every light path is counted by exactly one photon
+        // depth; light reaching a camera path's first non-delta vertex through delta lobes alone is a caustic.
+        let layer = match (b.kind.k(), v.all_pass) {
+            (1, true) if b.kind.first() && v.all_specular => Layer::Caustic,
+            (1, true) => Layer::Indirect,
             (1, false) if backward_diffuse_depth == 1 => Layer::Indirect,
             (1, false) => continue,
             _ => Layer::Indirect,
         };
+        // eq. 4's τ · f / (π r²), f evaluated here for a photon that is not Lambertian.
+        let weight = if b.is_lambertian() {
+            b.weight
+        } else {
+            let f = map.vertex(b.stored).eval(v.wi);
+            if f == Rgb::ZERO {
+                continue;
+            }
+            b.weight * f
+        };
         merges += 1;
         // eq. 4
-        let value = if S { join(b.weight, b.spectrum, v.flux, v.spectrum, phase) } else { b.weight * v.flux };
+        let value = if S { join(weight, b.spectrum, v.flux, v.spectrum, phase) } else { weight * v.flux };
         sink.add(b.pixel, layer, b.kind.ghost(), value);
         if blur {
             sink.add_blur(b.pixel, merge_blur(luminance(value), d2, b));

@@ -6,11 +6,11 @@
 
 use super::forward_pass::{register_crossing, Crossing, ForwardStats, LightEvent, LightSettings};
 use super::ghost_aim::{AimGrid, RINGS, SECTORS};
+use crate::bsdf::{Bsdf, BsdfSample, Reflection, Transport};
 use crate::color::{luminance, Rgb};
 use crate::geometry::{ray::offset_origin, Ray, SurfaceHit};
 use crate::integrator::walk::{walk, Technique, Walk};
 use crate::light::{disc_crossing, AimDensity, EmissionSample, UniformAim};
-use crate::material::{Material, Reflection, ScatterSample, Transport};
 use crate::ray_map::{PathKind, PathLog, RecordedPath, Recorder, Unrecorded};
 use crate::sampling::{Discrete, Pass, Sampler};
 use crate::scene::Scene;
@@ -95,9 +95,7 @@ pub struct GhostPairs {
 impl GhostPairs {
     /// The table of `scene`, from its pilot; None when the scene has no dielectric surface.
     pub fn for_scene(scene: &Scene) -> Option<GhostPairs> {
-        let dielectric = |o: &u32| {
-            matches!(scene.materials[scene.objects[*o as usize].material as usize], Material::Dielectric { .. })
-        };
+        let dielectric = |o: &u32| scene.materials[scene.objects[*o as usize].material as usize].is_dielectric();
         let surfaces: Vec<u32> = (0..scene.objects.len() as u32).filter(dielectric).collect();
         if surfaces.is_empty() {
             return None;
@@ -353,12 +351,12 @@ impl<const S: bool, V: FnMut(&LightEvent)> Technique<S> for GhostPath<'_, V> {
         &mut self,
         w: &mut Walk<S>,
         _: &SurfaceHit,
-        material: &Material,
+        bsdf: &Bsdf,
         _: Vec3,
         _: &mut Sampler,
         _: &mut L,
     ) -> bool {
-        material.diffuse_albedo().is_none() && w.segments < self.settings.max_depth
+        bsdf.flags().is_specular() && w.segments < self.settings.max_depth
     }
 
     #[inline(always)]
@@ -367,18 +365,11 @@ impl<const S: bool, V: FnMut(&LightEvent)> Technique<S> for GhostPath<'_, V> {
     }
 
     #[inline(always)]
-    fn after_sample(
-        &mut self,
-        w: &mut Walk<S>,
-        hit: &SurfaceHit,
-        material: &Material,
-        wo: Vec3,
-        s: &ScatterSample,
-    ) -> bool {
-        if crate::ghost::is_dielectric_reflection(material, hit, wo, s.wi) {
+    fn after_sample(&mut self, w: &mut Walk<S>, _: &SurfaceHit, bsdf: &Bsdf, s: &BsdfSample, _: Rgb) -> bool {
+        if bsdf.is_dielectric_reflection(s) {
             self.reflections += 1;
         }
-        w.beta != Rgb::ZERO
+        s.is_delta() && w.beta != Rgb::ZERO
     }
 
     #[inline(always)]

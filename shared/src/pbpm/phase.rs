@@ -15,7 +15,7 @@ use super::executor::Executor;
 use super::forward_pass::{gather, trace_light_path, ForwardStats, Gather, LightEvent, LightSettings, SensorHit};
 use super::gather_buffer::GatherBuffer;
 use super::ghost_paths::trace_ghost_paths;
-use super::photon::BackwardPhoton;
+use super::photon::{BackwardPhoton, PhotonLists, StoredVertex, LAMBERTIAN};
 use super::photon_map::PhotonMap;
 use super::radius::RadiusSchedule;
 use super::sensor_kernel::SensorKernel;
@@ -266,6 +266,8 @@ pub struct PhaseBuffers {
     aux_camera: Vec<f32>,
     /// The camera pass's photons, one list per `chunk` local pixels, in pixel order.
     photon_lists: Vec<Vec<BackwardPhoton>>,
+    /// The BSDFs of the non-Lambertian photons of each list, parallel to `photon_lists`.
+    vertex_lists: Vec<Vec<StoredVertex>>,
     /// Local pixels per unit of work: `PIXEL_CHUNK`, or every pixel on the calling thread, whose one list then
     /// becomes the map's photons without a copy (and takes the map's buffer back for the next phase), so that
     /// the single-threaded engine holds its photons once.
@@ -300,6 +302,7 @@ impl PhaseBuffers {
             replicates: Vec::new(),
             aux_camera: Vec::new(),
             photon_lists: Vec::new(),
+            vertex_lists: Vec::new(),
             chunk: PIXEL_CHUNK,
             single_list: exec == Executor::CallingThread,
             recorder: None,
@@ -326,6 +329,7 @@ impl PhaseBuffers {
         self.aux_camera.resize(pixels * self.aux.channels(), 0.0);
         self.chunk = if self.single_list { pixels.max(1) } else { PIXEL_CHUNK };
         self.photon_lists.resize_with(pixels.div_ceil(self.chunk), Vec::new);
+        self.vertex_lists.resize_with(pixels.div_ceil(self.chunk), Vec::new);
     }
 
     /// Bytes held.
@@ -334,6 +338,7 @@ impl PhaseBuffers {
             + self.replicates.capacity()
             + self.aux_camera.capacity() * 4
             + self.photon_lists.iter().map(Vec::capacity).sum::<usize>() * std::mem::size_of::<BackwardPhoton>()
+            + self.vertex_lists.iter().map(Vec::capacity).sum::<usize>() * std::mem::size_of::<StoredVertex>()
     }
 
     /// Stage 1: one camera path per local pixel; `pixels[i]` is local pixel i's image pixel (None: the whole
@@ -362,12 +367,13 @@ impl PhaseBuffers {
             .camera
             .par_chunks_mut(chunk_len)
             .zip(self.replicates.par_chunks_mut(chunk_len))
-            .zip(self.photon_lists.par_iter_mut())
+            .zip(self.photon_lists.par_iter_mut().zip(self.vertex_lists.par_iter_mut()))
             .zip(aux_chunks(&mut self.aux_camera, channels, count, chunk_len))
             .enumerate();
         exec.run(chunks)
-            .map(|(chunk, (((values, replicate), photons), mut aux))| {
+            .map(|(chunk, (((values, replicate), (photons, vertices)), mut aux))| {
                 photons.clear();
+                vertices.clear();
                 // A camera path stores at most one photon per diffuse vertex it continues from: at full size
                 // from the first phase, a list never grows, and holds what `--memory-limit` assumed.
                 photons.reserve_exact(values.len() * bdd as usize);
@@ -393,7 +399,7 @@ impl PhaseBuffers {
                     if kept.is_some() {
                         (log.phase, log.item, log.source) = (j as u32, pixel, pixel);
                     }
-                    let store = &mut |b| photons.push(b);
+                    let store = &mut PhotonLists { photons, vertices };
                     let (v, ghost) = match kept {
                         Some(_) => {
                             trace_camera_path(phase.scene, &bs, local as u32, ray, &mut s, &mut stats, store, &mut log)
@@ -416,12 +422,24 @@ impl PhaseBuffers {
             .reduce(BackwardStats::default, |a, b| a + b)
     }
 
-    /// Stage 2: the photon map of the camera pass's photons, in pixel order.
+    /// Stage 2: the photon map of the camera pass's photons, in pixel order, with the BSDFs of its
+    /// non-Lambertian photons.
     pub fn build_map(&mut self, exec: Executor, map: &mut PhotonMap) {
+        if self.vertex_lists.iter().any(|v| !v.is_empty()) {
+            // A list's photons count their BSDFs within the list: the map holds all lists' one after another.
+            let mut first = 0u32;
+            for (photons, vertices) in self.photon_lists.iter_mut().zip(&self.vertex_lists) {
+                if first > 0 {
+                    photons.iter_mut().filter(|p| p.stored != LAMBERTIAN).for_each(|p| p.stored += first);
+                }
+                first += vertices.len() as u32;
+            }
+        }
         match (&mut self.photon_lists[..], self.single_list) {
             ([list], true) => map.build_from(std::mem::take(list), exec),
             (lists, _) => map.build_from_lists(lists, exec),
         }
+        map.set_vertices(&self.vertex_lists);
     }
 
     /// Stage 4: closes the phase at every local pixel into `sums` and `aux_sums`, with the gathered light divided
