@@ -32,6 +32,7 @@ pub mod conductor;
 pub mod dielectric;
 pub mod diffuse;
 pub mod fresnel;
+pub mod metals;
 pub mod microfacet;
 
 use crate::color::Rgb;
