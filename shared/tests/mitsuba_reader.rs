@@ -1,7 +1,9 @@
-//! The Mitsuba 3 XML reader: transforms and spectra against values Mitsuba itself printed (committed data),
-//! substitution, references, includes, and refusals that name element and line.
+//! The Mitsuba 3 XML reader and the serialized mesh format: transforms and spectra against values Mitsuba itself
+//! printed (committed data), substitution, references, includes, refusals that name element and line, and
+//! serialized round trips and damaged files.
 
 use glam::{DMat4, DVec3};
+use photonfarm::scene::mitsuba::serialized::{mesh_count, read_serialized, write_serialized, SerializedMesh};
 use photonfarm::scene::mitsuba::{read_file, read_str, Category, Document, MitsubaError, Spectrum, SpectrumUse, Value};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -268,4 +270,78 @@ fn includes_read_relative_to_the_including_file_and_cycles_are_refused() {
     std::fs::write(dir.path().join("parts/more.xml"), scene("<bsdf type=\"x\">")).unwrap();
     let error = read_file(&dir.path().join("main.xml"), &[]).unwrap_err().to_string();
     assert!(error.contains("more.xml:3:") && error.contains("not well-formed"), "{error}");
+}
+
+fn mesh(normals: bool, uvs: bool, name: &str, shift: f32) -> SerializedMesh {
+    let positions = vec![[0.0, 0.0, shift], [1.0, 0.0, 0.1], [0.0, 1.0, 0.3], [1.0, 1.0, 1.0 / 3.0]];
+    SerializedMesh {
+        name: name.to_string(),
+        normals: normals.then(|| vec![[0.0, 0.0, 1.0], [0.0, 0.6, 0.8], [0.6, 0.0, 0.8], [0.0, 0.0, -1.0]]),
+        uvs: uvs.then(|| vec![[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [0.25, 0.75]]),
+        positions,
+        triangles: vec![[0, 1, 2], [2, 1, 3]],
+        face_normals: !normals,
+    }
+}
+
+#[test]
+fn serialized_meshes_round_trip_in_both_precisions_with_and_without_normals_and_uvs() {
+    for double in [false, true] {
+        for normals in [false, true] {
+            for uvs in [false, true] {
+                let meshes =
+                    [mesh(normals, uvs, "first", 0.0), mesh(!normals, uvs, "", 2.0), mesh(normals, !uvs, "third", 7.5)];
+                let bytes = write_serialized(&meshes, double).unwrap();
+                assert_eq!(mesh_count(&bytes).unwrap(), 3);
+                for (index, expected) in meshes.iter().enumerate() {
+                    assert_eq!(
+                        &read_serialized(&bytes, index as u32).unwrap(),
+                        expected,
+                        "double {double} mesh {index}"
+                    );
+                }
+                let error = read_serialized(&bytes, 3).unwrap_err().to_string();
+                assert!(error.contains("out of range") && error.contains("3 meshes"), "{error}");
+            }
+        }
+    }
+}
+
+#[test]
+fn truncated_and_damaged_serialized_files_are_refused_without_panic() {
+    let bytes = write_serialized(&[mesh(true, true, "a", 0.0), mesh(false, true, "b", 1.0)], false).unwrap();
+    for len in 0..bytes.len() {
+        for index in [0, 1] {
+            // A prefix may still hold mesh 0 whole; it must then read as written, never as something else.
+            if let Ok(read) = read_serialized(&bytes[..len], index) {
+                assert_eq!(read, mesh(true, true, "a", 0.0), "prefix of {len} bytes, mesh {index}");
+            }
+        }
+    }
+    // Any changed byte of the first mesh is caught (by the zlib checksum if nothing else); elsewhere, reading
+    // must not panic.
+    let first_len = write_serialized(&[mesh(true, true, "a", 0.0)], false).unwrap().len() - 12;
+    for at in 0..bytes.len() {
+        let mut damaged = bytes.clone();
+        damaged[at] ^= 0x5A;
+        let first = read_serialized(&damaged, 0);
+        assert!(at >= first_len || first.is_err(), "a change at byte {at} went unnoticed");
+        let _ = read_serialized(&damaged, 1);
+    }
+    // A body that claims a huge mesh is refused before anything is allocated.
+    let mut body = Vec::new();
+    body.extend_from_slice(&0x1000u32.to_le_bytes());
+    body.push(0);
+    body.extend_from_slice(&(u32::MAX as u64).to_le_bytes());
+    body.extend_from_slice(&(1u64 << 40).to_le_bytes());
+    let mut encoder = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+    std::io::Write::write_all(&mut encoder, &body).unwrap();
+    let mut hostile = vec![0x1C, 0x04, 4, 0];
+    hostile.extend(encoder.finish().unwrap());
+    let error = read_serialized(&hostile, 0).unwrap_err().to_string();
+    assert!(error.contains("truncated or damaged"), "{error}");
+    let error = read_serialized(&[0x1C, 0x04, 5, 0, 0, 0], 0).unwrap_err().to_string();
+    assert!(error.contains("version 5"), "{error}");
+    let error = read_serialized(b"PLY\n", 0).unwrap_err().to_string();
+    assert!(error.contains("not a serialized mesh"), "{error}");
 }
