@@ -149,6 +149,21 @@ fn files_that_are_not_mitsuba_3_scenes_are_refused_with_their_position() {
 }
 
 #[test]
+fn deep_nesting_and_long_reference_chains_are_refused_not_overflowing_the_stack() {
+    let deep = scene(&format!("{}{}", "<bsdf type=\"twosided\">".repeat(5000), "</bsdf>".repeat(5000)));
+    let error = read(&deep).unwrap_err().to_string();
+    assert!(error.starts_with("scene.xml:2:") && error.contains("nest deeper"), "{error}");
+    // Each bsdf references the next: a chain through 20000 plugins.
+    let chain: String =
+        (0..20000).map(|i| format!("<bsdf type=\"twosided\" id=\"b{i}\"><ref id=\"b{}\"/></bsdf>\n", i + 1)).collect();
+    let error = read(&scene(&format!("{chain}<bsdf type=\"diffuse\" id=\"b20000\"/>"))).unwrap_err().to_string();
+    assert!(error.contains("deeper than"), "{error}");
+    let short: String =
+        (0..50).map(|i| format!("<bsdf type=\"twosided\" id=\"b{i}\"><ref id=\"b{}\"/></bsdf>", i + 1)).collect();
+    assert!(read(&scene(&format!("{short}<bsdf type=\"diffuse\" id=\"b50\"/>"))).is_ok());
+}
+
+#[test]
 fn defaults_are_substituted_everywhere_and_defines_override_them() {
     let text = scene(
         "<default name=\"spp\" value=\"16\"/>\n<default name=\"spp\" value=\"99\"/>\n<default name=\"kind\" value=\"diffuse\"/>\n\
@@ -236,9 +251,13 @@ fn includes_read_relative_to_the_including_file_and_cycles_are_refused() {
     std::fs::create_dir_all(dir.path().join("parts/meshes")).unwrap();
     std::fs::create_dir_all(dir.path().join("common/meshes")).unwrap();
     std::fs::write(dir.path().join("common/meshes/m.serialized"), b"").unwrap();
+    std::fs::write(dir.path().join("common/gold.eta.spd"), "# eta\n400 0.5\n\n700 0.25\n").unwrap();
     std::fs::write(
         dir.path().join("main.xml"),
-        scene("<path value=\"common\"/>\n<include filename=\"parts/bsdfs.xml\"/>\n<shape type=\"sphere\"><ref id=\"red\"/></shape>"),
+        scene(
+            "<path value=\"common\"/>\n<include filename=\"parts/bsdfs.xml\"/>\n<shape type=\"sphere\"><ref id=\"red\"/></shape>\n\
+             <bsdf type=\"conductor\"><spectrum name=\"eta\" filename=\"gold.eta.spd\"/></bsdf>",
+        ),
     )
     .unwrap();
     std::fs::write(
@@ -252,7 +271,9 @@ fn includes_read_relative_to_the_including_file_and_cycles_are_refused() {
     )
     .unwrap();
     let document = read_file(&dir.path().join("main.xml"), &[]).unwrap();
-    assert_eq!(document.bsdfs.len(), 2);
+    assert_eq!(document.bsdfs.len(), 3);
+    let eta = Spectrum::Sampled { wavelengths: vec![400.0, 700.0], values: vec![0.5, 0.25] };
+    assert_eq!(document.bsdfs[2].param("eta").unwrap().value, Value::Spectrum(eta), "a .spd file in a <path> folder");
     assert_eq!(document.bsdfs[0].kind, "conductor");
     assert!(document.bsdfs[0].position.file.ends_with("parts/more.xml"));
     assert_eq!(document.bsdfs[0].param("x").unwrap().position.line, 3);

@@ -13,6 +13,9 @@ use std::sync::Arc;
 
 /// The most `<include>` levels a file may nest, beyond which it is refused (a cycle is refused sooner).
 const MAX_INCLUDE_DEPTH: usize = 32;
+/// The deepest nesting of plugins, and of references through plugins, that is read: far beyond real scenes,
+/// and shallow enough that hostile files cannot exhaust the stack of the recursive reading.
+const MAX_NESTING: usize = 100;
 /// The largest scene file read (meshes and textures are separate files).
 const MAX_FILE_BYTES: u64 = 64 << 20;
 
@@ -77,6 +80,8 @@ struct Reader {
     /// The scene's folder, where `filename`s are looked up last.
     scene_folder: PathBuf,
     version: Option<String>,
+    /// How many plugins enclose the element being read.
+    nesting: usize,
 }
 
 /// One element's tag, position and attributes after `$name` substitution.
@@ -182,6 +187,7 @@ impl Reader {
             search_paths: Vec::new(),
             scene_folder: path.parent().map(Path::to_path_buf).unwrap_or_default(),
             version: None,
+            nesting: 0,
         }
     }
 
@@ -229,7 +235,8 @@ impl Reader {
                 format!("not well-formed XML: {e}"),
             )
         })?;
-        let source = Source { document: &document, file };
+        let line_starts = std::iter::once(0).chain(text.match_indices('\n').map(|(i, _)| i + 1)).collect();
+        let source = Source { file, text, line_starts };
         let root = document.root_element();
         let attributes = self.attributes(&source, root)?;
         if attributes.tag != "scene" {
@@ -258,8 +265,7 @@ impl Reader {
     /// The tag, position and substituted attributes of `node`.
     fn attributes(&self, source: &Source, node: roxmltree::Node) -> Result<Attributes, MitsubaError> {
         let tag = node.tag_name().name().to_string();
-        let pos = source.document.text_pos_at(node.range().start);
-        let position = SourcePos { file: source.file.clone(), line: pos.row, column: pos.col };
+        let position = source.position(node.range().start);
         let mut element = format!("<{tag}");
         for key in ["type", "name", "id", "filename"] {
             if let Some(value) = node.attribute(key) {
@@ -397,11 +403,17 @@ impl Reader {
             }
             None => top.push(index),
         }
-        let mut nested_top = Vec::new();
-        for child in node.children().filter(roxmltree::Node::is_element) {
-            self.read_element(source, child, Some(index), &mut nested_top)?;
+        if self.nesting == MAX_NESTING {
+            return Err(attributes.error(format!("plugins nest deeper than {MAX_NESTING} levels here")));
         }
-        Ok(())
+        self.nesting += 1;
+        let mut nested_top = Vec::new();
+        let result = node
+            .children()
+            .filter(roxmltree::Node::is_element)
+            .try_for_each(|child| self.read_element(source, child, Some(index), &mut nested_top));
+        self.nesting -= 1;
+        result
     }
 
     /// Refuses an id (or alias) given twice.
@@ -562,7 +574,7 @@ impl Reader {
         };
         // Every plugin is resolved, also those no one references, so that a dangling ref anywhere is refused.
         for index in 0..self.plugins.len() {
-            resolver.resolve(index)?;
+            resolver.resolve(index, 0)?;
         }
         for (alias, (id, position, element)) in &self.aliases {
             resolver.lookup(id, position, element).map_err(|_| {
@@ -574,7 +586,7 @@ impl Reader {
             })?;
         }
         for index in top {
-            let plugin = resolver.resolve(index)?;
+            let plugin = resolver.resolve(index, 0)?;
             match plugin.category {
                 Category::Sensor => document.sensors.push(plugin),
                 Category::Integrator => {
@@ -594,9 +606,22 @@ impl Reader {
     }
 }
 
-struct Source<'a, 'input> {
-    document: &'a roxmltree::Document<'input>,
+struct Source<'input> {
     file: Arc<PathBuf>,
+    text: &'input str,
+    /// Byte offsets where lines start, to find positions in logarithmic time (a scan from the start of the file
+    /// for each element would take quadratic time on large files).
+    line_starts: Vec<usize>,
+}
+
+impl Source<'_> {
+    /// The 1-based line and column (in characters) of a byte offset.
+    fn position(&self, offset: usize) -> SourcePos {
+        let line = self.line_starts.partition_point(|&start| start <= offset);
+        let start = self.line_starts[line - 1];
+        let column = self.text.get(start..offset).map_or(1, |s| s.chars().count() + 1);
+        SourcePos { file: self.file.clone(), line: line as u32, column: column as u32 }
+    }
 }
 
 struct Resolver<'a> {
@@ -622,11 +647,19 @@ impl Resolver<'_> {
         Err(MitsubaError::at(position, element, format!("no plugin has the id \"{id}\"")))
     }
 
-    fn resolve(&mut self, index: usize) -> Result<Arc<Plugin>, MitsubaError> {
+    /// The plugin `index` with its children resolved; `depth` counts the plugins being resolved around it.
+    fn resolve(&mut self, index: usize, depth: usize) -> Result<Arc<Plugin>, MitsubaError> {
         if let Some(done) = &self.done[index] {
             return Ok(done.clone());
         }
         let raw = &self.reader.plugins[index];
+        if depth > 2 * MAX_NESTING {
+            return Err(MitsubaError::at(
+                &raw.position,
+                raw.element.clone(),
+                format!("references chain plugins deeper than {} levels here", 2 * MAX_NESTING),
+            ));
+        }
         if !self.in_progress.insert(index) {
             return Err(MitsubaError::at(
                 &raw.position,
@@ -650,7 +683,7 @@ impl Resolver<'_> {
                     ),
                 ));
             }
-            let plugin = self.resolve(target)?;
+            let plugin = self.resolve(target, depth + 1)?;
             children.push(Child { name: child.name.clone(), plugin, position: child.position.clone(), reference });
         }
         self.in_progress.remove(&index);
@@ -716,6 +749,19 @@ fn read_spectrum_file(path: &Path) -> Result<Spectrum, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn positions_agree_with_roxmltree_on_every_element() {
+        let text = "<scene version=\"3.0.0\">\r\n\t<bsdf type=\"diffuse\"/><!-- é -->  <shape type=\"ü\">\n\n   <float name=\"x\" value=\"1\"/></shape>\n</scene>";
+        let document = roxmltree::Document::parse(text).unwrap();
+        let line_starts = std::iter::once(0).chain(text.match_indices('\n').map(|(i, _)| i + 1)).collect();
+        let source = Source { file: Arc::new(PathBuf::from("s.xml")), text, line_starts };
+        for node in document.descendants().filter(roxmltree::Node::is_element) {
+            let expected = document.text_pos_at(node.range().start);
+            let ours = source.position(node.range().start);
+            assert_eq!((ours.line, ours.column), (expected.row, expected.col), "{:?}", node.tag_name());
+        }
+    }
 
     #[test]
     fn substitution_replaces_every_name_and_keeps_a_lone_dollar() {
