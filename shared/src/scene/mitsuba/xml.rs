@@ -327,7 +327,7 @@ impl Reader {
                 if !folder.is_dir() {
                     return Err(attributes.error(format!("the folder {} does not exist", folder.display())));
                 }
-                self.search_paths.insert(0, folder);
+                self.search_paths.insert(0, folder.canonicalize().unwrap_or(folder));
                 Ok(())
             }
             "alias" => {
