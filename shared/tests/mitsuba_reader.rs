@@ -328,6 +328,44 @@ fn serialized_meshes_round_trip_in_both_precisions_with_and_without_normals_and_
     }
 }
 
+/// A mesh of a hand-made version 3 file: flags, positions, triangles.
+type Version3Mesh = (u32, Vec<[f32; 3]>, Vec<[u32; 3]>);
+
+/// A version 3 file (no mesh names, 32-bit dictionary offsets), as older Mitsuba versions wrote, by hand.
+fn version_3_file(meshes: &[Version3Mesh]) -> Vec<u8> {
+    let mut out = Vec::new();
+    let mut offsets = Vec::new();
+    for (flags, positions, triangles) in meshes {
+        offsets.push(out.len() as u32);
+        out.extend_from_slice(&[0x1C, 0x04, 3, 0]);
+        let mut body = flags.to_le_bytes().to_vec();
+        body.extend_from_slice(&(positions.len() as u64).to_le_bytes());
+        body.extend_from_slice(&(triangles.len() as u64).to_le_bytes());
+        body.extend(positions.iter().flatten().flat_map(|v| v.to_le_bytes()));
+        body.extend(triangles.iter().flatten().flat_map(|i| i.to_le_bytes()));
+        let mut encoder = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+        std::io::Write::write_all(&mut encoder, &body).unwrap();
+        out.extend(encoder.finish().unwrap());
+    }
+    out.extend(offsets.iter().flat_map(|o| o.to_le_bytes()));
+    out.extend_from_slice(&(meshes.len() as u32).to_le_bytes());
+    out
+}
+
+#[test]
+fn version_3_serialized_files_are_read_by_shape_index() {
+    let first = (0x1000, vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], vec![[0, 1, 2]]);
+    let second =
+        (0x1010, vec![[5.0, 0.0, 0.0], [6.0, 0.0, 0.0], [5.0, 1.0, 0.0], [6.0, 1.0, 2.0]], vec![[0, 1, 2], [1, 3, 2]]);
+    let bytes = version_3_file(&[first.clone(), second.clone()]);
+    assert_eq!(mesh_count(&bytes).unwrap(), 2);
+    for (index, (flags, positions, triangles)) in [first, second].into_iter().enumerate() {
+        let mesh = read_serialized(&bytes, index as u32).unwrap();
+        assert_eq!((mesh.name.as_str(), &mesh.positions, &mesh.triangles), ("", &positions, &triangles));
+        assert_eq!((mesh.normals, mesh.uvs, mesh.face_normals), (None, None, flags & 0x10 != 0));
+    }
+}
+
 #[test]
 fn truncated_and_damaged_serialized_files_are_refused_without_panic() {
     let bytes = write_serialized(&[mesh(true, true, "a", 0.0), mesh(false, true, "b", 1.0)], false).unwrap();
