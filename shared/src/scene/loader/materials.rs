@@ -46,14 +46,30 @@ impl Loader<'_> {
                 };
                 let albedo = match (albedo, &texture) {
                     (Some(a), _) => self.colour(*a, &s, &f("albedo"), Some(1.0))?,
-                    // Texture values are at most 1, so the product stays a valid albedo.
                     (None, Some(_)) => Rgb::ONE,
                     (None, None) => {
                         return Err(self.error(Some(s), f("albedo"), "a diffuse material needs albedo = [r, g, b]"))
                     }
                 };
+                // Integer images stay within [0, 1]; a float one (OpenEXR, HDR, PFM) may not, and an albedo above 1
+                // would create light.
+                if let Some(image) = &texture {
+                    let top = image.max_texel() * albedo;
+                    if top.max_element() > 1.0 {
+                        return Err(self.error(
+                            Some(s),
+                            f("albedo_texture"),
+                            format!(
+                                "{}: albedo × texture reaches {} in some texel; a surface cannot reflect more than \
+                                 it receives (scale the image or lower the albedo)",
+                                albedo_texture.as_deref().unwrap_or_default(),
+                                top.max_element()
+                            ),
+                        ));
+                    }
+                }
                 let reflectance = match texture {
-                    Some(image) => Texture::Bitmap { image, factor: albedo },
+                    Some(image) => Texture::bitmap(image, albedo),
                     None => Texture::Constant(albedo),
                 };
                 Surface::Diffuse { reflectance }
