@@ -488,3 +488,76 @@ fn anisotropic_materials_turn_their_roughness_with_the_uv_tangent() {
     assert!(right_y < 0.01 * right_x, "u along y: {right_y} along u, {right_x} across");
     assert!((left_y - right_x).abs() < 1e-4 * left_y, "the same lobe turned: {left_y} vs {right_x}");
 }
+
+// ---- The TOML syntax of textures ----
+
+/// SCENE with the floor's material given `albedo = VALUE` (and no albedo_texture), its files in memory.
+fn scene_with_albedo(value: &str, files: &[(&str, Vec<u8>)]) -> Result<Scene, photonfarm::scene::SceneError> {
+    let text = SCENE.replace("albedo_texture = \"TEXTURE\"", &format!("albedo = {value}"));
+    let files = files.iter().map(|(n, b)| (n.to_string(), b.clone())).collect();
+    Scene::from_toml_with_meshes(&text, Path::new("scene.toml"), &files)
+}
+
+fn floor_albedo(scene: &Scene) -> &Texture {
+    let Surface::Diffuse { reflectance } = &scene.materials[0].front else { panic!("a diffuse floor") };
+    reflectance
+}
+
+#[test]
+fn an_albedo_table_reads_a_bitmap_of_any_format_with_its_lookup_options() {
+    for (format, file) in top_white_files() {
+        let value = "{ bitmap = \"floor.img\", filter = \"nearest\", wrap = \"clamp\", factor = [0.5, 0.5, 0.5], \
+                     to_uv = [[1, 0, 0], [0, 0.5, 0.5]] }";
+        let scene = scene_with_albedo(value, &[("floor.img", file)]).unwrap_or_else(|e| panic!("{format}: {e}"));
+        let albedo = floor_albedo(&scene);
+        // to_uv maps v ∈ [0, 1] onto [0.5, 1]: the top (white) half of the image everywhere.
+        for v in [0.05, 0.5, 0.95] {
+            assert!((albedo.eval(Vec2::new(0.5, v)).x - 0.5).abs() < 0.02, "{format} v = {v}");
+        }
+        // Clamped: far outside reads the edge texels, white at the top.
+        assert!((albedo.eval(Vec2::new(3.0, 9.0)).x - 0.5).abs() < 0.02, "{format}");
+        assert!(scene.materials[0].uses_uv());
+        assert!(scene.mesh_files.iter().any(|(p, _)| p == "floor.img"), "the texture travels with the scene");
+    }
+}
+
+#[test]
+fn an_albedo_checkerboard_loads_on_a_quad_and_is_refused_where_there_are_no_texture_coordinates() {
+    let value = "{ checkerboard = true, color0 = [0.9, 0.1, 0.1], color1 = 0.3, to_uv = [[2, 0, 0], [0, 2, 0]] }";
+    let scene = scene_with_albedo(value, &[]).unwrap();
+    let albedo = floor_albedo(&scene);
+    assert_eq!(albedo.eval(Vec2::new(0.125, 0.375)), Rgb::new(0.9, 0.1, 0.1));
+    assert_eq!(albedo.eval(Vec2::new(0.375, 0.375)), Rgb::splat(0.3));
+    let quad = "quad = { corner = [-1.0, -1.0, 0.0], edge1 = [2.0, 0.0, 0.0], edge2 = [0.0, 2.0, 0.0] }";
+    let text = SCENE
+        .replace("albedo_texture = \"TEXTURE\"", &format!("albedo = {value}"))
+        .replace(quad, "box = { min = [-1.0, -1.0, 0.0], max = [1.0, 1.0, 0.1] }");
+    let e = Scene::from_toml(&text, Path::new("scene.toml"), Path::new(".")).err().expect("refused").to_string();
+    assert!(e.contains("objects[0].material") && e.contains("texture coordinates") && e.contains("box"), "{e}");
+}
+
+#[test]
+fn albedo_texture_keeps_working_beside_a_constant_albedo_and_is_refused_beside_a_table() {
+    let (_, png) = top_white_files().remove(0);
+    let text = SCENE.replace("albedo_texture", "albedo = 0.5\nalbedo_texture");
+    let files = BTreeMap::from([("floor.png".to_string(), png.clone())]);
+    let scene =
+        Scene::from_toml_with_meshes(&text.replace("TEXTURE", "floor.png"), Path::new("s.toml"), &files).unwrap();
+    assert!((floor_albedo(&scene).eval(Vec2::new(0.5, 0.9)).x - 0.5).abs() < 1e-3);
+    let text = SCENE.replace("albedo_texture", "albedo = { checkerboard = true }\nalbedo_texture");
+    let e = Scene::from_toml_with_meshes(&text.replace("TEXTURE", "floor.png"), Path::new("s.toml"), &files)
+        .err()
+        .expect("refused")
+        .to_string();
+    assert!(e.contains("materials.white.albedo_texture") && e.contains("constant albedo"), "{e}");
+}
+
+#[test]
+fn a_float_bitmap_in_an_albedo_table_above_one_is_refused_naming_the_field() {
+    let exr = exr_file(1, 1, vec![("Y", FlatSamples::F32(vec![2.5]))]);
+    let e = scene_with_albedo("{ bitmap = \"bright.exr\" }", &[("bright.exr", exr.clone())]).err().expect("refused");
+    let e = e.to_string();
+    assert!(e.contains("materials.white.albedo") && e.contains("2.5") && e.contains("cannot reflect more"), "{e}");
+    // Scaled down by its factor it is a valid albedo.
+    assert!(scene_with_albedo("{ bitmap = \"bright.exr\", factor = 0.4 }", &[("bright.exr", exr)]).is_ok());
+}

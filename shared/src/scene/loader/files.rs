@@ -48,16 +48,6 @@ impl<'a> Loader<'a> {
         Ok((path, bytes))
     }
 
-    /// Reads and decodes a colour texture (integer samples sRGB-encoded) once per path.
-    pub(super) fn texture(
-        &mut self,
-        name: &str,
-        span: Option<std::ops::Range<usize>>,
-        field: &str,
-    ) -> Result<Arc<Bitmap>, SceneError> {
-        self.bitmap(name, span, field, Encoding::Srgb)
-    }
-
     /// Reads a texture file once per path and decodes it once per encoding of its integer samples (Mitsuba's
     /// `raw` is `Encoding::Linear`).
     pub(super) fn bitmap(
