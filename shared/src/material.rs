@@ -41,6 +41,11 @@ impl Roughness {
     fn varies(&self) -> bool {
         self.alpha_u.varies() || self.alpha_v.varies()
     }
+
+    /// True when α may differ between the two tangents: the shading frame's orientation then matters.
+    pub fn is_anisotropic(&self) -> bool {
+        self.alpha_u != self.alpha_v
+    }
 }
 
 /// The scattering family of one side of a surface, with its parameters.
@@ -190,6 +195,15 @@ impl Surface {
         }
     }
 
+    /// True when the family reads the direction of the shading frame's tangent (anisotropic roughness), which
+    /// the surface must then supply. A family with an anisotropic parameter answers here.
+    fn needs_tangent(&self) -> bool {
+        match self {
+            Surface::Conductor { roughness: Some(r), .. } => r.is_anisotropic(),
+            _ => false,
+        }
+    }
+
     /// True for the families that are an interface between two media, which scatter from both sides by
     /// their nature and tell the sides apart by their indices.
     fn is_interface(&self) -> bool {
@@ -276,17 +290,19 @@ pub struct Material {
     /// The probability that the surface is there, 1 where None.
     pub opacity: Option<Texture>,
     uses_uv: bool,
+    needs_tangent: bool,
 }
 
 impl Material {
     /// A material of `front` and `back` with an optional opacity.
     pub fn new(front: Surface, back: Back, opacity: Option<Texture>) -> Self {
-        let back_varies = match &back {
-            Back::Other(s) => s.varies(),
-            _ => false,
+        let (back_varies, back_tangent) = match &back {
+            Back::Other(s) => (s.varies(), s.needs_tangent()),
+            _ => (false, false),
         };
         let uses_uv = front.varies() || back_varies || opacity.as_ref().is_some_and(Texture::varies);
-        Material { front, back, opacity, uses_uv }
+        let needs_tangent = front.needs_tangent() || back_tangent;
+        Material { front, back, opacity, uses_uv, needs_tangent }
     }
 
     /// A material that scatters alike from both sides (every family of photonfarm's own scene format).
@@ -298,6 +314,13 @@ impl Material {
     #[inline]
     pub fn uses_uv(&self) -> bool {
         self.uses_uv
+    }
+
+    /// True when the BSDF depends on the direction of the surface's tangent (anisotropic roughness): a surface
+    /// point must then supply ∂p/∂u ([`Material::bsdf_with_tangent`]).
+    #[inline]
+    pub fn needs_tangent(&self) -> bool {
+        self.needs_tangent
     }
 
     /// True for a smooth dielectric interface, where ghosts reflect.
@@ -324,9 +347,22 @@ impl Material {
     }
 
     /// The BSDF at `hit` (texture coordinates `uv`) for a path arriving from `wo`: the side `wo` lies on, by
-    /// the geometric normal, chooses the family, and the frame is turned to that side.
+    /// the geometric normal, chooses the family, and the frame is turned to that side. The frame's tangents are
+    /// those `Frame::from_normal` picks (Mitsuba's `coordinate_system`).
     #[inline]
     pub fn bsdf(&self, hit: &SurfaceHit, uv: Vec2, wo: Vec3) -> Bsdf {
+        self.bsdf_in_frame(hit, uv, None, wo)
+    }
+
+    /// The BSDF as [`Material::bsdf`] gives it, with the shading frame's first tangent along `tangent` (∂p/∂u,
+    /// made perpendicular to the shading normal), as Mitsuba orients anisotropic materials.
+    #[inline]
+    pub fn bsdf_with_tangent(&self, hit: &SurfaceHit, uv: Vec2, tangent: Vec3, wo: Vec3) -> Bsdf {
+        self.bsdf_in_frame(hit, uv, Some(tangent), wo)
+    }
+
+    #[inline]
+    fn bsdf_in_frame(&self, hit: &SurfaceHit, uv: Vec2, tangent: Option<Vec3>, wo: Vec3) -> Bsdf {
         let front = wo.dot(hit.ng) >= 0.0;
         let (ng, ns) = if front { (hit.ng, hit.ns) } else { (-hit.ng, -hit.ns) };
         let surface = match (&self.back, front) {
@@ -336,6 +372,10 @@ impl Material {
             (Back::Black, _) => return Bsdf::new(Model::Black, Frame::from_normal(ns), ng, 1.0),
         };
         let opacity = self.opacity.as_ref().map_or(1.0, |t| t.eval_scalar(uv).clamp(0.0, 1.0));
-        Bsdf::new(surface.resolve(uv, front), Frame::from_normal(ns), ng, opacity)
+        let frame = match tangent {
+            Some(t) => Frame::from_normal_tangent(ns, t),
+            None => Frame::from_normal(ns),
+        };
+        Bsdf::new(surface.resolve(uv, front), frame, ng, opacity)
     }
 }
