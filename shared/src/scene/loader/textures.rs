@@ -14,7 +14,6 @@ use toml::Value;
 #[derive(Clone, Copy, PartialEq)]
 enum Kind {
     Colour,
-    #[cfg_attr(not(test), allow(dead_code))]
     Scalar,
 }
 
@@ -49,9 +48,6 @@ impl Loader<'_> {
 
     /// A numeric parameter at `field` (a roughness, an opacity): a number or a texture table, read where a number
     /// is wanted by [`Texture::eval_scalar`] (a colour bitmap by its luminance); bounded as [`Loader::texture`].
-    // The material families with numeric textured parameters read this; until the scene format has one, only
-    // the tests do.
-    #[cfg_attr(not(test), allow(dead_code))]
     pub(super) fn scalar_texture(
         &mut self,
         value: &Value,
