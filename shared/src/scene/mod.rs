@@ -1,10 +1,11 @@
 //! Scenes: the loaded scene the renderer reads (objects, materials, geometry, lights, camera), and how it is
 //! built from a TOML file (`file` holds the format, `loader` the validation with precise errors, `error` the
-//! error that points at the file, line and field).
+//! error that points at the file, line and field); `mitsuba` reads Mitsuba 3 scene files into a typed document.
 
 pub mod error;
 pub mod file;
 mod loader;
+pub mod mitsuba;
 
 pub use error::SceneError;
 
