@@ -561,3 +561,88 @@ fn a_float_bitmap_in_an_albedo_table_above_one_is_refused_naming_the_field() {
     // Scaled down by its factor it is a valid albedo.
     assert!(scene_with_albedo("{ bitmap = \"bright.exr\", factor = 0.4 }", &[("bright.exr", exr)]).is_ok());
 }
+
+// ---- Against Mitsuba 3 ----
+
+/// The texture a case of shared/tests/data/textures/mitsuba.json describes (written by scripts/mitsuba/textures).
+fn mitsuba_case_texture(t: &serde_json::Value, dir: &Path) -> Texture {
+    use photonfarm::texture::{BitmapTexture, Checkerboard, Filter, UvTransform, Wrap};
+    let to_uv = match t.get("to_uv_mitsuba") {
+        Some(rows) => {
+            let row = |i: usize| [0, 1, 2].map(|j| rows[i][j].as_f64().unwrap() as f32);
+            UvTransform::from_mitsuba([row(0), row(1)]).unwrap()
+        }
+        None => UvTransform::IDENTITY,
+    };
+    if let Some(file) = t.get("bitmap").and_then(|f| f.as_str()) {
+        let encoding = if t["raw"].as_bool().unwrap() { Encoding::Linear } else { Encoding::Srgb };
+        let image = Bitmap::decode(&std::fs::read(dir.join(file)).unwrap(), file, encoding).unwrap();
+        let filter = if t["filter"] == "nearest" { Filter::Nearest } else { Filter::Bilinear };
+        let wrap = match t["wrap"].as_str().unwrap() {
+            "mirror" => Wrap::Mirror,
+            "clamp" => Wrap::Clamp,
+            _ => Wrap::Repeat,
+        };
+        return Texture::Bitmap(BitmapTexture {
+            image: std::sync::Arc::new(image),
+            factor: Rgb::ONE,
+            filter,
+            wrap,
+            to_uv,
+        });
+    }
+    let colour = |c: Option<&serde_json::Value>, default: Texture| match c {
+        Some(serde_json::Value::Array(a)) => Texture::Constant(Rgb::new(
+            a[0].as_f64().unwrap() as f32,
+            a[1].as_f64().unwrap() as f32,
+            a[2].as_f64().unwrap() as f32,
+        )),
+        Some(v) => Texture::grey(v.as_f64().unwrap() as f32),
+        None => default,
+    };
+    let d = Checkerboard::default();
+    Texture::Checkerboard(Box::new(Checkerboard {
+        color0: colour(t.get("color0"), d.color0),
+        color1: colour(t.get("color1"), d.color1),
+        to_uv,
+    }))
+}
+
+#[test]
+fn textures_match_mitsuba_3() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/textures");
+    let data: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("mitsuba.json")).unwrap()).unwrap();
+    let (mut worst_colour, mut worst_scalar, mut swapped) = (0.0f32, 0.0f32, 0);
+    for case in data["cases"].as_array().unwrap() {
+        let name = case["name"].as_str().unwrap();
+        let texture = mitsuba_case_texture(&case["texture"], &dir);
+        let checkerboard = matches!(texture, Texture::Checkerboard(_));
+        for p in case["points"].as_array().unwrap() {
+            let x: Vec<f32> = p.as_array().unwrap().iter().map(|x| x.as_f64().unwrap() as f32).collect();
+            // Mitsuba's v runs down the image: photonfarm's is 1 − v.
+            let uv = Vec2::new(x[0], 1.0 - x[1]);
+            let theirs = Rgb::new(x[2], x[3], x[4]);
+            let ours = texture.eval(uv);
+            let colour_error = ((ours - theirs).abs() / theirs.abs().max(Rgb::ONE)).max_element();
+            assert!(colour_error < 1e-5, "{name} at Mitsuba's uv ({}, {}): {ours} vs {theirs}", x[0], x[1]);
+            worst_colour = worst_colour.max(colour_error);
+            // Numbers: a bitmap's luminance, whose weights Mitsuba writes with more digits (0.212671, 0.715160,
+            // 0.072169 against Rec. 709's 0.2126, 0.7152, 0.0722); a checkerboard's number is its colour's (the
+            // channel mean), where Mitsuba's eval_1 reads the other colour. The weights differ by at most 3.4e-4
+            // of themselves (red's), which bounds the relative difference of the luminances.
+            let scalar = texture.eval_scalar(uv);
+            let expected = if checkerboard { (theirs.x + theirs.y + theirs.z) / 3.0 } else { x[5] };
+            let scalar_error = (scalar - expected).abs() / expected.abs().max(1.0);
+            assert!(scalar_error < 3.5e-4, "{name} at ({}, {}): number {scalar} vs {expected}", x[0], x[1]);
+            worst_scalar = worst_scalar.max(scalar_error);
+            if checkerboard && (x[5] - expected).abs() > 1e-6 {
+                swapped += 1;
+            }
+        }
+    }
+    println!(
+        "largest relative difference to Mitsuba {}: colour {worst_colour:e}, number {worst_scalar:e}; Mitsuba's \
+              checkerboard eval_1 differs from its eval at {swapped} points",
+        data["mitsuba"]
+    );
+}
