@@ -1,5 +1,11 @@
 //! Light sources: emissive triangles (one-sided, front = CCW winding), point lights and spot lights, chosen by
-//! power both for next-event estimation and for emitting light paths.
+//! power both for next-event estimation and for emitting light paths. Its submodules hold the infinite lights
+//! (`environment`: constant and image-based; `directional`: the sun; `infinite`: the start of their light paths
+//! and their power over the scene).
+
+pub mod directional;
+pub mod environment;
+pub mod infinite;
 
 use crate::camera::RearElement;
 use crate::color::{luminance, Rgb};
