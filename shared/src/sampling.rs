@@ -1,7 +1,9 @@
 //! Random streams and the warps from uniform numbers to the directions and points the estimators need.
 
+mod piecewise;
 mod square_grid;
 
+pub use piecewise::{DistributionError, Piecewise1d, Piecewise2d};
 pub use square_grid::{GridShape, SquareGrid};
 
 use glam::{Vec2, Vec3};
