@@ -477,3 +477,86 @@ fn a_host_whose_workers_keep_failing_is_refused_for_the_rest_of_the_job_and_the_
     let local = workers.iter().find(|w| w["name"] == "node0").unwrap();
     assert_eq!((&local["state"], &local["failures"]), (&"finished".into(), &0.into()), "{local}");
 }
+
+/// The mean of an output's `phases` layer: the phases the image's pixels had.
+fn mean_phases(out: &Path) -> f64 {
+    use photonfarm::image_io::exr_file::{find_layer, read_exr};
+    let path = out.join("image.exr");
+    let layers = read_exr(&path).unwrap();
+    let phases = find_layer(&layers, &path, "phases").unwrap();
+    phases.rgb.iter().map(|p| p[0] as f64).sum::<f64>() / phases.rgb.len() as f64
+}
+
+#[test]
+fn two_workers_that_dial_in_give_the_blur_and_delta_of_the_planned_three_level_run() {
+    let dir = scratch_dir("dialled-share");
+    let scene = cornell_at(&dir, 32);
+    let (planned, dialled) = (dir.join("planned"), dir.join("dialled"));
+    // Wide discs, so that the blur stands far above its estimate's noise; light and depth fixed, so that the
+    // runs differ only in how their workers came; frequent snapshots, so that both stop near 300 phases.
+    let common = [
+        "--group-size",
+        "1",
+        "--phases",
+        "300",
+        "--radius-scale",
+        "12",
+        "--light-paths-per-pixel",
+        "1",
+        "--backward-diffuse-depth",
+        "1",
+        "--snapshot-interval",
+        "0.25",
+    ];
+    let mut c = coordinator(&scene, &planned, &["--method", "three-level", "--topology", TWO_NODES, "--seed", "61"]);
+    c.args(common);
+    run_ok(c);
+    // As a Slurm job runs it: the coordinator starts no worker, and two `worker join` processes, each confined
+    // to one core as hwloc-bind confines Slurm's, dial in.
+    let secret = dir.join("secret");
+    std::fs::write(&secret, "a secret for the dialled-in workers").unwrap();
+    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let addr = format!("127.0.0.1:{port}");
+    let mut c = coordinator(&scene, &dialled, &["--method", "three-level", "--remote-only", "--listen", &addr]);
+    c.args(common).args(["--seed", "62", "--secret-file"]).arg(&secret);
+    let child = c.stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let join = |name: &str, core: usize| {
+        let mut w = Command::new("taskset");
+        w.args(["-c", &(core % cores).to_string()]).arg(binary("worker"));
+        w.args(["join", &addr, "--name", name, "--secret-file"]).arg(&secret);
+        w.stdout(Stdio::null()).stderr(Stdio::piped()).spawn().expect("taskset (util-linux) runs the workers")
+    };
+    let workers = [join("a", 0), join("b", 1)];
+    let o = child.wait_with_output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for w in workers {
+        let o = w.wait_with_output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let (rp, rd) = (record(&planned), record(&dialled));
+    let workers = rd["workers"].as_array().unwrap();
+    assert_eq!(workers.len(), 2, "{workers:?}");
+    assert!(workers.iter().all(|w| w["state"] == "finished"), "{workers:?}");
+    // The blur falls about as N^(α − 1) = N^(−1/3) with the pixels' phases N: compared at the planned run's.
+    // With a lone process's schedule on each dialled-in worker it came out 14–16% above the planned run's.
+    let (np, nd) = (mean_phases(&planned), mean_phases(&dialled));
+    let error = |r: &serde_json::Value, key: &str| r["error"][key].as_f64().unwrap();
+    let (bp, bd) = (error(&rp, "blur_unlit"), error(&rd, "blur_unlit") * (nd / np).cbrt());
+    // δ² is the noise's SEM² plus the blur², and the noise part falls as 1/√N.
+    let noise = |r: &serde_json::Value, n: f64| {
+        let (d, b) = (error(r, "delta_unlit"), error(r, "blur_unlit"));
+        (d * d - b * b).max(0.0).sqrt() * (n / np).sqrt()
+    };
+    let (sp, sd) = (noise(&rp, np), noise(&rd, nd));
+    eprintln!(
+        "mean phases {np:.1} planned, {nd:.1} dialled in; at the planned phases blur_unlit {bp:.5} and {bd:.5} \
+         (ratio {:.3}), δ_unlit's noise part {sp:.5} and {sd:.5} (ratio {:.3})",
+        bd / bp,
+        sd / sp
+    );
+    assert!((bd / bp - 1.0).abs() < 0.06, "blur: dialled in {bd:.5} against planned {bp:.5}");
+    // A numbering that starved replicates of phases made δ's spread of the replicates several times larger.
+    assert!((sd / sp - 1.0).abs() < 0.25, "δ's noise part: dialled in {sd:.5} against planned {sp:.5}");
+    assert_same_image(&planned, &dialled, "dialled-in workers against planned ones");
+}

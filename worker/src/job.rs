@@ -6,7 +6,8 @@ use crate::machine;
 use crate::memory_binding::{self, MemoryBinding};
 use crate::parallel::{EngineConfig, ParallelEngine};
 use photonfarm::accumulation::delta::{encode_delta, Compression};
-use photonfarm::protocol::{Job, Snapshot, WorkerInfo};
+use photonfarm::pbpm::ProcessShare;
+use photonfarm::protocol::{Job, Share, Snapshot, WorkerInfo};
 use photonfarm::render::light_balance::LightBalance;
 use photonfarm::render::session::{self, Progressive};
 use photonfarm::render::ActiveTiles;
@@ -75,6 +76,9 @@ pub fn engine_config(job: &Job) -> Result<EngineConfig, String> {
 /// tile.
 pub type PendingTiles = std::sync::Mutex<Option<(u32, Vec<bool>)>>;
 
+/// The latest share of the image's phases the coordinator announced and the engine has not taken yet.
+pub type PendingShare = std::sync::Mutex<Option<Share>>;
+
 /// What the link changes while a job runs.
 pub struct Control<'a> {
     /// Set to end the job after its current round.
@@ -83,6 +87,8 @@ pub struct Control<'a> {
     pub interval_ms: &'a AtomicU64,
     /// Tiles the coordinator restricted the job to since the last round (tile edge, one flag per tile).
     pub tiles: &'a PendingTiles,
+    /// The processes rendering the image, announced since the last round.
+    pub share: &'a PendingShare,
 }
 
 /// Renders `job` until `control.stop` is set, calling `emit` with its events (it returns false when nobody
@@ -147,8 +153,27 @@ pub fn run(
     let mut base = engine.sums().clone();
     let mut seq = 0;
     let mut last = Instant::now();
-    let Control { stop, interval_ms, tiles } = control;
+    let Control { stop, interval_ms, tiles, share } = control;
     loop {
+        let announced = share.lock().unwrap_or_else(|e| e.into_inner()).take();
+        if let Some(announced) = announced {
+            // `base` holds what this worker has sent, which the coordinator's merged phases include (or will).
+            let own: Vec<u32> = engine.sums().pixels.iter().map(|p| p.phases).collect();
+            let sent: Vec<u32> = base.pixels.iter().map(|p| p.phases).collect();
+            let share = announced
+                .merged_phases(own.len())
+                .map_err(|e| e.to_string())
+                .and_then(|merged| ProcessShare::announced(announced.processes, announced.rank, &merged, &own, &sent));
+            match share {
+                Ok(s) => engine.set_share(s),
+                Err(e) => {
+                    emit(JobEvent::Failed(format!(
+                        "the coordinator's share of the phases does not fit the image: {e}"
+                    )));
+                    return;
+                }
+            }
+        }
         let pending = tiles.lock().unwrap_or_else(|e| e.into_inner()).take();
         if let Some((tile, flags)) = pending {
             match ActiveTiles::from_flags(scene.camera.width, scene.camera.height, tile, flags) {

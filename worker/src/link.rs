@@ -73,6 +73,8 @@ pub async fn serve_job(
     };
     // Tiles the coordinator restricts the job to (adaptive tiles), handed to the engine thread before a round.
     let tiles: Arc<job::PendingTiles> = Arc::default();
+    // The processes rendering the image, as the coordinator announces them, likewise.
+    let share: Arc<job::PendingShare> = Arc::default();
     if fetch_files(&mut conn, &job, cache, &tiles).await? == Fetched::Stopped {
         // The run ended while this worker was still being set up: nothing rendered, nothing lost.
         conn.write(&Message::Finished).await?;
@@ -105,13 +107,13 @@ pub async fn serve_job(
     let (events_tx, mut events) = mpsc::unbounded_channel();
     let engine = {
         let (job, stop, interval_ms, slowdown) = (job.clone(), stop.clone(), interval_ms.clone(), opts.slowdown);
-        let tiles = tiles.clone();
+        let (tiles, share) = (tiles.clone(), share.clone());
         // On this machine the link is free and the worker's time is not: compress fast.
         let compression = Compression::for_peer(conn.peer);
         std::thread::Builder::new()
             .name("job".into())
             .spawn(move || {
-                let control = job::Control { stop: &stop, interval_ms: &interval_ms, tiles: &tiles };
+                let control = job::Control { stop: &stop, interval_ms: &interval_ms, tiles: &tiles, share: &share };
                 job::run(&scene, &job, control, slowdown, compression, |e| events_tx.send(e).is_ok())
             })
             .map_err(|e| LinkError::Job(format!("cannot start the engine thread: {e}")))?
@@ -181,9 +183,12 @@ pub async fn serve_job(
                     Some(Ok(Message::ActiveTiles { tile, flags })) => {
                         *tiles.lock().unwrap_or_else(|e| e.into_inner()) = Some((tile, flags));
                     }
+                    Some(Ok(Message::Share(s))) => {
+                        *share.lock().unwrap_or_else(|e| e.into_inner()) = Some(s);
+                    }
                     Some(Ok(Message::Heartbeat)) => {}
                     Some(Ok(other)) => {
-                        break Err(ProtocolError::Unexpected { expected: "Ack, Stop, ActiveTiles or Heartbeat", got: other.kind().into() }.into())
+                        break Err(ProtocolError::Unexpected { expected: "Ack, Stop, ActiveTiles, Share or Heartbeat", got: other.kind().into() }.into())
                     }
                     // After `Finished` the coordinator may close once it has what it needs.
                     Some(Err(ProtocolError::Closed)) | None if finished => break Ok(()),

@@ -10,6 +10,7 @@ use anyhow::{Context, Result};
 use network::{Blocklist, Control, Event, NetworkPlan, Planned};
 use photonfarm::accumulation::delta::apply_delta;
 use photonfarm::accumulation::{Accumulator, AuxLayout};
+use photonfarm::protocol::Share;
 use photonfarm::render::record::{WorkerRecord, WorkerState};
 use photonfarm::render::session::Progressive;
 use photonfarm::render::{ActiveTiles, RayTotals, RenderSettings};
@@ -142,9 +143,34 @@ impl Cluster {
         if let WorkerState::Lost(why) = &state {
             eprintln!("coordinator: worker {} lost ({why}); the run goes on with the others", r.name);
         }
+        let was_rendering = r.state == WorkerState::Running;
         r.state = state;
+        let rendering = r.state == WorkerState::Running;
         if matches!(r.state, WorkerState::Lost(_)) {
             self.count_failure(w);
+        }
+        if was_rendering != rendering {
+            self.announce_share();
+        }
+    }
+
+    /// Tells every rendering worker how many workers render the image now, its rank among them, and every
+    /// pixel's merged phases, so that each numbers its phases as the pixel really receives them (the radius
+    /// schedule; docs/distribution.md). Nothing is announced once the run is being collected.
+    fn announce_share(&self) {
+        if self.collected {
+            return;
+        }
+        let rendering: Vec<usize> =
+            (0..self.workers.len()).filter(|&w| self.workers[w].record.state == WorkerState::Running).collect();
+        if rendering.is_empty() {
+            return;
+        }
+        let merged_phases = Share::compress_phases(self.sums.pixels.iter().map(|p| p.phases));
+        for (rank, &worker) in rendering.iter().enumerate() {
+            let share =
+                Share { processes: rendering.len() as u32, rank: rank as u32, merged_phases: merged_phases.clone() };
+            self.send(Control::Share { worker, share });
         }
     }
 

@@ -31,6 +31,6 @@ pub use ghost_paths::{trace_ghost_paths, GhostPair, GhostPairs};
 pub use phase::{LocalPixels, Phase, PhaseBuffers};
 pub use photon::{BackwardPhoton, PhotonKind};
 pub use photon_map::PhotonMap;
-pub use radius::{mean_phase, PhaseNumbering, RadiusSchedule};
+pub use radius::{mean_phase, PhaseNumbering, PixelPhase, ProcessShare, RadiusSchedule};
 pub use sensor_kernel::SensorKernel;
 pub use sorted_gather::{SortedGathers, SORTED_GATHER_BATCH};

@@ -339,15 +339,16 @@ impl PhaseBuffers {
     }
 
     /// Stage 1: one camera path per local pixel; `pixels[i]` is local pixel i's image pixel (None: the whole
-    /// image, local pixel i being image pixel i), and `next_phase(i)` its phase number j, which sets the radius
-    /// and the point and replicate of the pixel's quasi-random sequences. `map` is the previous phase's, whose
-    /// photon buffer a single list takes back. Returns the rays traced and the photons stored.
+    /// image, local pixel i being image pixel i), and `next_phase(i)` its phase numbers: the radius's j, and the
+    /// j that picks the point and replicate of the pixel's quasi-random sequences (`PixelPhase`). `map` is the
+    /// previous phase's, whose photon buffer a single list takes back. Returns the rays traced and the photons
+    /// stored.
     pub fn camera_pass(
         &mut self,
         exec: Executor,
         phase: &Phase,
         pixels: Option<&[u32]>,
-        next_phase: impl Fn(usize) -> u64 + Sync,
+        next_phase: impl Fn(usize) -> super::PixelPhase + Sync,
         map: &mut PhotonMap,
     ) -> BackwardStats {
         let count = pixels.map_or(phase.scene.camera.pixel_count(), <[u32]>::len);
@@ -378,13 +379,13 @@ impl PhaseBuffers {
                 for (i, out) in values.iter_mut().enumerate() {
                     let local = chunk * chunk_len + i;
                     let pixel = pixels.map_or(local as u32, |p| p[local]);
-                    let j = next_phase(local);
+                    let super::PixelPhase { radius: radius_j, sample: j } = next_phase(local);
                     replicate[i] = replicate_of(j).0 as u8;
                     let bs = BackwardSettings {
                         max_depth: phase.max_depth,
                         backward_diffuse_depth: bdd,
                         radius: phase.radius,
-                        phase: j,
+                        phase: radius_j,
                         spectrum: phase.spectrum,
                         sensor_ghosts: phase.sensor_ghosts,
                     };

@@ -13,7 +13,7 @@ use photonfarm::accumulation::{Accumulator, AuxLayer, AuxLayout};
 use photonfarm::color::Rgb;
 use photonfarm::protocol::frame::{read_frame, write_frame};
 use photonfarm::protocol::message::{decode, encode};
-use photonfarm::protocol::{EngineSpec, FileRef, Job, Message, Role, Snapshot, WorkerInfo};
+use photonfarm::protocol::{EngineSpec, FileRef, Job, Message, Role, Share, Snapshot, WorkerInfo};
 use photonfarm::render::checkpoint::Checkpoint;
 use photonfarm::render::method::ParallelMethod;
 use photonfarm::render::{Method, RayTotals, RenderSettings};
@@ -321,6 +321,11 @@ fn main() -> Result<()> {
         Message::Finished,
         Message::Failed { reason: "x".into() },
         Message::ActiveTiles { tile: 32, flags: vec![true, false, true, true] },
+        Message::Share(Share {
+            processes: 3,
+            rank: 2,
+            merged_phases: Share::compress_phases(base.pixels.iter().map(|p| p.phases)),
+        }),
     ];
     let runtime = tokio::runtime::Builder::new_current_thread().build()?;
     let mut frame_seeds = Vec::new();
@@ -362,7 +367,11 @@ fn main() -> Result<()> {
                         let mut r = &bytes[..];
                         let mut any_ok = false;
                         while let Ok(Some(body)) = runtime.block_on(read_frame(&mut r, 1 << 20)) {
-                            any_ok |= decode(&body).is_ok();
+                            any_ok |= match decode(&body) {
+                                // A worker decodes an announced share's phases for its image.
+                                Ok(Message::Share(s)) => s.merged_phases(base.pixels.len()).is_ok(),
+                                decoded => decoded.is_ok(),
+                            };
                         }
                         any_ok
                     }),
