@@ -1,4 +1,4 @@
-//! The distributed renderer (paper §5, DESIGN §2.4): worker processes, one per NUMA node and any remote ones,
+//! The distributed renderer (paper §5, docs/distribution.md): worker processes, one per NUMA node and any remote ones,
 //! render independently; the coordinator merges their snapshots into one set of sums and computes δ over them.
 //! It is a `Progressive` like the in-process engines, so the same run loop, outputs and record serve it.
 

@@ -1,4 +1,4 @@
-//! Progressive backward photon mapping (paper §2, DESIGN §1): each phase traces camera paths that store
+//! Progressive backward photon mapping (paper §2, docs/estimator.md): each phase traces camera paths that store
 //! backward photons, builds a map of them, traces light paths that gather into the map, and closes the phase
 //! into the running sums. `phase` puts the stages together once, for the single-threaded engine and the
 //! worker's groups alike; the other files are the stages' parts (camera and light paths, the photon and its

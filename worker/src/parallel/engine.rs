@@ -1,4 +1,4 @@
-//! The semi-synchronous level (paper §4.1, DESIGN §2.2) and the parallel methods as its configurations: the
+//! The semi-synchronous level (paper §4.1, docs/parallel-engine.md) and the parallel methods as its configurations: the
 //! main thread deals masks, runs the groups until one of them has finished K phases, stops them all, forms the
 //! whole image and deals again.
 
@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 
 pub use photonfarm::render::ParallelMethod;
 
-/// How the engine is laid out: DESIGN §2's table as data.
+/// How the engine is laid out: its method's row of the methods' table (`photonfarm::render::method`) as data.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EngineConfig {
     pub method: ParallelMethod,

@@ -1,4 +1,4 @@
-//! A synchronous group (level 1, DESIGN §2.1): g threads pinned to cores of one node, cooperating on every stage
+//! A synchronous group (level 1, docs/parallel-engine.md): g threads pinned to cores of one node, cooperating on every stage
 //! of a phase over the group's mask, with rayon's joins as the barriers between stages.
 
 use super::map_slot::{Guard, MapSlot, OwnerToken};
