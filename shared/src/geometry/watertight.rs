@@ -6,22 +6,17 @@
 //! through a closed mesh. Möller and Trumbore's test, obvhs's own, computes barycentrics per triangle and can
 //! reject a ray at an edge on both sides.
 
-use glam::Vec3A;
+use glam::{Mat3A, Vec3A};
 
-/// A ray prepared for the test: its axes permuted so that z is the largest component of the direction, and the
-/// shear that maps the direction onto +z.
+/// A ray prepared for the test: the shear that maps its direction onto +z, after a permutation of the axes that
+/// makes z the direction's largest component.
 #[derive(Clone, Copy, Debug)]
 pub struct ShearedRay {
     origin: Vec3A,
     direction: Vec3A,
-    /// Indices of the permuted axes.
-    kx: usize,
-    ky: usize,
-    kz: usize,
-    /// Shear: x' = x + sx z, y' = y + sy z, z' = sz z.
-    sx: f32,
-    sy: f32,
-    sz: f32,
+    /// x' = p[kx] + sx p[kz], y' = p[ky] + sy p[kz], z' = sz p[kz], as a matrix: each row has one or two
+    /// non-zero entries, so its products with a vertex add exact zeros and give the same bits as the formulas.
+    shear: Mat3A,
 }
 
 impl ShearedRay {
@@ -46,7 +41,13 @@ impl ShearedRay {
             std::mem::swap(&mut kx, &mut ky);
         }
         let dz = direction[kz];
-        ShearedRay { origin, direction, kx, ky, kz, sx: -direction[kx] / dz, sy: -direction[ky] / dz, sz: 1.0 / dz }
+        let (sx, sy, sz) = (-direction[kx] / dz, -direction[ky] / dz, 1.0 / dz);
+        // Columns of the matrix: what each input axis adds to (x', y', z').
+        let mut columns = [Vec3A::ZERO; 3];
+        columns[kx].x = 1.0;
+        columns[ky].y = 1.0;
+        columns[kz] = Vec3A::new(sx, sy, sz);
+        ShearedRay { origin, direction, shear: Mat3A::from_cols(columns[0], columns[1], columns[2]) }
     }
 
     /// The distance along the ray to triangle `v0 v1 v2` when it lies in [t_min, t_max] (the direction's
@@ -54,11 +55,9 @@ impl ShearedRay {
     /// a ray through an edge or a vertex hits every triangle that shares it.
     #[inline]
     pub fn intersect(&self, v0: Vec3A, v1: Vec3A, v2: Vec3A, t_min: f32, t_max: f32) -> Option<f32> {
-        let (a, b, c) = (v0 - self.origin, v1 - self.origin, v2 - self.origin);
-        let (kx, ky, kz) = (self.kx, self.ky, self.kz);
-        let (ax, ay) = (a[kx] + self.sx * a[kz], a[ky] + self.sy * a[kz]);
-        let (bx, by) = (b[kx] + self.sx * b[kz], b[ky] + self.sy * b[kz]);
-        let (cx, cy) = (c[kx] + self.sx * c[kz], c[ky] + self.sy * c[kz]);
+        let a = v0 - self.origin;
+        let (pa, pb, pc) = (self.shear * a, self.shear * (v1 - self.origin), self.shear * (v2 - self.origin));
+        let (ax, ay, bx, by, cx, cy) = (pa.x, pa.y, pb.x, pb.y, pc.x, pc.y);
         let mut u = cx * by - cy * bx;
         let mut v = ax * cy - ay * cx;
         let mut w = bx * ay - by * ax;
@@ -80,12 +79,7 @@ impl ShearedRay {
         // near a large triangle far from the scene's origin their t loses digits that the plane keeps.
         let n = (v0 - v1).cross(v2 - v0);
         let t = n.dot(a) / n.dot(self.direction);
-        let t = if t.is_finite() {
-            t
-        } else {
-            let (az, bz, cz) = (self.sz * a[kz], self.sz * b[kz], self.sz * c[kz]);
-            (u * az + v * bz + w * cz) / det
-        };
+        let t = if t.is_finite() { t } else { (u * pa.z + v * pb.z + w * pc.z) / det };
         (t >= t_min && t <= t_max).then_some(t)
     }
 }
