@@ -682,24 +682,17 @@ fn finish(engine: &mut dyn Progressive, outputs: &Outputs, history: &mut Vec<His
     if !outputs.args.method.is_distributed() {
         return;
     }
-    let (e, t) = (engine.sums().error(outputs.lit), engine.totals());
+    let e = engine.sums().error(outputs.lit);
     forecast.step(outputs.elapsed_s(), engine.sums().image_phases(), outputs.stop.delta_of(&e));
-    let truth = outputs.reference.map(|r| r.compare(engine.sums(), outputs.lit));
-    history.push(HistoryEntry {
-        phase: t.phases,
-        time_s: outputs.elapsed_s(),
-        delta_all: e.delta_all,
-        delta_unlit: e.delta_unlit,
-        backward_rays: t.backward_rays,
-        forward_rays: t.forward_rays,
-        light_paths_per_pixel: (!engine.settings().adaptive_light).then_some(engine.settings().light_paths_per_pixel),
-        backward_diffuse_depth: (!engine.settings().adaptive_depth).then_some(engine.settings().backward_diffuse_depth),
-        true_all: truth.as_ref().map(|t| t.rmse_all),
-        true_unlit: truth.as_ref().map(|t| t.rmse_unlit),
-        active_tiles: history.last().and_then(|h| h.active_tiles),
-        blur_all: e.blur_all,
-        blur_unlit: e.blur_unlit,
-    });
+    let s = engine.settings();
+    let light = (!s.adaptive_light).then_some(s.light_paths_per_pixel);
+    let depth = (!s.adaptive_depth).then_some(s.backward_diffuse_depth);
+    let tiles = history.last().and_then(|h| h.active_tiles);
+    let mut entry = HistoryEntry::after_step(outputs.elapsed_s(), &e, &engine.totals(), light, depth, tiles);
+    if let Some(truth) = outputs.reference.map(|r| r.compare(engine.sums(), outputs.lit)) {
+        (entry.true_all, entry.true_unlit) = (Some(truth.rmse_all), Some(truth.rmse_unlit));
+    }
+    history.push(entry);
 }
 
 fn print_summary(record: &RunRecord, reason: StopReason, dir: &Path) {

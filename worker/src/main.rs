@@ -4,7 +4,7 @@
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use photonfarm::protocol::auth::Secret;
-use photonfarm::protocol::tls::{self, Tls, Transport};
+use photonfarm::protocol::tls::{Tls, Transport};
 use photonfarm::protocol::Role;
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -67,25 +67,7 @@ enum Command {
 }
 
 fn secret(args: &SecretArgs, loopback: bool) -> Result<Secret> {
-    if let Some(path) = &args.secret_file {
-        return Ok(Secret::from_file(path)?);
-    }
-    if let Some(s) = Secret::from_env()? {
-        return Ok(s);
-    }
-    if let Some(dir) = &args.tls_dir {
-        let path = dir.join(tls::SECRET_FILE);
-        if path.exists() {
-            return Ok(Secret::from_file(&path)?);
-        }
-    }
-    if args.insecure || loopback {
-        return Ok(Secret::insecure());
-    }
-    bail!(
-        "a link that is not loopback needs a shared secret: --secret-file FILE, $PHOTONFARM_SECRET or the secret \
-         of --tls-dir DIR (or --insecure)"
-    )
+    Ok(Secret::resolve(args.secret_file.as_deref(), args.tls_dir.as_deref(), args.insecure || loopback)?)
 }
 
 /// TLS with the `--tls-dir` keys; plaintext only on loopback or with an explicit `--insecure`.

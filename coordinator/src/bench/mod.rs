@@ -3,7 +3,9 @@
 //! speedup, accuracy, memory) in the terminal, `report.md`, `results.csv` (one row per run) and `series.csv`
 //! (error against time and rays, for the charts).
 
-use crate::bench_tables::{write_table, ResultsRow, SeriesRow};
+pub mod charts;
+pub mod tables;
+
 use crate::cli::BenchArgs;
 use crate::live::bench_page::BenchLive;
 use crate::output_folder;
@@ -13,6 +15,7 @@ use photonfarm::render::method::Processes;
 use photonfarm::render::{Estimator, Method};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+use tables::{write_table, ResultsRow, SeriesRow};
 use worker::machine;
 
 /// Seconds per run and the methods of `--quick`: every method once on both scenes in under five minutes.
@@ -384,7 +387,7 @@ pub fn run(mut args: BenchArgs) -> Result<()> {
     say!("{report}");
     let path = dir.join("report.md");
     std::fs::write(&path, &report).with_context(|| format!("cannot write {}", path.display()))?;
-    let charts = crate::charts::write_charts(&dir)?;
+    let charts = charts::write_charts(&dir)?;
     say!("{} charts in {}", charts.len(), dir.join("charts").display());
     say!("wrote {}", dir.display());
     if page.is_some() {
@@ -411,7 +414,7 @@ fn run_plan(plan: &[Entry], args: &BenchArgs, dir: &Path, page: Option<&BenchLiv
         let steps: Vec<&SeriesRow> = runs.iter().flat_map(|r| &r.series).collect();
         write_table(&dir.join("series.csv"), &steps)?;
         if let Some(p) = page {
-            let charts = crate::charts::write_charts(dir)?;
+            let charts = charts::write_charts(dir)?;
             let pngs = charts
                 .iter()
                 .filter(|c| c.extension().is_some_and(|e| e == "png"))

@@ -45,6 +45,36 @@ pub struct HistoryEntry {
     pub blur_unlit: f64,
 }
 
+impl HistoryEntry {
+    /// The entry of a step that ended `time_s` into the run with the error `e` and the counters `t`; `light`,
+    /// `depth` and `active_tiles` are what the step rendered with, where the run knows them. The true error is
+    /// the caller's to add, when it has a reference.
+    pub fn after_step(
+        time_s: f64,
+        e: &ErrorEstimate,
+        t: &RayTotals,
+        light: Option<f32>,
+        depth: Option<u32>,
+        active_tiles: Option<u32>,
+    ) -> Self {
+        HistoryEntry {
+            phase: t.phases,
+            time_s,
+            delta_all: e.delta_all,
+            delta_unlit: e.delta_unlit,
+            backward_rays: t.backward_rays,
+            forward_rays: t.forward_rays,
+            light_paths_per_pixel: light,
+            backward_diffuse_depth: depth,
+            true_all: None,
+            true_unlit: None,
+            active_tiles,
+            blur_all: e.blur_all,
+            blur_unlit: e.blur_unlit,
+        }
+    }
+}
+
 /// Error against a reference image.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TrueError {

@@ -226,21 +226,8 @@ pub fn run<R: Progressive + ?Sized>(
             b.observe(engine.sums(), engine.totals());
         }
         let e = engine.sums().error(lit);
-        let t = engine.totals();
-        let entry = HistoryEntry {
-            phase: t.phases,
-            time_s: (elapsed_before + start.elapsed()).as_secs_f64(),
-            delta_all: e.delta_all,
-            delta_unlit: e.delta_unlit,
-            backward_rays: t.backward_rays,
-            forward_rays: t.forward_rays,
-            light_paths_per_pixel: light,
-            backward_diffuse_depth: depth,
-            active_tiles,
-            blur_all: e.blur_all,
-            blur_unlit: e.blur_unlit,
-            ..HistoryEntry::default()
-        };
+        let time_s = (elapsed_before + start.elapsed()).as_secs_f64();
+        let entry = HistoryEntry::after_step(time_s, &e, &engine.totals(), light, depth, active_tiles);
         history.push(entry);
         forecast.step(entry.time_s, engine.sums().image_phases(), stop.delta_of(&e));
         on_phase(engine, history, forecast);
