@@ -23,6 +23,7 @@ use clap::Parser;
 
 fn main() -> std::process::ExitCode {
     let cli = cli::Cli::parse();
+    worker::logging::init();
     let result = match cli.command {
         cli::Command::Render(args) => render_command::run(*args),
         cli::Command::Bench(args) => bench::run(args),

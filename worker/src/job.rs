@@ -195,8 +195,8 @@ pub fn run(
                 let comparing = b.is_comparing_depths();
                 b.observe(engine.sums(), engine.totals());
                 if comparing && !b.is_comparing_depths() {
-                    eprintln!(
-                        "worker: backward_diffuse_depth {} from here on, chosen from the first rounds",
+                    tracing::info!(
+                        "backward_diffuse_depth {} from here on, chosen from the first rounds",
                         b.depth().expect("a chosen depth once the comparison has ended")
                     );
                 }

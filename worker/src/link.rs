@@ -46,6 +46,8 @@ pub type FileCache = BTreeMap<String, Vec<u8>>;
 #[derive(Debug)]
 pub struct JobOutcome {
     pub coordinator: String,
+    /// The job's scene file name (empty when the link ended before a job arrived).
+    pub job: String,
     pub snapshots_sent: u64,
     pub snapshots_acked: u64,
 }
@@ -79,7 +81,12 @@ pub async fn serve_job(
         // The run ended while this worker was still being set up: nothing rendered, nothing lost.
         conn.write(&Message::Finished).await?;
         drain_until_closed(&mut conn).await;
-        return Ok(JobOutcome { coordinator: peer.name, snapshots_sent: 0, snapshots_acked: 0 });
+        return Ok(JobOutcome {
+            coordinator: peer.name,
+            job: job.scene_name.clone(),
+            snapshots_sent: 0,
+            snapshots_acked: 0,
+        });
     }
     let meshes: BTreeMap<String, Vec<u8>> =
         job.files.iter().map(|f| (f.path.clone(), cache[&f.sha256].clone())).collect();
@@ -110,9 +117,12 @@ pub async fn serve_job(
         let (tiles, share) = (tiles.clone(), share.clone());
         // On this machine the link is free and the worker's time is not: compress fast.
         let compression = Compression::for_peer(conn.peer);
+        // The engine's events name the job and the worker.
+        let span = tracing::info_span!("job", job = %job.scene_name, worker = %opts.name);
         std::thread::Builder::new()
             .name("job".into())
             .spawn(move || {
+                let _span = span.enter();
                 let control = job::Control { stop: &stop, interval_ms: &interval_ms, tiles: &tiles, share: &share };
                 job::run(&scene, &job, control, slowdown, compression, |e| events_tx.send(e).is_ok())
             })
@@ -215,7 +225,12 @@ pub async fn serve_job(
     drop(events);
     // The engine notices the stop flag within a round; its thread holds no lock the link needs.
     let _ = tokio::task::spawn_blocking(move || engine.join()).await;
-    result.map(|()| JobOutcome { coordinator: peer.name, snapshots_sent: sent, snapshots_acked: acked })
+    result.map(|()| JobOutcome {
+        coordinator: peer.name,
+        job: job.scene_name.clone(),
+        snapshots_sent: sent,
+        snapshots_acked: acked,
+    })
 }
 
 /// Whether the job's files all arrived, or the coordinator stopped the run first.

@@ -86,17 +86,18 @@ fn transport(args: &SecretArgs, loopback: bool) -> Result<Transport> {
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
+    worker::logging::init();
     let runtime = match tokio::runtime::Builder::new_current_thread().enable_all().build() {
         Ok(r) => r,
         Err(e) => {
-            eprintln!("worker: cannot start the network runtime: {e}");
+            tracing::error!("cannot start the network runtime: {e}");
             return std::process::ExitCode::FAILURE;
         }
     };
     match runtime.block_on(run(cli)) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("worker: {e:#}");
+            tracing::error!("{e:#}");
             std::process::ExitCode::FAILURE
         }
     }
@@ -125,9 +126,13 @@ async fn run(cli: Cli) -> Result<()> {
             };
             let conn = transport.connect(stream).await.with_context(|| format!("cannot set up the link to {addr}"))?;
             let outcome = serve_job(conn, &opts, &mut FileCache::new()).await?;
-            eprintln!(
-                "worker {}: job for {} done, {} snapshots sent, {} acknowledged",
-                opts.name, outcome.coordinator, outcome.snapshots_sent, outcome.snapshots_acked
+            tracing::info!(
+                worker = %opts.name,
+                job = %outcome.job,
+                coordinator = %outcome.coordinator,
+                "job done, {} snapshots sent, {} acknowledged",
+                outcome.snapshots_sent,
+                outcome.snapshots_acked
             );
             Ok(())
         }
@@ -140,27 +145,31 @@ async fn run(cli: Cli) -> Result<()> {
             let transport = transport(&s, listen.ip().is_loopback())?;
             let listener =
                 tokio::net::TcpListener::bind(listen).await.with_context(|| format!("cannot listen on {listen}"))?;
-            eprintln!("worker {}: listening on {}", opts.name, listener.local_addr()?);
+            tracing::info!(worker = %opts.name, "listening on {}", listener.local_addr()?);
             let mut cache = FileCache::new();
             loop {
                 let (stream, peer) = listener.accept().await.context("accept failed")?;
                 if opts.secret.is_insecure() && !peer.ip().is_loopback() && !s.insecure {
-                    eprintln!("worker {}: refused {peer}: no secret is set and the link is not loopback", opts.name);
+                    tracing::warn!(worker = %opts.name, "refused {peer}: no secret is set and the link is not loopback");
                     continue;
                 }
                 let conn = match transport.accept(stream).await {
                     Ok(c) => c,
                     Err(e) => {
-                        eprintln!("worker {}: refused {peer}: {e}", opts.name);
+                        tracing::warn!(worker = %opts.name, "refused {peer}: {e}");
                         continue;
                     }
                 };
                 match serve_job(conn, &opts, &mut cache).await {
-                    Ok(o) => eprintln!(
-                        "worker {}: job from {peer} ({}) done, {} snapshots sent, {} acknowledged",
-                        opts.name, o.coordinator, o.snapshots_sent, o.snapshots_acked
+                    Ok(o) => tracing::info!(
+                        worker = %opts.name,
+                        job = %o.job,
+                        coordinator = %o.coordinator,
+                        "job from {peer} done, {} snapshots sent, {} acknowledged",
+                        o.snapshots_sent,
+                        o.snapshots_acked
                     ),
-                    Err(e) => eprintln!("worker {}: link with {peer} ended: {e}", opts.name),
+                    Err(e) => tracing::warn!(worker = %opts.name, "link with {peer} ended: {e}"),
                 }
             }
         }

@@ -33,6 +33,8 @@ pub struct WorkerView {
 
 /// A running distributed render.
 pub struct Cluster {
+    /// The job's scene file name, for the log.
+    job: String,
     sums: Accumulator,
     /// Totals of earlier sessions (a resumed run).
     base_totals: RayTotals,
@@ -84,6 +86,7 @@ impl Cluster {
             None => (Accumulator::with_aux(width, height, aux), RayTotals::default()),
         };
         let accepts_joins = plan.public.is_some();
+        let job = plan.join_template.scene_name.clone();
         let blocklist = plan.blocklist.clone();
         let (events_tx, events) = std::sync::mpsc::channel();
         let (control_tx, control_rx) = tokio::sync::mpsc::unbounded_channel();
@@ -114,6 +117,7 @@ impl Cluster {
             })
             .collect();
         Ok(Cluster {
+            job,
             sums,
             base_totals,
             settings,
@@ -141,9 +145,10 @@ impl Cluster {
             return;
         }
         if let WorkerState::Lost(why) = &state {
-            eprintln!("coordinator: worker {} lost ({why}); the run goes on with the others", r.name);
+            tracing::warn!(job = %self.job, worker = %r.name, "lost ({why}); the run goes on with the others");
         }
         let was_rendering = r.state == WorkerState::Running;
+        tracing::debug!(job = %self.job, worker = %r.name, "{state}");
         r.state = state;
         let rendering = r.state == WorkerState::Running;
         if matches!(r.state, WorkerState::Lost(_)) {
@@ -183,9 +188,10 @@ impl Cluster {
             v.record.failures = n;
         }
         if n == self.blocklist.max() {
-            eprintln!(
-                "coordinator: workers from {ip} failed {n} times in this job: it is refused for the rest of it \
-                (--max-worker-failures)"
+            tracing::warn!(
+                job = %self.job,
+                "workers from {ip} failed {n} times in this job: it is refused for the rest of it \
+                 (--max-worker-failures)"
             );
         }
     }
@@ -260,7 +266,7 @@ impl Cluster {
             Event::Finished { worker } => self.set_state(worker, WorkerState::Finished),
             Event::Lost { worker, reason } => self.set_state(worker, WorkerState::Lost(reason)),
             Event::Refused { address, reason } => {
-                eprintln!("coordinator: refused a connection from {address}: {reason}");
+                tracing::warn!(job = %self.job, "refused a connection from {address}: {reason}");
             }
         }
         false

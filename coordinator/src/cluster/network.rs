@@ -171,11 +171,12 @@ pub async fn run(
     events: std_mpsc::Sender<Event>,
     mut control: mpsc::UnboundedReceiver<Control>,
 ) {
+    let job = plan.join_template.scene_name.clone();
     let adopt = |l: Option<(std::net::TcpListener, Secret)>| {
         l.and_then(|(l, s)| match TcpListener::from_std(l) {
             Ok(l) => Some((l, s)),
             Err(e) => {
-                eprintln!("coordinator: cannot use a listener: {e}");
+                tracing::error!(job = %job, "cannot use a listener: {e}");
                 None
             }
         })
@@ -248,7 +249,7 @@ pub async fn run(
                         (true, true) => "without authentication",
                         _ => "without encryption",
                     };
-                    eprintln!("coordinator: accepting {addr} {what} (--insecure)");
+                    tracing::warn!(job = %plan2.join_template.scene_name, "accepting {addr} {what} (--insecure)");
                 }
                 let Some((mut conn, peer)) = accept(stream, addr, &plan2.remote_transport, &secret, &events).await
                 else {

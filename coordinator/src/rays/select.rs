@@ -33,11 +33,11 @@ pub fn select(args: RaysSelectArgs) -> Result<()> {
     bar.finish_and_clear();
     let seconds = start.elapsed().as_secs_f64();
     for why in &selection.damaged {
-        eprintln!("warning: {why}");
+        tracing::warn!("{why}");
     }
     for (file, bytes) in &selection.truncated {
-        eprintln!(
-            "note: {} ends inside a portion (a stopped run): its last {bytes} bytes were left, every whole portion was read",
+        tracing::warn!(
+            "{} ends inside a portion (a stopped run): its last {bytes} bytes were left, every whole portion was read",
             file.display()
         );
     }
