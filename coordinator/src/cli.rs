@@ -330,9 +330,12 @@ pub struct RenderArgs {
     /// `tev=HOST:PORT`. A tev that is not there is a warning, never a failed render.
     #[arg(long, value_name = "tev[=HOST:PORT]", value_parser = parse_display)]
     pub display: Option<Display>,
-    /// Memory the process may use, e.g. 2G or 500M: checked before the in-process parallel methods allocate
-    /// (memory in use after loading the scene plus the engine's buffers). `async`, whose buffers grow with its
-    /// threads, runs with fewer threads to fit; the other methods refuse to start. The record flags either.
+    /// Memory a rendering process may use, e.g. 2G or 500M: the memory in use after loading the scene plus the
+    /// engine's buffers. The in-process parallel methods check it before they allocate (`async`, whose buffers
+    /// grow with its threads, runs with fewer threads to fit and the record flags it; `sync` and `two-level`
+    /// refuse to start); `pbpm` and `path` check it before their first phase; every worker of `combination`
+    /// and `three-level` checks it for itself before its engine allocates, and a worker over it fails its
+    /// job with the reason.
     #[arg(long, value_name = "SIZE", value_parser = parse_size)]
     pub memory_limit: Option<u64>,
     /// Record a fraction of the camera and light paths of every phase into raymap/ in the output folder, for

@@ -112,7 +112,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
             engine.workers().unwrap_or_default().iter().map(|w| format!("{}: {}", w.name, w.state)).collect();
         bail!("no worker rendered anything ({})", why.join("; "));
     }
-    let record = outputs.save(engine.as_ref(), &history, reason.name(), &forecast)?;
+    let record = outputs.save(engine.as_ref(), &history, reason, &forecast)?;
     if let Some(f) = feed {
         f.finished(engine.as_ref(), &record);
     }
@@ -266,6 +266,16 @@ fn load_checkpoint(args: &RenderArgs, scene: &Scene) -> Result<Option<Checkpoint
     }
     let path = from.join(CHECKPOINT);
     let c = Checkpoint::load(&path, scene)?;
+    if c.method != args.method {
+        bail!(
+            "the checkpoint in {} is of a --method {} run, and --method {} cannot continue it (three-level is the \
+             default when --method is not given): resume it with --method {}",
+            from.display(),
+            c.method,
+            args.method,
+            c.method
+        );
+    }
     Ok(Some(c))
 }
 
@@ -420,7 +430,15 @@ fn start_engine<'s>(
                 let base = memory::current_rss_bytes().unwrap_or(0);
                 let pixels = scene.camera.width as u64 * scene.camera.height as u64;
                 let aux = photonfarm::accumulation::AuxLayout::for_scene(scene, settings.spectral_bands);
+            let base = memory::current_rss_bytes().unwrap_or(0);
                 let need = |t: usize| -> Result<u64> {
+            if let Some(limit) = args.memory_limit {
+                // The engine's buffers are sized once, for the whole image: what it holds now is what it needs.
+                let need = base + (engine.bytes_per_pixel() * scene.camera.pixel_count() as f64) as u64;
+                if need > limit {
+                    bail!("{}", memory::over_limit(limit, need, base, ""));
+                }
+            }
                     let c = EngineConfig::for_method(method, t, args.group_size, cores.clone())?;
                     Ok(base
                         + (c.bytes_per_pixel(pixels as usize, settings.backward_diffuse_depth, &aux) * pixels as f64)
@@ -501,6 +519,7 @@ struct Outputs<'a> {
     /// The pixels that see a light, decided before the render, and the seconds that took.
     lit: &'a LitMask,
     lit_seconds: f64,
+        memory_limit: args.memory_limit,
     /// The stop rule, whose δ the forecast follows.
     stop: &'a StopRule,
     /// What the run changed from what it was asked (flags of the record).
@@ -522,7 +541,7 @@ impl Outputs<'_> {
         &self,
         engine: &dyn Progressive,
         history: &[HistoryEntry],
-        reason: &str,
+        reason: StopReason,
         forecast: &Forecast,
     ) -> RunRecord {
         let workers = engine.workers();
@@ -541,7 +560,7 @@ impl Outputs<'_> {
             settings: engine.settings().as_recorded(),
             radius_at_1m: engine.settings().radius_schedule(scene).radius(1.0, 1),
             threads: engine.threads() as u32,
-            stop_reason: reason.to_string(),
+            stop_reason: reason,
             totals: engine.totals(),
             stage_seconds: engine.stage_seconds(),
             wall_time_s: self.elapsed_s(),
@@ -565,7 +584,7 @@ impl Outputs<'_> {
         &self,
         engine: &dyn Progressive,
         history: &[HistoryEntry],
-        reason: &str,
+        reason: StopReason,
         forecast: &Forecast,
     ) -> Result<RunRecord> {
         if self.args.method.is_distributed() {
@@ -616,7 +635,7 @@ fn run_until_stop(
         }
         if last_save.elapsed() >= save_interval && save_error.is_none() {
             last_save = Instant::now();
-            if let Err(e) = outputs.save(engine, history, "running", forecast) {
+            if let Err(e) = outputs.save(engine, history, StopReason::Running, forecast) {
                 save_error = Some(e);
             }
         }
@@ -763,14 +782,8 @@ fn fit_memory(
             return Ok(t);
         }
     }
-    bail!(
-        "--memory-limit {} is too small: this render needs about {} ({} in use after loading the scene, plus the \
-         engine's buffers){}",
-        mb(limit),
-        mb(need(if grows_with_threads { 1 } else { threads })?),
-        mb(base),
-        if grows_with_threads { " even with one thread" } else { "" }
-    )
+    let least = need(if grows_with_threads { 1 } else { threads })?;
+    bail!("{}", memory::over_limit(limit, least, base, if grows_with_threads { " even with one thread" } else { "" }))
 }
 
 fn stop_rule(args: &RenderArgs) -> Result<StopRule> {

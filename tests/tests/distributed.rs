@@ -226,6 +226,11 @@ fn a_coordinator_killed_mid_run_resumes_without_losing_or_recounting_a_checkpoin
         assert!(start.elapsed() < Duration::from_secs(30), "workers outlived their coordinator");
         std::thread::sleep(Duration::from_millis(100));
     }
+    // Another method cannot continue it: refused before any worker starts, naming both methods.
+    let mut c = coordinator(&scene, &out, &["--method", "combination", "--topology", TWO_NODES, "--phases", "1200"]);
+    let o = c.arg("--resume").arg(&out).output().unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("--method three-level") && e.contains("--method combination"), "{e}");
     let mut c = coordinator(&scene, &out, &three);
     c.arg("--resume").arg(&out);
     run_ok(c);

@@ -72,6 +72,26 @@ pub fn engine_config(job: &Job) -> Result<EngineConfig, String> {
     Ok(config)
 }
 
+/// Refuses an engine of `config` whose buffers, with the memory this process holds now (the scene loaded), would
+/// not fit in `limit` bytes (`--memory-limit`, per worker process), before it allocates them.
+fn check_memory_limit(
+    limit: u64,
+    config: &EngineConfig,
+    scene: &Scene,
+    settings: &photonfarm::render::RenderSettings,
+) -> Result<(), String> {
+    let base = photonfarm::render::memory::current_rss_bytes().unwrap_or(0);
+    let pixels = scene.camera.pixel_count();
+    let aux = photonfarm::accumulation::AuxLayout::for_scene(scene, settings.spectral_bands);
+    let need = base + (config.bytes_per_pixel(pixels, settings.backward_diffuse_depth, &aux) * pixels as f64) as u64;
+    if need <= limit {
+        return Ok(());
+    }
+    let detail =
+        format!(" on this worker's {} thread{}", config.threads(), if config.threads() == 1 { "" } else { "s" });
+    Err(photonfarm::render::memory::over_limit(limit, need, base, &detail))
+}
+
 /// Tiles the coordinator restricted a job to and the engine has not taken yet: the tile edge and one flag per
 /// tile.
 pub type PendingTiles = std::sync::Mutex<Option<(u32, Vec<bool>)>>;
@@ -117,6 +137,12 @@ pub fn run(
         Some(node) => memory_binding::bind_memory(node),
         None => MemoryBinding::FirstTouch("no NUMA node given".into()),
     };
+    if let Some(limit) = job.engine.memory_limit {
+        if let Err(reason) = check_memory_limit(limit, &config, scene, &job.settings) {
+            emit(JobEvent::Failed(reason));
+            return;
+        }
+    }
     let mut settings = job.settings;
     settings.seed = stream_seed(job.settings.seed, job.stream);
     let layout = config.layout();

@@ -326,6 +326,7 @@ mod tests {
                 processes_per_pixel: 1,
                 process_rank: 0,
                 resumed_phases: 0,
+                memory_limit: None,
             },
             snapshot_interval_ms: 1000,
         };

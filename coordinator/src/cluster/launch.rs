@@ -47,6 +47,8 @@ pub struct LaunchOptions {
     pub group_size: usize,
     pub tile_size: Option<u32>,
     pub phases_per_deal: u32,
+    /// `--memory-limit`: what each worker process may use.
+    pub memory_limit: Option<u64>,
 }
 
 /// What a resumed run continues from.
@@ -218,6 +220,7 @@ impl JobTemplate {
                 processes_per_pixel: 1,
                 process_rank: 0,
                 resumed_phases,
+                memory_limit: options.memory_limit,
             },
             stream_base: (session as usize - 1) << 16,
             synthetic_nodes: nodes.synthetic,

@@ -54,6 +54,8 @@ pub struct EngineSpec {
     /// Phases the image already has from earlier sessions (a resumed run), added to the radius schedule's j.
     pub resumed_phases: u32,
 }
+    /// `--memory-limit`: the bytes this worker process may use, checked before its engine allocates.
+    pub memory_limit: Option<u64>,
 
 /// What a worker renders.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

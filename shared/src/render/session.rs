@@ -5,6 +5,7 @@ use super::engine::Engine;
 use super::forecast::Forecast;
 use super::light_balance::LightBalance;
 use super::record::HistoryEntry;
+pub use super::record::StopReason;
 use super::settings::RenderSettings;
 use super::totals::RayTotals;
 use crate::accumulation::{Accumulator, LitMask};
@@ -117,30 +118,6 @@ pub struct StopRule {
     pub phases: Option<u64>,
     pub target_error: Option<f64>,
     pub error_over: ErrorOver,
-}
-
-/// Why a run ended.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum StopReason {
-    Time,
-    Phases,
-    TargetError,
-    Interrupted,
-    /// Every worker of a distributed run was lost.
-    NoWorkers,
-}
-
-impl StopReason {
-    /// The name used in the run record.
-    pub fn name(self) -> &'static str {
-        match self {
-            StopReason::Time => "time",
-            StopReason::Phases => "phases",
-            StopReason::TargetError => "target-error",
-            StopReason::Interrupted => "interrupted",
-            StopReason::NoWorkers => "no-workers",
-        }
-    }
 }
 
 /// What a run measures its error over and forecasts with, besides the stop rule.

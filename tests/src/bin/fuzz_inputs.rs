@@ -288,6 +288,7 @@ fn main() -> Result<()> {
             processes_per_pixel: 2,
             process_rank: 1,
             resumed_phases: 0,
+            memory_limit: Some(1 << 30),
         },
         snapshot_interval_ms: 1000,
     };
