@@ -261,8 +261,9 @@ pub struct RenderArgs {
     #[arg(long, value_name = "DIR")]
     pub tls_dir: Option<PathBuf>,
     /// Continue the run whose output folder is DIR from its checkpoint (combination and three-level): its
-    /// sums, phases, rays and time carry on, and results go to DIR unless --out is given.
-    #[arg(long, value_name = "DIR")]
+    /// sums, phases, rays and time carry on, and results go to DIR unless --out is given. A checkpoint file
+    /// instead of DIR (DIR/checkpoint-previous.bin, the one saved before the latest) continues from that file.
+    #[arg(long, value_name = "DIR|FILE")]
     pub resume: Option<PathBuf>,
     /// A worker that sends nothing (not even a heartbeat) for this many seconds is presumed hung and dropped.
     #[arg(long, default_value_t = 15.0, value_name = "SECONDS")]

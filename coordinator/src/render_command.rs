@@ -264,7 +264,7 @@ fn load_checkpoint(args: &RenderArgs, scene: &Scene) -> Result<Option<Checkpoint
     {
         bail!("a resumed run keeps the settings of its checkpoint: drop --max-depth, --backward-diffuse-depth, --radius-scale, --light-paths-per-pixel and --spectral-output");
     }
-    let path = from.join(CHECKPOINT);
+    let (_, path) = resume_paths(from);
     let c = Checkpoint::load(&path, scene)?;
     if c.method != args.method {
         bail!(
@@ -277,6 +277,17 @@ fn load_checkpoint(args: &RenderArgs, scene: &Scene) -> Result<Option<Checkpoint
         );
     }
     Ok(Some(c))
+}
+
+/// The output folder of the run `--resume` names and the checkpoint file it continues from: FROM/checkpoint.bin,
+/// or FROM itself when it is a file (`checkpoint-previous.bin`), in its folder.
+fn resume_paths(from: &Path) -> (PathBuf, PathBuf) {
+    if from.is_file() {
+        let dir = from.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        (dir.to_path_buf(), from.to_path_buf())
+    } else {
+        (from.to_path_buf(), from.join(CHECKPOINT))
+    }
 }
 
 /// Refuses to resume a run whose checkpoint already meets the stop rule: starting workers only to stop them at
@@ -332,8 +343,11 @@ fn check_resume_has_work(
 
 /// The output folder (`--out`, the resumed run's, or a new one under out/), created.
 fn output_dir(args: &RenderArgs) -> Result<PathBuf> {
-    let dir =
-        args.out.clone().or_else(|| args.resume.clone()).unwrap_or_else(|| output_folder::default_dir(&args.scene));
+    let dir = args
+        .out
+        .clone()
+        .or_else(|| args.resume.as_deref().map(|r| resume_paths(r).0))
+        .unwrap_or_else(|| output_folder::default_dir(&args.scene));
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create the output folder {}", dir.display()))?;
     Ok(dir)
 }
@@ -416,7 +430,15 @@ fn start_engine<'s>(
             Ok((Box::new(cluster), layout))
         }
         (Processes::One, None) => {
+            let base = memory::current_rss_bytes().unwrap_or(0);
             let mut engine = Engine::new(scene, settings);
+            if let Some(limit) = args.memory_limit {
+                // The engine's buffers are sized once, for the whole image: what it holds now is what it needs.
+                let need = base + (engine.bytes_per_pixel() * scene.camera.pixel_count() as f64) as u64;
+                if need > limit {
+                    bail!("{}", memory::over_limit(limit, need, base, ""));
+                }
+            }
             engine.set_recorder(recorder);
             Ok((Box::new(engine), "1 thread".to_string()))
         }
@@ -430,15 +452,7 @@ fn start_engine<'s>(
                 let base = memory::current_rss_bytes().unwrap_or(0);
                 let pixels = scene.camera.width as u64 * scene.camera.height as u64;
                 let aux = photonfarm::accumulation::AuxLayout::for_scene(scene, settings.spectral_bands);
-            let base = memory::current_rss_bytes().unwrap_or(0);
                 let need = |t: usize| -> Result<u64> {
-            if let Some(limit) = args.memory_limit {
-                // The engine's buffers are sized once, for the whole image: what it holds now is what it needs.
-                let need = base + (engine.bytes_per_pixel() * scene.camera.pixel_count() as f64) as u64;
-                if need > limit {
-                    bail!("{}", memory::over_limit(limit, need, base, ""));
-                }
-            }
                     let c = EngineConfig::for_method(method, t, args.group_size, cores.clone())?;
                     Ok(base
                         + (c.bytes_per_pixel(pixels as usize, settings.backward_diffuse_depth, &aux) * pixels as f64)
@@ -505,6 +519,7 @@ fn launch_options(args: &RenderArgs) -> LaunchOptions {
         group_size: args.group_size,
         tile_size: args.tile_size,
         phases_per_deal: args.phases_per_deal,
+        memory_limit: args.memory_limit,
     }
 }
 
@@ -519,7 +534,6 @@ struct Outputs<'a> {
     /// The pixels that see a light, decided before the render, and the seconds that took.
     lit: &'a LitMask,
     lit_seconds: f64,
-        memory_limit: args.memory_limit,
     /// The stop rule, whose δ the forecast follows.
     stop: &'a StopRule,
     /// What the run changed from what it was asked (flags of the record).

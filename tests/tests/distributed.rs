@@ -565,3 +565,41 @@ fn two_workers_that_dial_in_give_the_blur_and_delta_of_the_planned_three_level_r
     assert!((sd / sp - 1.0).abs() < 0.25, "δ's noise part: dialled in {sd:.5} against planned {sp:.5}");
     assert_same_image(&planned, &dialled, "dialled-in workers against planned ones");
 }
+
+#[test]
+fn a_checkpoint_with_one_bit_flipped_is_refused_and_the_previous_one_resumes() {
+    let dir = scratch_dir("damaged-checkpoint");
+    let scene = cornell_at(&dir, 32);
+    let out = dir.join("run");
+    let three = ["--method", "three-level", "--topology", TWO_NODES, "--group-size", "1"];
+    let mut c = coordinator(&scene, &out, &three);
+    c.args(["--time", "3", "--save-interval", "0.5", "--seed", "71"]);
+    run_ok(c);
+    let (latest, previous) = (out.join("checkpoint.bin"), out.join("checkpoint-previous.bin"));
+    assert!(previous.is_file(), "the save before the last one is kept beside it");
+    let whole = std::fs::read(&latest).unwrap();
+    let record_before = std::fs::read(out.join("run.json")).unwrap();
+    // As a user would try it: one bit flipped at 10%, 30%, 50%, 70% or 90% of the file, then --resume.
+    for percent in [10, 30, 50, 70, 90] {
+        let mut bytes = whole.clone();
+        bytes[whole.len() * percent / 100] ^= 0x10;
+        std::fs::write(&latest, &bytes).unwrap();
+        let mut c = coordinator(&scene, &out, &three);
+        let o = c.args(["--time", "6", "--resume"]).arg(&out).output().unwrap();
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "a checkpoint damaged at {percent}% was resumed: {e}");
+        assert!(
+            e.contains("is damaged") && e.contains(&format!("--resume {}", previous.display())),
+            "at {percent}%: {e}"
+        );
+        assert_eq!(std::fs::read(out.join("run.json")).unwrap(), record_before, "the refusal wrote nothing");
+    }
+    // The latest one stays damaged; the previous one continues the run.
+    let mut c = coordinator(&scene, &out, &three);
+    c.args(["--time", "5", "--resume"]).arg(&previous);
+    run_ok(c);
+    let r = record(&out);
+    assert_eq!(r["session"], 2);
+    assert_eq!(r["stop_reason"], "time");
+    assert!(r["wall_time_s"].as_f64().unwrap() >= 5.0, "{}", r["wall_time_s"]);
+}

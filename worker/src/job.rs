@@ -238,10 +238,12 @@ pub fn run(
         if stopping || last.elapsed() >= interval {
             seq += 1;
             let current = engine.sums();
+            let delta = encode_delta(current, &base, compression);
             let snapshot = Snapshot {
                 seq,
                 totals: engine.totals(),
-                delta: encode_delta(current, &base, compression),
+                checksum: Snapshot::checksum_of(&delta),
+                delta,
                 interval_ms: interval.as_millis() as u64,
                 previous_send_ms: 0,
                 peak_memory_bytes: photonfarm::render::memory::peak_rss_bytes().unwrap_or(0),

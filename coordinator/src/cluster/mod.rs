@@ -10,7 +10,7 @@ use anyhow::{Context, Result};
 use network::{Blocklist, Control, Event, NetworkPlan, Planned};
 use photonfarm::accumulation::delta::apply_delta;
 use photonfarm::accumulation::{Accumulator, AuxLayout};
-use photonfarm::protocol::Share;
+use photonfarm::protocol::{Share, Snapshot};
 use photonfarm::render::record::{WorkerRecord, WorkerState};
 use photonfarm::render::session::Progressive;
 use photonfarm::render::{ActiveTiles, RayTotals, RenderSettings};
@@ -240,7 +240,12 @@ impl Cluster {
                     self.set_state(worker, WorkerState::Lost(reason));
                     return false;
                 }
-                match apply_delta(&snapshot.delta, &mut self.sums) {
+                let merged = if Snapshot::checksum_of(&snapshot.delta) == snapshot.checksum {
+                    apply_delta(&snapshot.delta, &mut self.sums).map_err(|e| e.to_string())
+                } else {
+                    Err("its delta does not match its checksum (damaged on the way)".to_string())
+                };
+                match merged {
                     Ok(summary) => {
                         let v = &mut self.workers[worker];
                         v.last_seq = snapshot.seq;

@@ -12,7 +12,8 @@ use serde::{Deserialize, Serialize};
 /// 7: the coordinator may restrict workers to the tiles still above the target error (`ActiveTiles`).
 /// 8: jobs say whether the worker chooses its light paths per pixel (`RenderSettings::adaptive_light`).
 /// 9: and whether it chooses the camera paths' diffuse depth (`RenderSettings::adaptive_depth`).
-/// 10: the coordinator announces the processes rendering the image when they change (`Share`).
+/// 10: the coordinator announces the processes rendering the image when they change (`Share`), jobs carry
+/// `--memory-limit`, and snapshots a CRC-32 of their delta.
 pub const PROTOCOL_VERSION: u32 = 10;
 
 /// Which end of a link a peer is.
@@ -53,9 +54,9 @@ pub struct EngineSpec {
     pub process_rank: u32,
     /// Phases the image already has from earlier sessions (a resumed run), added to the radius schedule's j.
     pub resumed_phases: u32,
-}
     /// `--memory-limit`: the bytes this worker process may use, checked before its engine allocates.
     pub memory_limit: Option<u64>,
+}
 
 /// What a worker renders.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -97,6 +98,9 @@ pub struct Snapshot {
     pub totals: RayTotals,
     /// Per-pixel sums added since the previous snapshot (see `accumulation::delta`).
     pub delta: Vec<u8>,
+    /// CRC-32 of `delta`: a delta damaged on its way (a plaintext link has only TCP's 16-bit checksum) is refused
+    /// rather than merged.
+    pub checksum: u32,
     /// The snapshot interval the worker uses now, and how long sending its previous snapshot took, from the
     /// start of the write to the acknowledgement (ms).
     pub interval_ms: u64,
@@ -176,6 +180,13 @@ pub enum Message {
     /// Coordinator → worker: the processes rendering the image changed; number the phases accordingly from the
     /// next round on.
     Share(Share),
+}
+
+impl Snapshot {
+    /// The checksum `delta` must carry.
+    pub fn checksum_of(delta: &[u8]) -> u32 {
+        crc32fast::hash(delta)
+    }
 }
 
 impl Message {

@@ -310,6 +310,7 @@ fn main() -> Result<()> {
         Message::Snapshot(Snapshot {
             seq: 1,
             totals: RayTotals::default(),
+            checksum: Snapshot::checksum_of(&delta),
             delta,
             interval_ms: 1000,
             previous_send_ms: 3,
@@ -390,7 +391,14 @@ fn main() -> Result<()> {
                 deltas.record(i, catch_unwind(AssertUnwindSafe(|| apply_delta(&bytes, &mut target).is_ok())));
             }
             2 => {
-                let bytes = materialise(&next(&mut runner), &checkpoint_seeds);
+                let mut bytes = materialise(&next(&mut runner), &checkpoint_seeds);
+                // Every edit fails the checksum: every other input gets its checksum recomputed after the edit, to
+                // reach the checks behind it.
+                if i % 8 == 2 && bytes.len() >= 4 {
+                    let body = bytes.len() - 4;
+                    let sum = crc32fast::hash(&bytes[..body]).to_le_bytes();
+                    bytes[body..].copy_from_slice(&sum);
+                }
                 // The scene is only read (with the `embree` feature it holds cells, so the compiler cannot see that).
                 let decode = AssertUnwindSafe(|| Checkpoint::from_bytes(&bytes, &scene, "fuzz").is_ok());
                 checkpoints.record(i, catch_unwind(decode));
