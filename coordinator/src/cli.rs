@@ -137,6 +137,10 @@ pub struct BenchArgs {
     /// Seconds per run.
     #[arg(long, default_value_t = 40.0)]
     pub time: f64,
+    /// Phases per run: each run stops once every pixel has this many (`render --phases`), or at --time if that
+    /// comes first, so that the runs compare at equal work rather than equal time.
+    #[arg(long, value_name = "N")]
+    pub phases: Option<u64>,
     /// Every method on both scenes for 8 s, once: under five minutes on 2 cores.
     #[arg(long)]
     pub quick: bool,

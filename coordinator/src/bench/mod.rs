@@ -189,6 +189,9 @@ fn render(e: &Entry, args: &BenchArgs, out: &Path) -> Result<()> {
         .arg("--out")
         .arg(out)
         .stdout(std::process::Stdio::null());
+    if let Some(n) = args.phases {
+        cmd.args(["--phases", &n.to_string()]);
+    }
     if let Some((tiles, d)) = e.target {
         cmd.args(["--target-error", &d.to_string()]);
         if tiles == "uniform" {
@@ -313,6 +316,9 @@ pub fn run(mut args: BenchArgs) -> Result<()> {
     if args.repeats == 0 {
         bail!("--repeats must be at least 1");
     }
+    if args.phases == Some(0) {
+        bail!("--phases must be at least 1");
+    }
     let all = match &args.cores {
         Some(list) => machine::parse_cores(list).map_err(|e| anyhow::anyhow!("--cores: {e}"))?.len(),
         None => machine::all_cores().len(),
@@ -358,13 +364,21 @@ pub fn run(mut args: BenchArgs) -> Result<()> {
             }
         }
     }
-    eprintln!(
-        "{} runs of {} s each, about {:.0} minutes; results in {}",
-        plan.len(),
-        args.time,
-        plan.len() as f64 * (args.time + 0.7) / 60.0,
-        dir.display()
-    );
+    match args.phases {
+        None => eprintln!(
+            "{} runs of {} s each, about {:.0} minutes; results in {}",
+            plan.len(),
+            args.time,
+            plan.len() as f64 * (args.time + 0.7) / 60.0,
+            dir.display()
+        ),
+        Some(n) => eprintln!(
+            "{} runs of {n} phases each (at most {} s each); results in {}",
+            plan.len(),
+            args.time,
+            dir.display()
+        ),
+    }
     let page = match args.serve {
         Some(addr) => {
             let secret = match &args.secret_file {
@@ -460,12 +474,16 @@ fn scenes_of(runs: &[Run]) -> std::collections::BTreeSet<&str> {
 /// the calibration of δ, and two-level against sync and async.
 fn report(runs: &[Run], args: &BenchArgs, threads: &[usize]) -> String {
     let mut s = String::new();
+    let budget = match args.phases {
+        Some(n) => format!("{n} phases (at most {} s)", args.time),
+        None => format!("{} s", args.time),
+    };
     let _ = writeln!(
         s,
-        "{} run(s) of {} s per configuration. Tracing speedup = rays per second / (rays per second of the same \
+        "{} run(s) of {budget} per configuration. Tracing speedup = rays per second / (rays per second of the same \
          method at {} thread(s)) × {}; δ range over runs in brackets; \"unlit\" = pixels that do not see a light \
          directly.\n",
-        args.repeats, args.time, threads[0], threads[0]
+        args.repeats, threads[0], threads[0]
     );
     let _ = writeln!(s, "| scene | method | threads | processes × groups × threads | forward rays | backward rays | tracing speedup | δ unlit / all | true error unlit / all | mean against the reference unlit / all | peak memory | bytes/pixel | idle | maps per light path |");
     let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
@@ -794,6 +812,7 @@ mod tests {
         let runs = vec![run(Method::TwoLevel, 1, 0, 0.06, 100), run(Method::TwoLevel, 2, 0, 0.044, 190)];
         let args = BenchArgs {
             time: 1.0,
+            phases: None,
             quick: false,
             scenes: vec!["cornell".into()],
             methods: vec![Method::TwoLevel],
