@@ -252,9 +252,7 @@ fn write_overlay(
     let sensor = matches!(cam.lens, photonfarm::camera::Lens::Sensor { .. });
     let in_lens = |object: u16| {
         sensor
-            && scene.objects.get(object as usize).is_some_and(|o| {
-                matches!(scene.materials[o.material as usize], photonfarm::material::Material::Dielectric { .. })
-            })
+            && scene.objects.get(object as usize).is_some_and(|o| scene.materials[o.material as usize].is_dielectric())
     };
     for p in paths {
         let points = polyline(p);
