@@ -1,4 +1,4 @@
-//! One phase of progressive backward photon mapping over a set of pixels (DESIGN §1, paper §2):
+//! One phase of progressive backward photon mapping over a set of pixels (paper §2, docs/estimator.md, "Phases"):
 //!
 //! 1. the camera pass traces one camera path per pixel, keeps its visible-light and direct-light values and
 //!    stores backward photons at its diffuse vertices ([`PhaseBuffers::camera_pass`]);
@@ -109,7 +109,7 @@ impl Phase<'_> {
         self
     }
 
-    /// Traces light path number `index` of the phase and hands each vertex that may gather (DESIGN §1 step 3)
+    /// Traces light path number `index` of the phase and hands each vertex that may gather (step 3 above)
     /// and each ghost chain that reaches the sensor to `visit`.
     #[inline]
     pub fn trace_light_path(&self, index: u64, stats: &mut ForwardStats, visit: &mut impl FnMut(&LightEvent)) {
@@ -514,7 +514,7 @@ impl Closing {
     }
 
     /// Closes one pixel: its phase value L_ij is the camera pass's `value` plus the `gathered` light over the
-    /// light paths (DESIGN §1 step 4), counted in the pixel's `replicate`; the auxiliary channels (`aux`,
+    /// light paths (step 4 above), counted in the pixel's `replicate`; the auxiliary channels (`aux`,
     /// started by `start_aux`, and the pixel's wavelength) get their gathered light too and the spectral bands
     /// of the phase total. Leaves `gathered` zero.
     #[inline]
