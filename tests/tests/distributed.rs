@@ -603,3 +603,21 @@ fn a_checkpoint_with_one_bit_flipped_is_refused_and_the_previous_one_resumes() {
     assert_eq!(r["stop_reason"], "time");
     assert!(r["wall_time_s"].as_f64().unwrap() >= 5.0, "{}", r["wall_time_s"]);
 }
+
+#[test]
+fn a_memory_limit_is_checked_by_every_worker_against_its_own_engine() {
+    let dir = scratch_dir("worker-memory-limit");
+    let scene = cornell_at(&dir, 256);
+    let three = ["--method", "three-level", "--topology", TWO_NODES, "--group-size", "1", "--phases", "2"];
+    // Each worker fails its job with the reason, and a run none of whose workers fit says why.
+    let mut c = coordinator(&scene, &dir.join("small"), &three);
+    let o = c.args(["--memory-limit", "20M"]).output().unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{e}");
+    assert!(e.contains("no worker rendered anything") && e.contains("--memory-limit 20 MiB is too small"), "{e}");
+    assert!(e.contains("on this worker's 1 thread"), "{e}");
+    // A limit the workers fit in renders as without one.
+    let mut c = coordinator(&scene, &dir.join("fits"), &three);
+    run_ok(c.args(["--memory-limit", "4G"]));
+    assert_eq!(record(&dir.join("fits"))["stop_reason"], "phases");
+}
