@@ -67,9 +67,11 @@ fn up_y() -> Spanned<[f32; 3]> {
 #[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
 pub enum MaterialSection {
     Diffuse {
-        /// Multiplies `albedo_texture` when both are given; required without a texture.
-        albedo: Option<[f32; 3]>,
-        /// A PNG (sRGB) path relative to the scene file.
+        /// A colour, a grey or a texture table (scenes/README.md, "Textures"); a constant one multiplies
+        /// `albedo_texture` when both are given; required without `albedo_texture`.
+        albedo: Option<toml::Value>,
+        /// An image file (sRGB where its samples are integers) relative to the scene file: the older spelling of
+        /// `albedo = { bitmap = "..." }`.
         albedo_texture: Option<String>,
     },
     Mirror {
@@ -108,7 +110,8 @@ pub struct ObjectSection {
     pub name: Option<String>,
     pub material: Spanned<String>,
     pub emission: Option<Spanned<[f32; 3]>>,
-    /// A PNG (sRGB) path relative to the scene file that multiplies `emission` (default 1 with a texture).
+    /// An image file (sRGB where its samples are integers) relative to the scene file that multiplies `emission`
+    /// (default 1 with a texture).
     pub emission_texture: Option<Spanned<String>>,
     pub mesh: Option<Spanned<String>>,
     pub quad: Option<Spanned<QuadSection>>,

@@ -1,4 +1,4 @@
-//! The `[materials]` table: every material and its albedo texture, by name.
+//! The `[materials]` table: every material and its textures, by name.
 
 use super::state::Loader;
 use crate::bsdf::conductor::ConductorFresnel;
@@ -7,7 +7,7 @@ use crate::material::{Material, Surface};
 use crate::scene::file::MaterialSection;
 use crate::scene::SceneError;
 use crate::spectrum::RefractiveIndex;
-use crate::texture::Texture;
+use crate::texture::{Encoding, Texture};
 use std::collections::BTreeMap;
 use toml::Spanned;
 
@@ -40,22 +40,32 @@ impl Loader<'_> {
         let f = |x: &str| format!("materials.{name}.{x}");
         Ok(Material::two_sided(match m.get_ref() {
             MaterialSection::Diffuse { albedo, albedo_texture } => {
-                let texture = match albedo_texture {
-                    Some(t) => Some(self.texture(t, Some(s.clone()), &f("albedo_texture"))?),
-                    None => None,
-                };
-                let albedo = match (albedo, &texture) {
-                    (Some(a), _) => self.colour(*a, &s, &f("albedo"), Some(1.0))?,
-                    // Texture values are at most 1, so the product stays a valid albedo.
-                    (None, Some(_)) => Rgb::ONE,
-                    (None, None) => {
-                        return Err(self.error(Some(s), f("albedo"), "a diffuse material needs albedo = [r, g, b]"))
-                    }
-                };
-                let reflectance = match texture {
-                    Some(image) => Texture::Bitmap { image, factor: albedo },
-                    None => Texture::Constant(albedo),
-                };
+                let reflectance =
+                    match (albedo, albedo_texture) {
+                        (Some(toml::Value::Table(_)), Some(_)) => return Err(self.error(
+                            Some(s),
+                            f("albedo_texture"),
+                            "albedo_texture multiplies a constant albedo; with a texture table in albedo, give the \
+                             file there (albedo = { bitmap = \"...\", factor = [r, g, b] })",
+                        )),
+                        (Some(a), None) => self.texture(a, &s, &f("albedo"), Some(1.0))?,
+                        (a, Some(file)) => {
+                            let factor = match a {
+                                Some(a) => self.texture(a, &s, &f("albedo"), Some(1.0))?.constant().unwrap_or(Rgb::ONE),
+                                None => Rgb::ONE,
+                            };
+                            let image = self.bitmap(file, Some(s.clone()), &f("albedo_texture"), Encoding::Srgb)?;
+                            let t = Texture::bitmap(image, factor);
+                            // Integer images stay within [0, 1]; a float one (OpenEXR, HDR, PFM) may not.
+                            self.check_max(&t, &s, &f("albedo_texture"), Some(1.0))?;
+                            t
+                        }
+                        (None, None) => return Err(self.error(
+                            Some(s),
+                            f("albedo"),
+                            "a diffuse material needs albedo = [r, g, b] or a texture (scenes/README.md, \"Textures\")",
+                        )),
+                    };
                 Surface::Diffuse { reflectance }
             }
             MaterialSection::Mirror { reflectance } => Surface::Conductor {
