@@ -618,6 +618,7 @@ fn a_memory_limit_is_checked_by_every_worker_against_its_own_engine() {
     assert!(e.contains("on this worker's 1 thread"), "{e}");
     // A limit the workers fit in renders as without one.
     let mut c = coordinator(&scene, &dir.join("fits"), &three);
-    run_ok(c.args(["--memory-limit", "4G"]));
+    c.args(["--memory-limit", "4G"]);
+    run_ok(c);
     assert_eq!(record(&dir.join("fits"))["stop_reason"], "phases");
 }
