@@ -10,16 +10,12 @@ macro_rules! say {
     }};
 }
 
-mod bench_command;
-mod bench_tables;
-mod charts;
+mod bench;
 mod cli;
 mod cluster;
 mod live;
 mod output_folder;
-mod rays_command;
-mod rays_ghosts;
-mod rays_outputs;
+mod rays;
 mod reference_command;
 mod render_command;
 
@@ -27,14 +23,15 @@ use clap::Parser;
 
 fn main() -> std::process::ExitCode {
     let cli = cli::Cli::parse();
+    worker::logging::init();
     let result = match cli.command {
         cli::Command::Render(args) => render_command::run(*args),
-        cli::Command::Bench(args) => bench_command::run(args),
+        cli::Command::Bench(args) => bench::run(args),
         cli::Command::Reference(args) => reference_command::run(args),
-        cli::Command::Charts(args) => charts::run(args),
+        cli::Command::Charts(args) => bench::charts::run(args),
         cli::Command::Keys(cli::KeysCommand::Init { dir }) => keys_init(&dir),
-        cli::Command::Rays(cli::RaysCommand::Select(args)) => rays_command::select(args),
-        cli::Command::Rays(cli::RaysCommand::Ghosts(args)) => rays_ghosts::ghosts(args),
+        cli::Command::Rays(cli::RaysCommand::Select(args)) => rays::select::select(args),
+        cli::Command::Rays(cli::RaysCommand::Ghosts(args)) => rays::ghosts::ghosts(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

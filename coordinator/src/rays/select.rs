@@ -1,10 +1,10 @@
 //! `coordinator rays select`: the rayon threads take a ray map's portions in map order, one at a time, and each
 //! decompresses its portion straight from the stream's mapping and tests it against a selection expression, each
 //! path read in place; the portions' results are combined in map order, and the first `--limit` matches go to
-//! `rays_outputs`.
+//! `outputs`.
 
+use super::{outputs, render_folder, Selection};
 use crate::cli::RaysSelectArgs;
-use crate::rays_outputs;
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use photonfarm::ray_map::format::PORTION_HEADER_BYTES;
@@ -15,21 +15,6 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Mutex, PoisonError};
-
-/// What a selection found.
-#[derive(Debug, Default)]
-pub struct Selection {
-    /// The first matches in map order, up to the limit.
-    pub paths: Vec<RecordedPath>,
-    pub matched_paths: u64,
-    pub matched_segments: u64,
-    pub total_paths: u64,
-    pub total_segments: u64,
-    /// Bytes cut off truncated streams, per stream file.
-    pub truncated: Vec<(PathBuf, u64)>,
-    /// Damaged portions, skipped (a damaged frame) or ending their stream (a damaged portion header): why.
-    pub damaged: Vec<String>,
-}
 
 /// Runs `rays select`.
 pub fn select(args: RaysSelectArgs) -> Result<()> {
@@ -48,11 +33,11 @@ pub fn select(args: RaysSelectArgs) -> Result<()> {
     bar.finish_and_clear();
     let seconds = start.elapsed().as_secs_f64();
     for why in &selection.damaged {
-        eprintln!("warning: {why}");
+        tracing::warn!("{why}");
     }
     for (file, bytes) in &selection.truncated {
-        eprintln!(
-            "note: {} ends inside a portion (a stopped run): its last {bytes} bytes were left, every whole portion was read",
+        tracing::warn!(
+            "{} ends inside a portion (a stopped run): its last {bytes} bytes were left, every whole portion was read",
             file.display()
         );
     }
@@ -70,7 +55,7 @@ pub fn select(args: RaysSelectArgs) -> Result<()> {
         None => default_out(&args.map),
     };
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
-    let written = rays_outputs::write_all(&out, &args.map, &header, &selection, &args.expr, args.colour)?;
+    let written = outputs::write_all(&out, &args.map, &header, &selection, &args.expr, args.colour)?;
     for (what, file) in written {
         say!("{what}: {}", file.display());
     }
@@ -80,16 +65,6 @@ pub fn select(args: RaysSelectArgs) -> Result<()> {
 /// selection/ in the render's output folder that holds the map.
 fn default_out(map: &Path) -> PathBuf {
     render_folder(map).join("selection")
-}
-
-/// The render's output folder of a map given as that folder, its raymap/ folder or a stream file in it.
-pub fn render_folder(map: &Path) -> PathBuf {
-    let dir = if map.is_file() { map.parent().unwrap_or(Path::new(".")) } else { map };
-    if dir.join("raymap").is_dir() {
-        dir.to_path_buf()
-    } else {
-        dir.parent().map_or_else(|| PathBuf::from("."), Path::to_path_buf)
-    }
 }
 
 /// Reads every stream of the map at `map`, tests each path against `expr` and keeps the first `limit` matches

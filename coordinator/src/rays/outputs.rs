@@ -1,8 +1,8 @@
 //! What `rays select` writes: an overlay PNG of the selected paths over the render's preview, the paths as OBJ
 //! polylines, and a report of their vertices as JSON and as a readable table.
 
+use super::{render_folder, Selection};
 use crate::cli::PathColour;
-use crate::rays_command::{render_folder, Selection};
 use anyhow::{Context, Result};
 use photonfarm::ray_map::path::NO_OBJECT;
 use photonfarm::ray_map::{Events, MapHeader, PathKind, RecordedPath};
@@ -41,8 +41,8 @@ pub fn write_all(
     match Scene::load(Path::new(&header.scene)) {
         Ok(scene) => {
             if scene.hash != header.scene_hash {
-                eprintln!(
-                    "note: {} changed since the map was recorded; the overlay uses its camera as it is now",
+                tracing::warn!(
+                    "{} changed since the map was recorded; the overlay uses its camera as it is now",
                     header.scene
                 );
             }
@@ -50,7 +50,7 @@ pub fn write_all(
             write_overlay(&png, &render_folder(map).join("preview.png"), &scene, &sel.paths, colour)?;
             written.push(("overlay", png));
         }
-        Err(e) => eprintln!("note: no overlay: the map's scene {} cannot be loaded for its camera ({e})", header.scene),
+        Err(e) => tracing::warn!("no overlay: the map's scene {} cannot be loaded for its camera ({e})", header.scene),
     }
     Ok(written)
 }
@@ -243,7 +243,7 @@ fn write_overlay(
     let cam = &scene.camera;
     let (w, h) = (cam.width as usize, cam.height as usize);
     let background = read_rgb8(preview, w, h).unwrap_or_else(|e| {
-        eprintln!("note: the overlay is drawn on black: {e}");
+        tracing::warn!("the overlay is drawn on black: {e}");
         vec![0; w * h * 3]
     });
     let mut acc = vec![0f32; w * h * 3];

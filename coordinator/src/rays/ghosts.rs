@@ -2,8 +2,8 @@
 //! reflections (camera paths, and light paths whose ghost chain registered on the sensor), by their share of the ghost light the recorded paths carry, with each pair's footprint on the
 //! image, and compares the recorded ghost light with the render's ghost layer.
 
+use super::render_folder;
 use crate::cli::RaysGhostsArgs;
-use crate::rays_command::render_folder;
 use anyhow::{bail, Context, Result};
 use photonfarm::color::luminance;
 use photonfarm::ray_map::reader::open_streams;
@@ -87,7 +87,7 @@ pub fn ghosts(args: RaysGhostsArgs) -> Result<()> {
             portions.push(p);
         }
         if let Some(bytes) = s.truncated_bytes() {
-            eprintln!("note: {} ends inside a portion; its last {bytes} bytes were left", s.path().display());
+            tracing::warn!("{} ends inside a portion; its last {bytes} bytes were left", s.path().display());
         }
     }
     // A light path's weight is what it registered before the division by its phase's light paths; the record
@@ -174,7 +174,7 @@ pub fn ghosts(args: RaysGhostsArgs) -> Result<()> {
             image_total,
             100.0 * total / header.fraction / image_total.max(f64::MIN_POSITIVE)
         ),
-        Err(e) => eprintln!("note: no comparison with the ghost layer: {e:#}"),
+        Err(e) => tracing::warn!("no comparison with the ghost layer: {e:#}"),
     }
     std::fs::write(out.join("ghosts.txt"), &table).context("cannot write ghosts.txt")?;
     let report = serde_json::json!({
