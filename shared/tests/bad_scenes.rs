@@ -352,7 +352,8 @@ fn with_material(material: &str) -> String {
 #[test]
 fn every_material_family_loads_into_its_own_surface() {
     use photonfarm::material::{Back, Surface};
-    let cases: [(&str, fn(&Surface) -> bool); 8] = [
+    type IsFamily = fn(&Surface) -> bool;
+    let cases: [(&str, IsFamily); 8] = [
         ("type = \"conductor\"\nmaterial = \"Au\"", |s| matches!(s, Surface::Conductor { roughness: None, .. })),
         (
             "type = \"conductor\"\nmaterial = \"Cu\"\nalpha_u = 0.1\nalpha_v = 0.3",
