@@ -17,9 +17,7 @@ mod cli;
 mod cluster;
 mod live;
 mod output_folder;
-mod rays_command;
-mod rays_ghosts;
-mod rays_outputs;
+mod rays;
 mod reference_command;
 mod render_command;
 
@@ -33,8 +31,8 @@ fn main() -> std::process::ExitCode {
         cli::Command::Reference(args) => reference_command::run(args),
         cli::Command::Charts(args) => charts::run(args),
         cli::Command::Keys(cli::KeysCommand::Init { dir }) => keys_init(&dir),
-        cli::Command::Rays(cli::RaysCommand::Select(args)) => rays_command::select(args),
-        cli::Command::Rays(cli::RaysCommand::Ghosts(args)) => rays_ghosts::ghosts(args),
+        cli::Command::Rays(cli::RaysCommand::Select(args)) => rays::select::select(args),
+        cli::Command::Rays(cli::RaysCommand::Ghosts(args)) => rays::ghosts::ghosts(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

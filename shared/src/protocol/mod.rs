@@ -13,4 +13,6 @@ pub mod tls;
 pub use auth::Secret;
 pub use connection::{Connection, MessageReader, MessageWriter};
 pub use error::ProtocolError;
-pub use message::{EngineSpec, FileRef, Job, Message, Role, Snapshot, WorkerInfo, PROTOCOL_VERSION};
+pub use message::{
+    EngineSpec, FileRef, Job, Message, RayMapPortion, RayMapRequest, Role, Snapshot, WorkerInfo, PROTOCOL_VERSION,
+};

@@ -1,8 +1,9 @@
 //! What `rays select` writes: an overlay PNG of the selected paths over the render's preview, the paths as OBJ
 //! polylines, and a report of their vertices as JSON and as a readable table.
 
+use super::render_folder;
+use super::selection::Selection;
 use crate::cli::PathColour;
-use crate::rays_command::{render_folder, Selection};
 use anyhow::{Context, Result};
 use photonfarm::ray_map::path::NO_OBJECT;
 use photonfarm::ray_map::{Events, MapHeader, PathKind, RecordedPath};

@@ -2,8 +2,8 @@
 //! reflections (camera paths, and light paths whose ghost chain registered on the sensor), by their share of the ghost light the recorded paths carry, with each pair's footprint on the
 //! image, and compares the recorded ghost light with the render's ghost layer.
 
+use super::render_folder;
 use crate::cli::RaysGhostsArgs;
-use crate::rays_command::render_folder;
 use anyhow::{bail, Context, Result};
 use photonfarm::color::luminance;
 use photonfarm::material::Material;

@@ -1,12 +1,9 @@
-//! `coordinator rays select`: the rayon threads take a ray map's portions in map order, one at a time, and each
+//! A selection over a ray map: the rayon threads take the map's portions in map order, one at a time, and each
 //! decompresses its portion straight from the stream's mapping and tests it against a selection expression, each
-//! path read in place; the portions' results are combined in map order, and the first `--limit` matches go to
-//! `rays_outputs`.
+//! path read in place; the portions' results are combined in map order, and the first `limit` matches are kept.
 
-use crate::cli::RaysSelectArgs;
-use crate::rays_outputs;
-use anyhow::{bail, Context, Result};
-use indicatif::{ProgressBar, ProgressStyle};
+use anyhow::Result;
+use indicatif::ProgressBar;
 use photonfarm::ray_map::format::PORTION_HEADER_BYTES;
 use photonfarm::ray_map::reader::{open_streams, RawPortion, StreamReader};
 use photonfarm::ray_map::select::{parse, Expr};
@@ -29,67 +26,6 @@ pub struct Selection {
     pub truncated: Vec<(PathBuf, u64)>,
     /// Damaged portions, skipped (a damaged frame) or ending their stream (a damaged portion header): why.
     pub damaged: Vec<String>,
-}
-
-/// Runs `rays select`.
-pub fn select(args: RaysSelectArgs) -> Result<()> {
-    let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    if threads == 0 {
-        bail!("--threads must be at least 1");
-    }
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("cannot start the threads")?;
-    let bar = if args.quiet { ProgressBar::hidden() } else { ProgressBar::new(0) };
-    bar.set_style(
-        ProgressStyle::with_template("{bar:40} {bytes}/{total_bytes} {msg} [{elapsed_precise}]")
-            .expect("static template"),
-    );
-    let start = std::time::Instant::now();
-    let (header, selection) = pool.install(|| run_selection(&args.map, &args.expr, args.limit, &bar))?;
-    bar.finish_and_clear();
-    let seconds = start.elapsed().as_secs_f64();
-    for why in &selection.damaged {
-        eprintln!("warning: {why}");
-    }
-    for (file, bytes) in &selection.truncated {
-        eprintln!(
-            "note: {} ends inside a portion (a stopped run): its last {bytes} bytes were left, every whole portion was read",
-            file.display()
-        );
-    }
-    say!(
-        "{} of {} paths match ({} of {} segments) in {:.2} s ({:.1} M segments/s on {threads} threads)",
-        selection.matched_paths,
-        selection.total_paths,
-        selection.matched_segments,
-        selection.total_segments,
-        seconds,
-        selection.total_segments as f64 / seconds.max(1e-9) / 1e6,
-    );
-    let out = match &args.out {
-        Some(dir) => dir.clone(),
-        None => default_out(&args.map),
-    };
-    std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
-    let written = rays_outputs::write_all(&out, &args.map, &header, &selection, &args.expr, args.colour)?;
-    for (what, file) in written {
-        say!("{what}: {}", file.display());
-    }
-    Ok(())
-}
-
-/// selection/ in the render's output folder that holds the map.
-fn default_out(map: &Path) -> PathBuf {
-    render_folder(map).join("selection")
-}
-
-/// The render's output folder of a map given as that folder, its raymap/ folder or a stream file in it.
-pub fn render_folder(map: &Path) -> PathBuf {
-    let dir = if map.is_file() { map.parent().unwrap_or(Path::new(".")) } else { map };
-    if dir.join("raymap").is_dir() {
-        dir.to_path_buf()
-    } else {
-        dir.parent().map_or_else(|| PathBuf::from("."), Path::to_path_buf)
-    }
 }
 
 /// Reads every stream of the map at `map`, tests each path against `expr` and keeps the first `limit` matches

@@ -1,0 +1,21 @@
+//! `coordinator rays`: reading the ray maps `render --ray-map` records. `selection` runs a selection
+//! expression over a map's portions in parallel; `select` is the `rays select` command, which writes what
+//! `outputs` makes of a selection (the overlay of `overlay`, the glTF scene of `gltf_export`, OBJ polylines and
+//! reports); `ghosts` is `rays ghosts`, which ranks a lens's ghost pairs. docs/ray-maps.md describes them.
+
+pub mod ghosts;
+pub mod outputs;
+pub mod select;
+pub mod selection;
+
+use std::path::{Path, PathBuf};
+
+/// The render's output folder of a map given as that folder, its raymap/ folder or a stream file in it.
+pub fn render_folder(map: &Path) -> PathBuf {
+    let dir = if map.is_file() { map.parent().unwrap_or(Path::new(".")) } else { map };
+    if dir.join("raymap").is_dir() {
+        dir.to_path_buf()
+    } else {
+        dir.parent().map_or_else(|| PathBuf::from("."), Path::to_path_buf)
+    }
+}
