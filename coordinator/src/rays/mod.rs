@@ -1,12 +1,19 @@
 //! `coordinator rays`: reading the ray maps `render --ray-map` records. `selection` runs a selection
 //! expression over a map's portions in parallel; `select` is the `rays select` command, which writes what
-//! `outputs` makes of a selection (the overlay of `overlay`, the glTF scene of `gltf_export`, OBJ polylines and
-//! reports); `ghosts` is `rays ghosts`, which ranks a lens's ghost pairs. docs/ray-maps.md describes them.
+//! `outputs` makes of a selection (the overlay of `overlay` and the side view of `section`, drawn on a `canvas`;
+//! the glTF scene of `gltf_export`; both of the latter with the scene's `surfaces` as triangles; OBJ polylines
+//! and reports); `ghosts` is
+//! `rays ghosts`, which ranks a lens's ghost pairs. docs/ray-maps.md describes them.
 
+pub mod canvas;
 pub mod ghosts;
+pub mod gltf_export;
 pub mod outputs;
+pub mod overlay;
+pub mod section;
 pub mod select;
 pub mod selection;
+pub mod surfaces;
 
 use std::path::{Path, PathBuf};
 

@@ -1,6 +1,7 @@
 //! `coordinator rays select`: runs a selection over a map (`selection`) on `--threads` threads, says what it
 //! found and writes the outputs (`outputs`).
 
+use super::overlay::OverlayStyle;
 use super::selection::run_selection;
 use super::{outputs, render_folder};
 use crate::cli::RaysSelectArgs;
@@ -43,7 +44,9 @@ pub fn select(args: RaysSelectArgs) -> Result<()> {
     );
     let out = args.out.clone().unwrap_or_else(|| render_folder(&args.map).join("selection"));
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
-    let written = outputs::write_all(&out, &args.map, &header, &selection, &args.expr, args.colour)?;
+    let pictures =
+        outputs::Pictures { overlay: OverlayStyle { colour: args.colour, max_paths: args.draw }, glb: !args.no_glb };
+    let written = outputs::write_all(&out, &args.map, &header, &selection, &args.expr, pictures)?;
     for (what, file) in written {
         say!("{what}: {}", file.display());
     }
