@@ -8,7 +8,7 @@ use super::overlay::{heaviest, relative_weights};
 use anyhow::Result;
 use glam::{Vec2, Vec3};
 use photonfarm::material::Material;
-use photonfarm::ray_map::{Events, RecordedPath};
+use photonfarm::ray_map::{Events, PathKind, RecordedPath};
 use photonfarm::scene::Scene;
 use std::path::Path;
 
@@ -21,6 +21,7 @@ const MARGIN: f32 = 0.06;
 const SURFACE: [f32; 3] = [0.5, 0.5, 0.5];
 const GLASS: [f32; 3] = [0.55, 0.7, 0.85];
 const REFLECTING: [f32; 3] = [1.0, 0.75, 0.3];
+const SENSOR: [f32; 3] = [0.9, 0.9, 0.9];
 
 /// The plane the section is drawn in: its origin (the camera's position), the direction drawn to the right
 /// (the camera's axis) and the one drawn upward (its up).
@@ -72,10 +73,13 @@ pub fn write_section(
     let weights = relative_weights(paths);
     let drawn = heaviest(&weights, max_paths);
     // A lens is drawn from its sensor to its front element; any other scene around the drawn paths' vertices.
-    let sensor = matches!(cam.lens, photonfarm::camera::Lens::Sensor { .. });
-    let region: Vec<Vec2> = if sensor && glass.iter().any(|&g| g) {
+    let sensor_half_height = match cam.lens {
+        photonfarm::camera::Lens::Sensor { width, .. } => Some(0.5 * width * cam.height as f32 / cam.width as f32),
+        _ => None,
+    };
+    let region: Vec<Vec2> = if let (Some(half), true) = (sensor_half_height, glass.iter().any(|&g| g)) {
         let lens = triangles.iter().zip(&glass).filter(|(_, g)| **g).flat_map(|(t, _)| t.iter().flatten());
-        lens.map(|&p| plane.coords(p)).chain([Vec2::ZERO]).collect()
+        lens.map(|&p| plane.coords(p)).chain([Vec2::new(0.0, -half), Vec2::new(0.0, half)]).collect()
     } else {
         drawn
             .iter()
@@ -138,12 +142,23 @@ pub fn write_section(
         }
     }
     let mut used = [false; EVENT_COLOURS.len() + 1];
+    if let Some(half) = sensor_half_height {
+        let (a, b) = (to_px(Vec2::new(0.0, -half)), to_px(Vec2::new(0.0, half)));
+        canvas.segment(a, b, 2.5, SENSOR, 0.9);
+        labels.push((b.max(Vec2::new(0.0, 18.0)) - Vec2::new(0.0, 4.0), "sensor".to_string(), SENSOR));
+    }
     // Reflections last, over everything else, as in the overlay.
     for reflections in [false, true] {
         for &i in &drawn {
             let (p, r) = (&paths[i], weights[i].sqrt());
             let (width, alpha) = (0.6 + 1.2 * r, 0.2 + 0.7 * r);
-            for (k, pair) in polylines[i].windows(2).enumerate() {
+            // A light path's story ends where it registered on the sensor.
+            let end = match p.kind {
+                PathKind::Light => p.vertices.iter().skip(1).position(|v| v.events.contains(Events::SENSOR)),
+                PathKind::Camera => None,
+            };
+            let points = &polylines[i][..end.map_or(polylines[i].len(), |k| k + 2)];
+            for (k, pair) in points.windows(2).enumerate() {
                 let events = p.vertices[k + 1].events;
                 if events.contains(Events::REFLECT) != reflections {
                     continue;
