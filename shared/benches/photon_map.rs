@@ -14,10 +14,12 @@ use photonfarm::color::Rgb;
 use photonfarm::geometry::SurfaceHit;
 use photonfarm::integrator::Layer;
 use photonfarm::pbpm::backward_pass::BackwardStats;
+use photonfarm::pbpm::photon::PhotonLists;
 use photonfarm::pbpm::{
     gather, trace_camera_path, trace_light_path, BackwardPhoton, BackwardSettings, ForwardStats, GatherPoint,
     LightEvent, LightSettings, LightVertex, PhotonMap, SortedGathers,
 };
+use photonfarm::ray_map::Unrecorded;
 use photonfarm::render::{Method, RenderSettings};
 use photonfarm::sampling::{Pass, Sampler};
 use photonfarm::scene::Scene;
@@ -49,6 +51,7 @@ impl OwnedVertex {
             flux: self.flux,
             m: self.m,
             all_specular: self.all_specular,
+            all_pass: self.all_specular,
             spectrum: 0,
             phase: &PhaseSpectrum::RGB,
         }
@@ -71,13 +74,14 @@ fn backward_photons(scene: &Scene, settings: &RenderSettings) -> Vec<BackwardPho
         spectrum: PhaseSpectrum::RGB,
         sensor_ghosts: false,
     };
-    let mut photons = Vec::new();
+    let (mut photons, mut vertices) = (Vec::new(), Vec::new());
     let mut stats = BackwardStats::default();
     for pixel in 0..cam.pixel_count() {
         let (x, y) = ((pixel % cam.width as usize) as u32, (pixel / cam.width as usize) as u32);
         let mut s = Sampler::new(settings.seed, Pass::Camera, PHASE, pixel as u64);
         let ray = cam.generate_ray(x, y, s.next_2d(), s.next_2d());
-        trace_camera_path(scene, &bs, pixel as u32, ray, &mut s, &mut stats, &mut |b| photons.push(b));
+        let store = &mut PhotonLists { photons: &mut photons, vertices: &mut vertices };
+        trace_camera_path(scene, &bs, pixel as u32, ray, &mut s, &mut stats, store, &mut Unrecorded);
     }
     photons
 }
@@ -89,11 +93,26 @@ fn light_vertices(scene: &Scene, settings: &RenderSettings) -> Vec<OwnedVertex> 
     for i in 0..settings.light_paths_per_phase(scene.camera.pixel_count()) {
         let mut s = Sampler::new(settings.seed, Pass::Light, PHASE, i);
         let light = LightSettings { max_depth: settings.max_depth, sensor: false, vertices: true, ghost_paths: 0 };
-        trace_light_path(scene, light, &PhaseSpectrum::RGB, i, &mut s, &mut stats, &mut |e: &LightEvent| {
-            if let LightEvent::Vertex(v) = e {
-                vertices.push(OwnedVertex { hit: *v.hit, wi: v.wi, flux: v.flux, m: v.m, all_specular: v.all_specular })
-            }
-        });
+        trace_light_path(
+            scene,
+            light,
+            &PhaseSpectrum::RGB,
+            i,
+            &mut s,
+            &mut stats,
+            &mut |e: &LightEvent| {
+                if let LightEvent::Vertex(v) = e {
+                    vertices.push(OwnedVertex {
+                        hit: *v.hit,
+                        wi: v.wi,
+                        flux: v.flux,
+                        m: v.m,
+                        all_specular: v.all_specular,
+                    })
+                }
+            },
+            &mut Unrecorded,
+        );
     }
     vertices
 }

@@ -7,6 +7,7 @@
 
 use photonfarm::color::{luminance_f64, Rgb};
 use photonfarm::pbpm::{trace_ghost_paths, trace_light_path, ForwardStats, LightEvent, LightSettings};
+use photonfarm::ray_map::Unrecorded;
 use photonfarm::render::{Method, RenderSettings};
 use photonfarm::sampling::Sampler;
 use photonfarm::scene::Scene;
@@ -64,7 +65,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 ghost_pixels[hit.pixel as usize] += 1;
                 this_phase[hit.pixel as usize] += y / pixels as f64;
             };
-            trace_light_path(&scene, light, &spectrum, index, &mut sampler, &mut stats, &mut visit);
+            trace_light_path(&scene, light, &spectrum, index, &mut sampler, &mut stats, &mut visit, &mut Unrecorded);
             trace_ghost_paths(
                 &scene,
                 light,

@@ -7,9 +7,7 @@
 use crate::camera::{Camera, Lens, RearElement};
 use crate::geometry::{LensSurface, SurfaceHit};
 use crate::light::{Light, AIMED_FRACTION};
-use crate::material::Material;
 use crate::scene::Scene;
-use glam::Vec3;
 
 /// The auxiliary layer (and EXR layer) holding ghost light.
 pub const GHOST_LAYER: &str = "ghost";
@@ -19,7 +17,7 @@ pub const GHOST_LAYER: &str = "ghost";
 /// lens to reflect in, and a lens of mirrors and coatings alone has no dielectric surface.
 pub fn scene_can_make_ghosts(scene: &Scene) -> bool {
     matches!(scene.camera.lens, crate::camera::Lens::Sensor { .. })
-        && scene.objects.iter().any(|o| matches!(scene.materials[o.material as usize], Material::Dielectric { .. }))
+        && scene.objects.iter().any(|o| scene.materials[o.material as usize].is_dielectric())
 }
 
 /// True when light paths register the ghost chains on the scene's sensor and camera paths leave those chains to
@@ -115,39 +113,4 @@ pub fn lens_images_by_light_paths(scene: &Scene, front: &RearElement) -> Vec<boo
 #[inline]
 pub fn light_side_owns(scene: &Scene, hit: &SurfaceHit, ghost: bool, segments: u32) -> bool {
     ghost || (segments >= 2 && scene.lights.lens_image_by_light_paths_at(hit))
-}
-
-/// True when the direction `wi` sampled at `material` for outgoing `wo` is a reflection at a dielectric: the
-/// path stays on the side of the surface it came from. Told by the geometric normal rather than by the
-/// material's branch, so that it needs nothing from the material's sampling code; the two agree wherever the
-/// shading normal is the geometric one, as on the analytic lens surfaces.
-#[inline]
-pub fn is_dielectric_reflection(material: &Material, hit: &SurfaceHit, wo: Vec3, wi: Vec3) -> bool {
-    matches!(material, Material::Dielectric { .. }) && wo.dot(hit.ng) * wi.dot(hit.ng) > 0.0
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::material::Transport;
-    use glam::Vec2;
-
-    #[test]
-    fn reflection_and_refraction_at_glass_are_told_apart_and_other_materials_never_reflect_a_ghost() {
-        let hit = SurfaceHit { t: 1.0, p: Vec3::ZERO, ng: Vec3::Z, ns: Vec3::Z, object: 0, triangle: 0 };
-        let glass = Material::Dielectric {
-            ior: crate::spectrum::RefractiveIndex::constant(1.5),
-            ext_ior: crate::spectrum::RefractiveIndex::constant(1.0),
-            anti_reflection: false,
-        };
-        let wo = Vec3::new(0.6, 0.0, 0.8);
-        // u.x = 0 picks the reflection branch (F > 0), u.x near 1 the refraction.
-        let r = glass.sample(&hit, wo, Vec2::ZERO, Transport::Radiance).unwrap();
-        let t = glass.sample(&hit, wo, Vec2::new(0.999, 0.0), Transport::Radiance).unwrap();
-        assert!(is_dielectric_reflection(&glass, &hit, wo, r.wi));
-        assert!(!is_dielectric_reflection(&glass, &hit, wo, t.wi));
-        let mirror = Material::Mirror { reflectance: crate::color::Rgb::ONE };
-        let m = mirror.sample(&hit, wo, Vec2::ZERO, Transport::Radiance).unwrap();
-        assert!(!is_dielectric_reflection(&mirror, &hit, wo, m.wi));
-    }
 }

@@ -43,6 +43,7 @@
 //! `accumulation::delta` bytes.
 
 pub mod accumulation;
+pub mod bsdf;
 pub mod camera;
 pub mod color;
 pub mod geometry;

@@ -6,7 +6,7 @@ use crate::color::{luminance, Rgb};
 use crate::geometry::{SceneGeometry, SurfaceHit};
 use crate::sampling::{concentric_disk, cosine_hemisphere};
 use crate::sampling::{uniform_cone, uniform_sphere, uniform_triangle, Discrete, Frame};
-use crate::texture::{barycentric, interpolate_uv, Texture};
+use crate::texture::{barycentric, interpolate_uv, Bitmap};
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 use std::sync::Arc;
@@ -125,7 +125,7 @@ fn disc_pdf(disc: &RearElement, density: &impl AimDensity, origin: Vec3, directi
 /// An emission texture on one emitting triangle: its radiance is `emission` times the texture at the point.
 #[derive(Clone, Debug)]
 pub struct EmissionTexture {
-    pub texture: Arc<Texture>,
+    pub texture: Arc<Bitmap>,
     /// The triangle's vertices, to find the texture coordinates of a point hit on it.
     pub vertices: [Vec3; 3],
     /// Texture coordinates of the vertices.

@@ -163,6 +163,12 @@ impl Frame {
     pub fn to_world(&self, v: Vec3) -> Vec3 {
         self.s * v.x + self.t * v.y + self.n * v.z
     }
+
+    /// World to local coordinates.
+    #[inline]
+    pub fn to_local(&self, v: Vec3) -> Vec3 {
+        Vec3::new(v.dot(self.s), v.dot(self.t), v.dot(self.n))
+    }
 }
 
 /// Cosine-weighted direction in the local hemisphere around +z; pdf = cos θ / π.

@@ -5,8 +5,8 @@
 mod common;
 
 use common::{mean_sem, region_phase_means, scene, settings};
+use photonfarm::bsdf::fresnel::fresnel_dielectric;
 use photonfarm::integrator::Layer;
-use photonfarm::material::fresnel_dielectric;
 use photonfarm::render::{Engine, Method};
 use std::f64::consts::PI;
 

@@ -11,6 +11,7 @@ use photonfarm::color::luminance_f64;
 use photonfarm::ghost::GHOST_LAYER;
 use photonfarm::pbpm::ghost_aim::{RINGS, SECTORS};
 use photonfarm::pbpm::{trace_ghost_paths, trace_light_path, ForwardStats, GhostPair, LightEvent, LightSettings};
+use photonfarm::ray_map::Unrecorded;
 use photonfarm::render::{Engine, Method};
 use photonfarm::sampling::{Frame, Sampler};
 use photonfarm::scene::Scene;
@@ -177,7 +178,7 @@ fn light_half(scene: &Scene, paths: u64, ghost_paths: u32) -> ((f64, f64), u64) 
             }
             _ => {}
         };
-        trace_light_path(scene, settings, &PhaseSpectrum::RGB, index, &mut s, &mut stats, &mut visit);
+        trace_light_path(scene, settings, &PhaseSpectrum::RGB, index, &mut s, &mut stats, &mut visit, &mut Unrecorded);
         trace_ghost_paths(scene, settings, &PhaseSpectrum::RGB, index, 5, 1, &mut stats, &mut visit, None);
         values.push(sum);
     }

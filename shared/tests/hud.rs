@@ -6,15 +6,16 @@ mod common;
 
 use common::{mean_sem, region_phase_means, regions_phase_means, scene, settings, shipped};
 use glam::{Vec2, Vec3};
+use photonfarm::bsdf::{reflect, Transport};
 use photonfarm::camera::Lens;
 use photonfarm::color::{luminance, Rgb};
 use photonfarm::geometry::{ray::offset_origin, Ray, SurfaceHit};
 use photonfarm::integrator::Layer;
-use photonfarm::material::{reflect, Material, Transport};
+use photonfarm::material::{Material, Surface};
 use photonfarm::render::{Engine, Method};
 use photonfarm::sampling::{Pass, Sampler};
 use photonfarm::scene::Scene;
-use photonfarm::texture::{barycentric, interpolate_uv, Texture};
+use photonfarm::texture::{barycentric, interpolate_uv, Bitmap};
 use std::path::{Path, PathBuf};
 
 /// The distance from the eye at which the scene file says the virtual image lies.
@@ -34,8 +35,8 @@ fn reflect_to(scene: &Scene, mut ray: Ray, target: &str) -> Option<(Vec<SurfaceH
         if object_name(scene, &hit) == target {
             return Some((hits, ray.direction));
         }
-        match scene.materials[scene.objects[hit.object as usize].material as usize] {
-            Material::Mirror { .. } | Material::Coating { .. } => {
+        match scene.materials[scene.objects[hit.object as usize].material as usize].front {
+            Surface::Conductor { roughness: None, .. } | Surface::Coating { .. } => {
                 let wi = reflect(-ray.direction, hit.ns);
                 ray = Ray::new(offset_origin(hit.p, hit.ng, wi), wi);
             }
@@ -166,8 +167,8 @@ fn coating_of(scene: &Scene) -> (Rgb, Rgb) {
     scene
         .materials
         .iter()
-        .find_map(|m| match *m {
-            Material::Coating { reflectance, transmittance } => Some((reflectance, transmittance)),
+        .find_map(|m| match m.front {
+            Surface::Coating { reflectance, transmittance } => Some((reflectance, transmittance)),
             _ => None,
         })
         .expect("the HUD scene has a coating combiner")
@@ -176,7 +177,7 @@ fn coating_of(scene: &Scene) -> (Rgb, Rgb) {
 #[test]
 fn the_combiner_reflects_r_and_transmits_t_of_the_incident_energy_in_both_transport_modes() {
     let (r, t) = coating_of(&shipped("hud.toml"));
-    let m = Material::Coating { reflectance: r, transmittance: t };
+    let m = Material::two_sided(Surface::Coating { reflectance: r, transmittance: t });
     let n = Vec3::new(0.0, -1.0, -1.0).normalize();
     let hit = SurfaceHit { t: 1.0, p: Vec3::ZERO, ng: n, ns: n, object: 0, triangle: 0 };
     let wo = Vec3::new(0.1, -0.2, -1.0).normalize();
@@ -185,8 +186,9 @@ fn the_combiner_reflects_r_and_transmits_t_of_the_incident_energy_in_both_transp
         let count = 200_000;
         let (mut reflected, mut transmitted) = (Vec::with_capacity(count), Vec::with_capacity(count));
         for _ in 0..count {
-            let s = m.sample(&hit, wo, sampler.next_2d(), mode).expect("the coating never absorbs a whole sample");
-            assert!(s.delta);
+            let bsdf = m.bsdf(&hit, Vec2::ZERO, wo);
+            let s = bsdf.sample(wo, sampler.next_2d(), mode).expect("the coating never absorbs a whole sample");
+            assert!(s.is_delta());
             let y = luminance(s.weight) as f64;
             if s.wi.dot(wo) > -0.999 {
                 assert!((s.wi - reflect(wo, n)).length() < 1e-5, "a reflection goes the mirror way");
@@ -284,25 +286,25 @@ fn an_srgb_png_decodes_to_the_right_linear_values_in_every_colour_type() {
     }
     let rgb = [0u8, 10, 128, 188, 255, 64];
     write_png(&dir.join("rgb.png"), 2, 1, png::ColorType::Rgb, &rgb);
-    let t = Texture::from_png(&std::fs::read(dir.join("rgb.png")).unwrap()).unwrap();
+    let t = Bitmap::from_png(&std::fs::read(dir.join("rgb.png")).unwrap()).unwrap();
     assert_eq!((t.width(), t.height()), (2, 1));
     assert!((t.texel(0, 0) - Vec3::new(srgb(0), srgb(10), srgb(128))).abs().max_element() < 1e-6);
     assert!((t.texel(1, 0) - Vec3::new(srgb(188), srgb(255), srgb(64))).abs().max_element() < 1e-6);
     // Grey, grey with alpha and RGBA: the same curve, alpha ignored.
     write_png(&dir.join("grey.png"), 1, 2, png::ColorType::Grayscale, &[128, 188]);
-    let g = Texture::from_png(&std::fs::read(dir.join("grey.png")).unwrap()).unwrap();
+    let g = Bitmap::from_png(&std::fs::read(dir.join("grey.png")).unwrap()).unwrap();
     assert!((g.texel(0, 0) - Vec3::splat(srgb(128))).abs().max_element() < 1e-6);
     assert!((g.texel(0, 1) - Vec3::splat(srgb(188))).abs().max_element() < 1e-6);
     write_png(&dir.join("ga.png"), 1, 1, png::ColorType::GrayscaleAlpha, &[188, 7]);
-    let ga = Texture::from_png(&std::fs::read(dir.join("ga.png")).unwrap()).unwrap();
+    let ga = Bitmap::from_png(&std::fs::read(dir.join("ga.png")).unwrap()).unwrap();
     assert!((ga.texel(0, 0) - Vec3::splat(srgb(188))).abs().max_element() < 1e-6);
     write_png(&dir.join("rgba.png"), 1, 1, png::ColorType::Rgba, &[255, 128, 0, 0]);
-    let rgba = Texture::from_png(&std::fs::read(dir.join("rgba.png")).unwrap()).unwrap();
+    let rgba = Bitmap::from_png(&std::fs::read(dir.join("rgba.png")).unwrap()).unwrap();
     assert!((rgba.texel(0, 0) - Vec3::new(1.0, srgb(128), 0.0)).abs().max_element() < 1e-6);
     // The mean is the mean of the linear values, not of the encoded ones.
     let mean = (srgb(0) + srgb(188)) / 2.0;
-    assert!((Texture::from_png(&std::fs::read(dir.join("rgb.png")).unwrap()).unwrap().mean().x - mean).abs() < 1e-6);
-    assert!(Texture::from_png(b"\x89PNG\r\n\x1a\nnot really").is_err());
+    assert!((Bitmap::from_png(&std::fs::read(dir.join("rgb.png")).unwrap()).unwrap().mean().x - mean).abs() < 1e-6);
+    assert!(Bitmap::from_png(b"\x89PNG\r\n\x1a\nnot really").is_err());
 }
 
 /// An 8 × 8 texture of four 4 × 4 blocks of the given sRGB colours (top row first); returns them linear.

@@ -8,13 +8,13 @@ mod common;
 use glam::{Vec2, Vec3};
 use photonfarm::accumulation::blur::{BLUR_LAYER, BLUR_SQUARES_LAYER};
 use photonfarm::accumulation::{non_finite_dropped, Accumulator, AuxLayout, PixelSums};
+use photonfarm::bsdf::Transport;
 use photonfarm::color::{luminance_f64, Rgb};
 use photonfarm::geometry::{ray::offset_origin, Ray};
 use photonfarm::ghost::GHOST_LAYER;
 use photonfarm::integrator::Layer;
 use photonfarm::integrator::LayerValues;
 use photonfarm::light::Light;
-use photonfarm::material::{Material, Transport};
 use photonfarm::pbpm::PhotonMap;
 use photonfarm::render::{Engine, Method};
 use photonfarm::scene::Scene;
@@ -128,16 +128,16 @@ fn through_lens_at(scene: &Scene, mut ray: Ray, nm: Option<f32>) -> Option<Ray> 
             // Anything but the lens (it spans z from 0 to −0.032 m) or a ray turned back.
             return None;
         }
-        let mut material = scene.material(&hit);
-        if !matches!(material, Material::Dielectric { .. }) {
+        if !scene.material_at(&hit).is_dielectric() {
             return None;
         }
-        if let Some(nm) = nm {
-            material = material.at_wavelength(&Wavelength::with_pdf(nm, 1.0));
-        }
         let wo = -ray.direction;
+        let mut bsdf = scene.bsdf(&hit, wo);
+        if let Some(nm) = nm {
+            bsdf = bsdf.at_wavelength(&Wavelength::with_pdf(nm, 1.0));
+        }
         // u.x just below 1 selects refraction wherever the Fresnel reflectance is below 1.
-        let s = material.sample(&hit, wo, Vec2::new(1.0 - 1e-7, 0.5), Transport::Radiance)?;
+        let s = bsdf.sample(wo, Vec2::new(1.0 - 1e-7, 0.5), Transport::Radiance)?;
         assert!(s.wi.dot(hit.ng) * wo.dot(hit.ng) < 0.0, "total internal reflection on a near-axial ray");
         ray = Ray::new(offset_origin(hit.p, hit.ng, s.wi), s.wi);
     }

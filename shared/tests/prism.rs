@@ -5,8 +5,9 @@
 mod common;
 
 use glam::{Vec2, Vec3};
+use photonfarm::bsdf::fresnel::fresnel_dielectric;
+use photonfarm::bsdf::{Model, Transport};
 use photonfarm::geometry::{ray::offset_origin, Ray};
-use photonfarm::material::{fresnel_dielectric, Material, Transport};
 use photonfarm::render::{Engine, Method};
 use photonfarm::scene::Scene;
 use photonfarm::spectrum::{rgb_matching, Dispersive, Wavelength, LAMBDA_MAX, LAMBDA_MIN};
@@ -49,19 +50,15 @@ fn trace_central_ray(scene: &Scene, nm: f32) -> Traced {
     let mut entry_normal = Vec3::ZERO;
     for surface in 0..2 {
         let hit = scene.geometry.intersect(&ray).expect("the beam meets the prism");
-        let m = scene.material(&hit).at_wavelength(&w);
-        let Material::Dielectric { ior, ext_ior, .. } = m else {
-            panic!("the beam's first two surfaces are the prism")
-        };
         let wo = -ray.direction;
-        let front = wo.dot(hit.ng) >= 0.0;
-        let (eta_i, eta_t) = if front { (ext_ior.d, ior.d) } else { (ior.d, ext_ior.d) };
-        transmitted *= 1.0 - fresnel_dielectric(wo.dot(hit.ng).abs(), eta_i, eta_t) as f64;
+        let m = scene.bsdf(&hit, wo).at_wavelength(&w);
+        let Model::Dielectric(d) = m.model else { panic!("the beam's first two surfaces are the prism") };
+        transmitted *= 1.0 - fresnel_dielectric(wo.dot(hit.ng).abs(), d.eta_o.d, d.eta_t.d) as f64;
         if surface == 0 {
             entry_normal = hit.ng;
         }
         // u = 1⁻ picks refraction whenever some light is transmitted.
-        let s = m.sample(&hit, wo, Vec2::new(0.999_999, 0.0), Transport::Importance).expect("refracts");
+        let s = m.sample(wo, Vec2::new(0.999_999, 0.0), Transport::Importance).expect("refracts");
         ray = Ray::new(offset_origin(hit.p, hit.ng, s.wi), s.wi);
     }
     let screen = scene.geometry.intersect(&ray).expect("the beam reaches the screen").p;

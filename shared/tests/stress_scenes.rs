@@ -8,9 +8,9 @@ mod common;
 use common::{mean_sem, regions_phase_means, settings, shipped};
 use glam::{Vec2, Vec3};
 use photonfarm::accumulation::{non_finite_dropped, LitMask};
+use photonfarm::bsdf::Transport;
 use photonfarm::geometry::{ray::offset_origin, Ray, SurfaceHit};
 use photonfarm::integrator::Layer;
-use photonfarm::material::Transport;
 use photonfarm::render::images::layer_images;
 use photonfarm::render::{Engine, Method};
 use photonfarm::scene::Scene;
@@ -115,12 +115,12 @@ fn check_delta_falls<'s>(scene: &'s Scene, seed: u64, regions: Vec<Region>, n: u
 fn landing(scene: &Scene, mut ray: Ray) -> Option<SurfaceHit> {
     for _ in 0..16 {
         let hit = scene.geometry.intersect(&ray)?;
-        let material = scene.material(&hit);
-        if !material.is_delta() {
+        let bsdf = scene.bsdf(&hit, -ray.direction);
+        if bsdf.has_non_delta() {
             return Some(hit);
         }
         // u.x just below 1 picks transmission whenever the Fresnel reflectance is below 1.
-        let s = material.sample(&hit, -ray.direction, Vec2::new(0.999_999, 0.5), Transport::Radiance)?;
+        let s = bsdf.sample(-ray.direction, Vec2::new(0.999_999, 0.5), Transport::Radiance)?;
         ray = Ray::new(offset_origin(hit.p, hit.ng, s.wi), s.wi);
     }
     None

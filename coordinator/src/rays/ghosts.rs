@@ -6,7 +6,6 @@ use super::render_folder;
 use crate::cli::RaysGhostsArgs;
 use anyhow::{bail, Context, Result};
 use photonfarm::color::luminance;
-use photonfarm::material::Material;
 use photonfarm::ray_map::reader::open_streams;
 use photonfarm::ray_map::{Events, PathKind};
 use photonfarm::render::Method;
@@ -74,11 +73,8 @@ pub fn ghosts(args: RaysGhostsArgs) -> Result<()> {
     let header = streams[0].header().clone();
     let scene = Scene::load(Path::new(&header.scene))
         .with_context(|| format!("the map's scene {} is needed for its lens surfaces", header.scene))?;
-    let dielectric: Vec<bool> = scene
-        .objects
-        .iter()
-        .map(|o| matches!(scene.materials[o.material as usize], Material::Dielectric { .. }))
-        .collect();
+    let dielectric: Vec<bool> =
+        scene.objects.iter().map(|o| scene.materials[o.material as usize].is_dielectric()).collect();
     if !dielectric.iter().any(|&d| d) {
         bail!("{} has no dielectric surface, so no ghosts", header.scene);
     }

@@ -9,7 +9,8 @@ use glam::Vec3;
 use gltf_json as json;
 use json::validation::Checked::Valid;
 use json::validation::USize64;
-use photonfarm::material::Material;
+use photonfarm::material::{Material, Surface};
+use photonfarm::texture::Texture;
 use photonfarm::ray_map::{PathKind, RecordedPath};
 use photonfarm::scene::Scene;
 use std::borrow::Cow;
@@ -147,13 +148,24 @@ impl Builder {
     }
 }
 
-/// A material's base colour (with its opacity) and whether it is metal, as a viewer would show the surface.
+/// A material's base colour (with its opacity) and whether it is metal, as a viewer would show the surface: a
+/// textured parameter shows its mean, a conductor its reflectance at normal incidence.
 fn look(material: &Material) -> ([f32; 4], f32) {
-    match material {
-        Material::Diffuse { albedo } => ([albedo.x, albedo.y, albedo.z, 1.0], 0.0),
-        Material::Mirror { reflectance } => ([reflectance.x, reflectance.y, reflectance.z, 1.0], 1.0),
-        Material::Dielectric { .. } => ([0.75, 0.88, 1.0, 0.25], 0.0),
-        Material::Coating { reflectance, transmittance } => {
+    let mean = |t: &Texture| match t {
+        Texture::Constant(c) => *c,
+        Texture::Bitmap { image, factor } => image.mean() * *factor,
+    };
+    match &material.front {
+        Surface::Diffuse { reflectance } => {
+            let c = mean(reflectance);
+            ([c.x, c.y, c.z, 1.0], 0.0)
+        }
+        Surface::Conductor { fresnel, specular, .. } => {
+            let c = fresnel.at(1.0) * mean(specular);
+            ([c.x, c.y, c.z, 1.0], 1.0)
+        }
+        Surface::Dielectric { .. } => ([0.75, 0.88, 1.0, 0.25], 0.0),
+        Surface::Coating { reflectance, transmittance } => {
             let t = (transmittance.x + transmittance.y + transmittance.z) / 3.0;
             ([reflectance.x, reflectance.y, reflectance.z, (1.0 - t).clamp(0.15, 1.0)], 0.0)
         }

@@ -93,7 +93,7 @@ pub fn image_points(scene: &Scene, path: &RecordedPath, world: &[Vec3]) -> Vec<(
     let in_lens = |object: u16| {
         sensor
             && scene.objects.get(object as usize).is_some_and(|o| {
-                matches!(scene.materials[o.material as usize], photonfarm::material::Material::Dielectric { .. })
+                scene.materials[o.material as usize].is_dielectric()
             })
     };
     let pixel_centre = |pixel: u32| {

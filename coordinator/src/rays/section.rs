@@ -7,7 +7,6 @@ use super::canvas::{event_colour, Canvas, EVENT_COLOURS, OTHER_COLOUR};
 use super::overlay::{heaviest, relative_weights};
 use anyhow::Result;
 use glam::{Vec2, Vec3};
-use photonfarm::material::Material;
 use photonfarm::ray_map::{Events, PathKind, RecordedPath};
 use photonfarm::scene::Scene;
 use std::path::Path;
@@ -68,7 +67,7 @@ pub fn write_section(
     let glass: Vec<bool> = scene
         .objects
         .iter()
-        .map(|o| matches!(scene.materials[o.material as usize], Material::Dielectric { .. }))
+        .map(|o| scene.materials[o.material as usize].is_dielectric())
         .collect();
     let weights = relative_weights(paths);
     let drawn = heaviest(&weights, max_paths);

@@ -73,7 +73,8 @@ fn sees_emitter(scene: &Scene, rays: impl Iterator<Item = Ray>, max_depth: u32) 
         if segment >= max_depth {
             continue;
         }
-        for (s, p) in scene.material(&hit).delta_branches(&hit, -ray.direction) {
+        let wo = -ray.direction;
+        for (s, p) in scene.bsdf(&hit, wo).delta_branches(wo) {
             if s.weight != Rgb::ZERO && probability * p >= MIN_BRANCH_PROBABILITY {
                 let ray = Ray::new(offset_origin(hit.p, hit.ng, s.wi), s.wi);
                 frontier.push(Branch { ray, segment: segment + 1, probability: probability * p });
@@ -90,21 +91,22 @@ mod tests {
     #[test]
     fn delta_branches_of_glass_are_a_reflection_and_a_refraction_whose_probabilities_add_to_one() {
         use crate::geometry::SurfaceHit;
-        use crate::material::Material;
+        use crate::material::{Material, Surface};
         use crate::spectrum::RefractiveIndex;
-        use glam::Vec3;
-        let glass = Material::Dielectric {
+        use crate::texture::Texture;
+        use glam::{Vec2, Vec3};
+        let glass = Material::two_sided(Surface::Dielectric {
             ior: RefractiveIndex::constant(1.5),
             ext_ior: RefractiveIndex::constant(1.0),
             anti_reflection: false,
-        };
+        });
         let hit = SurfaceHit { t: 1.0, p: Vec3::ZERO, ng: Vec3::Z, ns: Vec3::Z, object: 0, triangle: u32::MAX };
         let wo = Vec3::new(0.3, 0.0, 1.0).normalize();
-        let b = glass.delta_branches(&hit, wo);
+        let b = glass.bsdf(&hit, Vec2::ZERO, wo).delta_branches(wo);
         assert_eq!(b.len(), 2);
         assert!((b[0].1 + b[1].1 - 1.0).abs() < 1e-6);
         assert!(b[0].0.wi.z > 0.0 && b[1].0.wi.z < 0.0, "reflected up, refracted down");
-        let diffuse = Material::Diffuse { albedo: Rgb::ONE };
-        assert!(diffuse.delta_branches(&hit, wo).is_empty());
+        let diffuse = Material::two_sided(Surface::Diffuse { reflectance: Texture::Constant(Rgb::ONE) });
+        assert!(diffuse.bsdf(&hit, Vec2::ZERO, wo).delta_branches(wo).is_empty());
     }
 }

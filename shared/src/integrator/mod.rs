@@ -1,12 +1,14 @@
 //! Camera-path pieces shared by the reference path tracer and the PBPM backward pass: the image layers and
 //! next-event estimation of direct light.
 
+pub mod camera_path;
 mod lit_pixels;
 pub mod path_tracer;
+pub mod walk;
 
+use crate::bsdf::{Bsdf, Transport};
 use crate::color::Rgb;
 use crate::geometry::{ray::offset_origin, SurfaceHit};
-use crate::material::diffuse_f;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::spectrum::PathSpectrum;
@@ -53,36 +55,40 @@ pub(crate) fn add_contribution(out: &mut LayerValues, ghost: &mut Option<Rgb>, l
     }
 }
 
-/// A next-event estimate at a diffuse vertex, before MIS weighting and before the path throughput.
+/// A next-event estimate at a vertex, before MIS weighting and before the path throughput.
 #[derive(Clone, Copy, Debug)]
 pub struct DirectSample {
-    /// f · Li · cos / pdf_light.
+    /// f · Li · |cos| / pdf_light.
     pub value: Rgb,
     /// Solid-angle pdf of the light sample (selection included).
     pub light_pdf: f32,
     /// True for point and spot lights, which the BSDF can never hit.
     pub delta: bool,
-    /// Solid-angle pdf with which cosine sampling of the BSDF would have picked the same direction.
+    /// Solid-angle pdf with which sampling the BSDF would have picked the same direction.
     pub bsdf_pdf: f32,
 }
 
-/// Samples direct light at a diffuse vertex with outgoing direction `wo` (paper eq. 5's light term), in the
-/// path's colour terms (`albedo` already is). Returns None when the sample carries nothing (back side,
-/// occluded).
+/// Samples direct light at a vertex with BSDF `bsdf` and outgoing direction `wo` (paper eq. 5's light term),
+/// in the path's colour terms (`bsdf` already is), over the BSDF's non-delta lobes or, with `stored_only`, over
+/// its stored ones. Returns None when the sample carries nothing (wrong side, occluded).
 pub fn sample_direct<const S: bool>(
     scene: &Scene,
     hit: &SurfaceHit,
+    bsdf: &Bsdf,
     wo: Vec3,
-    albedo: Rgb,
+    stored_only: bool,
     path: &PathSpectrum<S>,
     sampler: &mut Sampler,
 ) -> Option<DirectSample> {
     let u_select = sampler.next_f32();
     let u = sampler.next_2d();
     let ls = scene.lights.sample_incident(&scene.geometry, hit.p, u_select, u)?;
-    let f = diffuse_f(albedo, hit.ng, wo, ls.wi);
-    let ns = if wo.dot(hit.ng) >= 0.0 { hit.ns } else { -hit.ns };
-    let cos = ls.wi.dot(ns);
+    let f = if stored_only {
+        bsdf.eval_stored(wo, ls.wi, Transport::Radiance)
+    } else {
+        bsdf.eval(wo, ls.wi, Transport::Radiance)
+    };
+    let cos = ls.wi.dot(bsdf.shading_normal()).abs();
     if f == Rgb::ZERO || cos <= 0.0 || ls.li == Rgb::ZERO {
         return None;
     }
@@ -94,6 +100,6 @@ pub fn sample_direct<const S: bool>(
         value: f * path.quantity(ls.li) * (cos / ls.pdf),
         light_pdf: ls.pdf,
         delta: ls.delta,
-        bsdf_pdf: cos * std::f32::consts::FRAC_1_PI,
+        bsdf_pdf: bsdf.pdf(wo, ls.wi),
     })
 }

@@ -3,11 +3,12 @@
 
 use super::inner_disc::merge_blur;
 use super::photon_map::PhotonMap;
+use crate::bsdf::{Bsdf, BsdfSample, Transport};
 use crate::color::{luminance, Rgb};
 use crate::geometry::{ray::offset_origin, Ray, SurfaceHit};
+use crate::integrator::walk::{walk, Technique, Walk};
 use crate::integrator::Layer;
-use crate::material::Transport;
-use crate::ray_map::{events::scatter_event, Events, RecordedPath};
+use crate::ray_map::PathLog;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::spectrum::{join, PathSpectrum, PhaseSpectrum};
@@ -75,8 +76,11 @@ pub struct LightVertex<'a> {
     pub flux: Rgb,
     /// Light segments from the light to this vertex.
     pub m: u32,
-    /// True when y1 … y_{m−1} are all specular.
+    /// True when y1 … y_{m−1} all scattered through delta lobes.
     pub all_specular: bool,
+    /// True when y1 … y_{m−1} all scattered through pass lobes (delta or sharp glossy: none a photon could
+    /// have gathered).
+    pub all_pass: bool,
     /// 0 for an RGB light path; 1 + its wavelength class once it turned spectral, and `flux` then holds its
     /// value at that wavelength in every channel.
     pub spectrum: u8,
@@ -125,6 +129,9 @@ pub struct LightSettings {
 
 /// Traces light path number `index` of a phase and hands every diffuse vertex with m ≥ 2 and every sensor hit
 /// to `visit`, which gathers them into one or more phases. The index deals the path its wavelength class.
+/// `log` records the path (a ray map's, its source the light's emitter, `ray_map::emitter_of`) or, as
+/// `Unrecorded`, costs nothing; the image is the same either way.
+#[allow(clippy::too_many_arguments)]
 pub fn trace_light_path(
     scene: &Scene,
     settings: LightSettings,
@@ -133,22 +140,7 @@ pub fn trace_light_path(
     sampler: &mut Sampler,
     stats: &mut ForwardStats,
     visit: &mut impl FnMut(&LightEvent),
-) {
-    trace_light_path_logged(scene, settings, spectrum, index, sampler, stats, visit, None)
-}
-
-/// `trace_light_path` that also records the path's vertices and events into `log` (a ray map's path) when
-/// given one, its source being the light's emitter (`ray_map::emitter_of`); the image is the same either way.
-#[allow(clippy::too_many_arguments)]
-pub fn trace_light_path_logged(
-    scene: &Scene,
-    settings: LightSettings,
-    spectrum: &PhaseSpectrum,
-    index: u64,
-    sampler: &mut Sampler,
-    stats: &mut ForwardStats,
-    visit: &mut impl FnMut(&LightEvent),
-    log: Option<&mut RecordedPath>,
+    log: &mut impl PathLog,
 ) {
     // An RGB phase runs the instantiation without spectral branches: RGB scenes keep their speed.
     if spectrum.wavelengths.is_some() {
@@ -168,158 +160,158 @@ fn light_path<const S: bool>(
     sampler: &mut Sampler,
     stats: &mut ForwardStats,
     visit: &mut impl FnMut(&LightEvent),
-    mut log: Option<&mut RecordedPath>,
+    log: &mut impl PathLog,
 ) {
-    let max_depth = settings.max_depth;
     stats.light_paths += 1;
     let u_select = sampler.next_f32();
     let (u_pos, u_dir) = (sampler.next_2d(), sampler.next_2d());
     let Some(e) = scene.lights.sample_emission(&scene.geometry, u_select, u_pos, u_dir) else { return };
     let origin = if e.normal == Vec3::ZERO { e.origin } else { offset_origin(e.origin, e.normal, e.direction) };
-    let mut ray = Ray::new(origin, e.direction);
     let mut beta = e.beta;
-    let mut path = PathSpectrum::<S>::start(spectrum, PhaseSpectrum::class_of(index), &mut beta);
-    let beta0 = beta.max_element();
-    let mut all_specular = true;
-    // Set once the all-specular chain so far took a reflection at a dielectric: from then on, until a diffuse
-    // vertex, a segment that crosses the sensor is a ghost the light side owns.
-    let mut ghost_chain = false;
-    // The light's image through the lens is the light side's too: a segment after at least one specular vertex
-    // that crosses the sensor registers, as a camera path of two segments or more would have hit the light.
-    let lens_image = settings.sensor && scene.lights.lens_image_by_light_paths(e.light);
-    // What the path registered on the sensor, for its recording.
-    let mut registered = Rgb::ZERO;
-    let mut m = 0u32;
-    if let Some(l) = log.as_deref_mut() {
-        l.source = crate::ray_map::emitter_of(scene, e.light);
-        l.begin(e.origin, e.normal);
-    }
-    loop {
+    let path = PathSpectrum::<S>::start(spectrum, PhaseSpectrum::class_of(index), &mut beta);
+    let mut w = Walk::new(scene, Ray::new(origin, e.direction), beta, path);
+    let mut light = LightPath {
+        settings,
+        spectrum,
+        visit,
+        beta0: beta.max_element(),
+        all_specular: true,
+        all_pass: true,
+        ghost_chain: false,
+        // The light's image through the lens is the light side's too: a segment after at least one specular
+        // vertex that crosses the sensor registers, as a camera path of two segments or more would have hit
+        // the light.
+        lens_image: settings.sensor && scene.lights.lens_image_by_light_paths(e.light),
+        sensor: None,
+        registered: Rgb::ZERO,
+        capped: false,
+    };
+    log.set_source(crate::ray_map::emitter_of(scene, e.light));
+    log.begin(e.origin, e.normal);
+    walk(&mut w, &mut light, sampler, log);
+    stats.rays += w.rays;
+    stats.capped += light.capped as u64;
+    let weight = if light.registered == Rgb::ZERO { e.beta } else { light.registered };
+    log.finish(weight, w.spectrum.wavelength_nm());
+}
+
+/// A light path's state as a technique of the walk.
+struct LightPath<'a, V> {
+    settings: LightSettings,
+    spectrum: &'a PhaseSpectrum,
+    visit: &'a mut V,
+    /// The throughput's largest channel at the light, roulette's unit.
+    beta0: f32,
+    /// True while y1 … y_m all scattered through delta lobes.
+    all_specular: bool,
+    /// True while y1 … y_m all scattered through pass lobes.
+    all_pass: bool,
+    /// Set once the all-specular chain so far took a reflection at a dielectric: from then on, until a diffuse
+    /// vertex, a segment that crosses the sensor is a ghost the light side owns.
+    ghost_chain: bool,
+    lens_image: bool,
+    /// Whether the segment being traced registers where it crosses the sensor, and if so whether as a ghost.
+    sensor: Option<bool>,
+    /// What the path registered on the sensor, for its recording.
+    registered: Rgb,
+    /// `max_depth` stopped the path while it still carried flux.
+    capped: bool,
+}
+
+impl<const S: bool, V: FnMut(&LightEvent)> Technique<S> for LightPath<'_, V> {
+    const MODE: Transport = Transport::Importance;
+
+    #[inline(always)]
+    fn before_segment(&mut self, w: &Walk<S>) {
         // Segment m + 1 reaches the sensor within max_depth segments, as a camera path's emitter hit does.
-        let registers = if ghost_chain { settings.ghost_paths == 0 } else { lens_image && m >= 1 };
-        let sensor = (registers && all_specular && m < max_depth).then_some(ghost_chain);
-        let segment = Segment { ray: &ray, beta, tag: path.tag(), sensor };
-        let Some(hit) = trace_segment(scene, spectrum, segment, stats, visit, log.as_deref_mut(), &mut registered)
-        else {
-            break;
-        };
-        m += 1;
-        let material = path.material(scene.material(&hit), &mut beta);
-        let wi = -ray.direction;
-        if material.diffuse_albedo().is_some() {
-            if !settings.vertices {
-                break;
-            }
-            if m >= 2 && m < max_depth {
-                visit(&LightEvent::Vertex(LightVertex {
-                    hit: &hit,
-                    wi,
-                    flux: beta,
-                    m,
-                    all_specular,
-                    spectrum: path.tag(),
-                    phase: spectrum,
-                }));
-            }
-            all_specular = false;
+        let m = w.segments;
+        let registers = if self.ghost_chain { self.settings.ghost_paths == 0 } else { self.lens_image && m >= 1 };
+        self.sensor = (registers && self.all_specular && m < self.settings.max_depth).then_some(self.ghost_chain);
+    }
+
+    #[inline(always)]
+    fn on_segment<L: PathLog>(&mut self, w: &Walk<S>, hit: Option<&SurfaceHit>, log: &mut L) {
+        if let Some(ghost) = self.sensor {
+            let t_max = hit.map_or(f32::INFINITY, |h| h.t);
+            let crossing = Crossing { ray: &w.ray, t_max, beta: w.beta, tag: w.spectrum.tag(), ghost };
+            self.registered += register_crossing(w.scene, self.spectrum, crossing, self.visit, log);
         }
-        // The next vertex y_{m+1} can still merge only with a photon one segment from the eye; a ghost chain
-        // may still reach the sensor on segment m + 1.
-        let sensor_next = settings.sensor && all_specular && m < max_depth;
+    }
+
+    #[inline(always)]
+    fn at_vertex<L: PathLog>(
+        &mut self,
+        w: &mut Walk<S>,
+        hit: &SurfaceHit,
+        bsdf: &Bsdf,
+        wo: Vec3,
+        _sampler: &mut Sampler,
+        _log: &mut L,
+    ) -> bool {
+        let (m, max_depth) = (w.segments, self.settings.max_depth);
+        let delta = bsdf.flags().is_specular();
+        if !self.settings.vertices && !delta {
+            return false;
+        }
+        if self.settings.vertices && bsdf.has_stored() && m >= 2 && m < max_depth {
+            (self.visit)(&LightEvent::Vertex(LightVertex {
+                hit,
+                wi: wo,
+                flux: w.beta,
+                m,
+                all_specular: self.all_specular,
+                all_pass: self.all_pass,
+                spectrum: w.spectrum.tag(),
+                phase: self.spectrum,
+            }));
+        }
+        // The next vertex y_{m+1} can still merge only with a photon one segment from the eye; a ghost chain may
+        // still reach the sensor on segment m + 1.
+        let sensor_next = self.settings.sensor && self.all_specular && delta && m < max_depth;
         if m + 2 > max_depth && !sensor_next {
-            if beta != Rgb::ZERO {
-                stats.capped += 1;
-            }
-            break;
+            self.capped = w.beta != Rgb::ZERO;
+            return false;
         }
-        let Some(s) = material.sample(&hit, wi, sampler.next_2d(), Transport::Importance) else {
-            if let Some(l) = log.as_deref_mut() {
-                l.event(Events::ABSORB);
-            }
-            break;
-        };
-        if let Some(l) = log.as_deref_mut() {
-            l.event(scatter_event(&material, &hit, wi, s.wi, s.delta));
-        }
-        if settings.sensor && all_specular && crate::ghost::is_dielectric_reflection(&material, &hit, wi, s.wi) {
-            ghost_chain = true;
-        }
-        beta *= s.weight;
-        if m >= 3 {
-            let q = (beta.max_element() / beta0).min(1.0);
-            if sampler.next_f32() >= q {
-                if let Some(l) = log.as_deref_mut() {
-                    l.event(Events::ABSORB);
-                }
-                break;
-            }
-            beta /= q;
-        }
-        ray = Ray::new(offset_origin(hit.p, hit.ng, s.wi), s.wi);
+        true
     }
-    if let Some(l) = log {
-        let weight = if registered == Rgb::ZERO { e.beta } else { registered };
-        l.finish(weight, path.wavelength_nm());
-    }
-}
 
-/// A light-path segment about to be traced: its ray, the flux it carries and its colour terms, and, when it
-/// registers where it crosses the sensor, whether its chain is a ghost.
-pub(super) struct Segment<'a> {
-    pub ray: &'a Ray,
-    pub beta: Rgb,
-    pub tag: u8,
-    pub sensor: Option<bool>,
-}
-
-/// Traces a light-path segment: counts its ray, registers it on the sensor where `s.sensor` asks (adding what it
-/// recorded to `registered`), and records where it ends into `log`. Returns its hit, None when it escaped.
-#[inline(always)]
-pub(super) fn trace_segment(
-    scene: &Scene,
-    spectrum: &PhaseSpectrum,
-    s: Segment,
-    stats: &mut ForwardStats,
-    visit: &mut impl FnMut(&LightEvent),
-    mut log: Option<&mut RecordedPath>,
-    registered: &mut Rgb,
-) -> Option<SurfaceHit> {
-    stats.rays += 1;
-    let hit = scene.geometry.intersect(s.ray);
-    if let Some(ghost) = s.sensor {
-        let t_max = hit.as_ref().map_or(f32::INFINITY, |h| h.t);
-        let crossing = Crossing { ray: s.ray, t_max, beta: s.beta, tag: s.tag, ghost };
-        *registered += register_crossing(scene, spectrum, crossing, visit, log.as_deref_mut());
-    }
-    if let Some(l) = log {
-        match &hit {
-            Some(h) => l.hit(h),
-            None => l.escape(s.ray.direction),
+    #[inline(always)]
+    fn after_sample(&mut self, _: &mut Walk<S>, _: &SurfaceHit, bsdf: &Bsdf, s: &BsdfSample, _: Rgb) -> bool {
+        if self.settings.sensor && self.all_specular && bsdf.is_dielectric_reflection(s) {
+            self.ghost_chain = true;
         }
+        self.all_specular &= s.is_delta();
+        self.all_pass &= !s.stored;
+        // A path that only brings chains to the sensor ends where its chain leaves the delta lobes.
+        self.settings.vertices || s.is_delta()
     }
-    hit
+
+    #[inline(always)]
+    fn roulette_unit(&self, w: &Walk<S>) -> Option<f32> {
+        (w.segments >= 3).then_some(self.beta0)
+    }
 }
 
 /// A light-path segment that crosses the sensor: the ray up to `t_max`, the flux it carries and its colour
 /// terms, and whether its chain is a ghost.
-struct Crossing<'a> {
-    ray: &'a Ray,
-    t_max: f32,
-    beta: Rgb,
-    tag: u8,
-    ghost: bool,
+pub(super) struct Crossing<'a> {
+    pub ray: &'a Ray,
+    pub t_max: f32,
+    pub beta: Rgb,
+    pub tag: u8,
+    pub ghost: bool,
 }
 
 /// Registers a segment that crosses the sensor on its pixel: hands the hit to `visit` and records its sensor
 /// vertex into `log`. Returns what it registered in image terms (as a pixel whose camera paths start in RGB
 /// reads it) when it records, zero otherwise.
 #[inline(always)]
-fn register_crossing(
+pub(super) fn register_crossing<L: PathLog>(
     scene: &Scene,
     spectrum: &PhaseSpectrum,
     c: Crossing,
     visit: &mut impl FnMut(&LightEvent),
-    log: Option<&mut RecordedPath>,
+    log: &mut L,
 ) -> Rgb {
     let Some((pixel, importance)) = scene.camera.sensor_pixel(c.ray.origin, c.ray.direction, c.t_max) else {
         return Rgb::ZERO;
@@ -329,8 +321,10 @@ fn register_crossing(
         return Rgb::ZERO;
     }
     visit(&LightEvent::Sensor(SensorHit { pixel, value, spectrum: c.tag, phase: spectrum, ghost: c.ghost }));
-    let Some(l) = log else { return Rgb::ZERO };
-    l.sensor(scene.camera.sensor_point(c.ray.origin, c.ray.direction), pixel);
+    if !L::RECORDS {
+        return Rgb::ZERO;
+    }
+    log.sensor(scene.camera.sensor_point(c.ray.origin, c.ray.direction), pixel);
     join(Rgb::ONE, 0, value, c.tag, spectrum)
 }
 
@@ -346,6 +340,7 @@ pub struct GatherPoint {
     pub flux: Rgb,
     pub m: u32,
     pub all_specular: bool,
+    pub all_pass: bool,
     pub spectrum: u8,
 }
 
@@ -360,6 +355,7 @@ impl LightVertex<'_> {
             flux: self.flux,
             m: self.m,
             all_specular: self.all_specular,
+            all_pass: self.all_pass,
             spectrum: self.spectrum,
         }
     }
@@ -428,16 +424,28 @@ fn gather_in<const S: bool>(
         {
             continue;
         }
-        // DESIGN §1's partition: every light path is counted by exactly one photon depth.
-        let layer = match (b.kind.k(), v.all_specular) {
-            (1, true) => Layer::Caustic,
+        // The partition of docs/estimator.md ("Layers"): every light path is counted by exactly one photon
+        // depth; light reaching a camera path's first non-delta vertex through delta lobes alone is a caustic.
+        let layer = match (b.kind.k(), v.all_pass) {
+            (1, true) if b.kind.first() && v.all_specular => Layer::Caustic,
+            (1, true) => Layer::Indirect,
             (1, false) if backward_diffuse_depth == 1 => Layer::Indirect,
             (1, false) => continue,
             _ => Layer::Indirect,
         };
+        // eq. 4's τ · f / (π r²), f evaluated here for a photon that is not Lambertian.
+        let weight = if b.is_lambertian() {
+            b.weight
+        } else {
+            let f = map.vertex(b.stored).eval(v.wi);
+            if f == Rgb::ZERO {
+                continue;
+            }
+            b.weight * f
+        };
         merges += 1;
         // eq. 4
-        let value = if S { join(b.weight, b.spectrum, v.flux, v.spectrum, phase) } else { b.weight * v.flux };
+        let value = if S { join(weight, b.spectrum, v.flux, v.spectrum, phase) } else { weight * v.flux };
         sink.add(b.pixel, layer, b.kind.ghost(), value);
         if blur {
             sink.add_blur(b.pixel, merge_blur(luminance(value), d2, b));

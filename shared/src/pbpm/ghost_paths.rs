@@ -4,13 +4,14 @@
 //! chain of a pair then carries nearly the same weight, where a path free to reflect anywhere carries weights
 //! that differ by the number of surfaces it crossed.
 
-use super::forward_pass::{trace_segment, ForwardStats, LightEvent, LightSettings, Segment};
+use super::forward_pass::{register_crossing, Crossing, ForwardStats, LightEvent, LightSettings};
 use super::ghost_aim::{AimGrid, RINGS, SECTORS};
+use crate::bsdf::{Bsdf, BsdfSample, Reflection, Transport};
 use crate::color::{luminance, Rgb};
-use crate::geometry::{ray::offset_origin, Ray};
+use crate::geometry::{ray::offset_origin, Ray, SurfaceHit};
+use crate::integrator::walk::{walk, Technique, Walk};
 use crate::light::{disc_crossing, AimDensity, EmissionSample, UniformAim};
-use crate::material::{Material, Reflection, Transport};
-use crate::ray_map::{events::scatter_event, Events, PathKind, RecordedPath, Recorder};
+use crate::ray_map::{PathKind, PathLog, RecordedPath, Recorder, Unrecorded};
 use crate::sampling::{Discrete, Pass, Sampler};
 use crate::scene::Scene;
 use crate::spectrum::{PathSpectrum, PhaseSpectrum};
@@ -94,9 +95,7 @@ pub struct GhostPairs {
 impl GhostPairs {
     /// The table of `scene`, from its pilot; None when the scene has no dielectric surface.
     pub fn for_scene(scene: &Scene) -> Option<GhostPairs> {
-        let dielectric = |o: &u32| {
-            matches!(scene.materials[scene.objects[*o as usize].material as usize], Material::Dielectric { .. })
-        };
+        let dielectric = |o: &u32| scene.materials[scene.objects[*o as usize].material as usize].is_dielectric();
         let surfaces: Vec<u32> = (0..scene.objects.len() as u32).filter(dielectric).collect();
         if surfaces.is_empty() {
             return None;
@@ -196,7 +195,8 @@ fn pilot(scene: &Scene, pairs: &[GhostPair]) -> Vec<PairPilot> {
                 };
                 let start = GhostStart { emission: e, index: 0, pair, weight: 1.0 };
                 let spectrum = &PhaseSpectrum::RGB;
-                ghost_path::<false>(scene, settings, spectrum, start, &mut sampler, &mut stats, &mut visit, None);
+                let log = &mut Unrecorded;
+                ghost_path::<false, _>(scene, settings, spectrum, start, &mut sampler, &mut stats, &mut visit, log);
                 let square = registered * registered;
                 match front.and_then(|d| disc_crossing(&d, e.origin, e.direction)) {
                     Some((point, _)) => {
@@ -255,10 +255,20 @@ pub fn trace_ghost_paths(
         let weight = 1.0 / (p * k as f32);
         let Some(emission) = emit(scene, aim, &mut sampler) else { continue };
         let start = GhostStart { emission, index: ghost, pair, weight };
-        if spectrum.wavelengths.is_some() {
-            ghost_path::<true>(scene, settings, spectrum, start, &mut sampler, stats, visit, log.as_mut())
-        } else {
-            ghost_path::<false>(scene, settings, spectrum, start, &mut sampler, stats, visit, log.as_mut())
+        let spectral = spectrum.wavelengths.is_some();
+        match (&mut log, spectral) {
+            (Some(log), true) => {
+                ghost_path::<true, _>(scene, settings, spectrum, start, &mut sampler, stats, visit, log)
+            }
+            (Some(log), false) => {
+                ghost_path::<false, _>(scene, settings, spectrum, start, &mut sampler, stats, visit, log)
+            }
+            (None, true) => {
+                ghost_path::<true, _>(scene, settings, spectrum, start, &mut sampler, stats, visit, &mut Unrecorded)
+            }
+            (None, false) => {
+                ghost_path::<false, _>(scene, settings, spectrum, start, &mut sampler, stats, visit, &mut Unrecorded)
+            }
         }
         if let (Some((recorder, _)), Some(log)) = (record, &log) {
             recorder.record(log);
@@ -279,7 +289,7 @@ struct GhostStart {
 /// One ghost path from `start`.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn ghost_path<const S: bool>(
+fn ghost_path<const S: bool, L: PathLog>(
     scene: &Scene,
     settings: LightSettings,
     spectrum: &PhaseSpectrum,
@@ -287,54 +297,84 @@ fn ghost_path<const S: bool>(
     sampler: &mut Sampler,
     stats: &mut ForwardStats,
     visit: &mut impl FnMut(&LightEvent),
-    mut log: Option<&mut RecordedPath>,
+    log: &mut L,
 ) {
     let GhostStart { emission: e, index, pair, weight } = start;
     let origin = if e.normal == Vec3::ZERO { e.origin } else { offset_origin(e.origin, e.normal, e.direction) };
-    let mut ray = Ray::new(origin, e.direction);
     let mut beta = e.beta * weight;
-    let mut path = PathSpectrum::<S>::start(spectrum, PhaseSpectrum::class_of(index), &mut beta);
-    let mut reflections = 0u32;
-    let mut m = 0u32;
-    let mut registered = Rgb::ZERO;
-    if let Some(l) = log.as_deref_mut() {
-        l.source = crate::ray_map::emitter_of(scene, e.light);
-        l.begin(e.origin, e.normal);
+    let path = PathSpectrum::<S>::start(spectrum, PhaseSpectrum::class_of(index), &mut beta);
+    let mut w = Walk::new(scene, Ray::new(origin, e.direction), beta, path);
+    let mut ghost = GhostPath { settings, spectrum, visit, pair, reflections: 0, sensor: None, registered: Rgb::ZERO };
+    log.set_source(crate::ray_map::emitter_of(scene, e.light));
+    log.begin(e.origin, e.normal);
+    walk(&mut w, &mut ghost, sampler, log);
+    stats.rays += w.rays;
+    log.finish(ghost.registered, w.spectrum.wavelength_nm());
+}
+
+/// A ghost path's state as a technique of the walk: it takes its pair's reflections, registers where it crosses
+/// the sensor once it has them, and ends at its first diffuse vertex. It has no roulette: all-specular chains
+/// are short and `max_depth` bounds them.
+struct GhostPath<'a, V> {
+    settings: LightSettings,
+    spectrum: &'a PhaseSpectrum,
+    visit: &'a mut V,
+    pair: GhostPair,
+    /// Reflections at dielectrics so far.
+    reflections: u32,
+    /// Whether the segment being traced registers where it crosses the sensor.
+    sensor: Option<bool>,
+    /// What the path registered, for its recording.
+    registered: Rgb,
+}
+
+impl<const S: bool, V: FnMut(&LightEvent)> Technique<S> for GhostPath<'_, V> {
+    const MODE: Transport = Transport::Importance;
+
+    #[inline(always)]
+    fn before_segment(&mut self, w: &Walk<S>) {
+        let registers = self.reflections >= self.pair.reflections();
+        self.sensor = (registers && w.segments < self.settings.max_depth).then_some(true);
     }
-    loop {
-        let sensor = (reflections >= pair.reflections() && m < settings.max_depth).then_some(true);
-        let segment = Segment { ray: &ray, beta, tag: path.tag(), sensor };
-        let Some(hit) = trace_segment(scene, spectrum, segment, stats, visit, log.as_deref_mut(), &mut registered)
-        else {
-            break;
-        };
-        m += 1;
-        let material = path.material(scene.material(&hit), &mut beta);
-        if material.diffuse_albedo().is_some() || m >= settings.max_depth {
-            break;
+
+    #[inline(always)]
+    fn on_segment<L: PathLog>(&mut self, w: &Walk<S>, hit: Option<&SurfaceHit>, log: &mut L) {
+        if let Some(ghost) = self.sensor {
+            let t_max = hit.map_or(f32::INFINITY, |h| h.t);
+            let crossing = Crossing { ray: &w.ray, t_max, beta: w.beta, tag: w.spectrum.tag(), ghost };
+            self.registered += register_crossing(w.scene, self.spectrum, crossing, self.visit, log);
         }
-        let wi = -ray.direction;
-        let choice = pair.choice(reflections, hit.object);
-        let Some(s) = material.sample_reflecting(&hit, wi, sampler.next_2d(), Transport::Importance, choice) else {
-            if let Some(l) = log.as_deref_mut() {
-                l.event(Events::ABSORB);
-            }
-            break;
-        };
-        if let Some(l) = log.as_deref_mut() {
-            l.event(scatter_event(&material, &hit, wi, s.wi, s.delta));
-        }
-        if crate::ghost::is_dielectric_reflection(&material, &hit, wi, s.wi) {
-            reflections += 1;
-        }
-        beta *= s.weight;
-        if beta == Rgb::ZERO {
-            break;
-        }
-        ray = Ray::new(offset_origin(hit.p, hit.ng, s.wi), s.wi);
     }
-    if let Some(l) = log {
-        l.finish(registered, path.wavelength_nm());
+
+    #[inline(always)]
+    fn at_vertex<L: PathLog>(
+        &mut self,
+        w: &mut Walk<S>,
+        _: &SurfaceHit,
+        bsdf: &Bsdf,
+        _: Vec3,
+        _: &mut Sampler,
+        _: &mut L,
+    ) -> bool {
+        bsdf.flags().is_specular() && w.segments < self.settings.max_depth
+    }
+
+    #[inline(always)]
+    fn choice(&self, hit: &SurfaceHit) -> Reflection {
+        self.pair.choice(self.reflections, hit.object)
+    }
+
+    #[inline(always)]
+    fn after_sample(&mut self, w: &mut Walk<S>, _: &SurfaceHit, bsdf: &Bsdf, s: &BsdfSample, _: Rgb) -> bool {
+        if bsdf.is_dielectric_reflection(s) {
+            self.reflections += 1;
+        }
+        s.is_delta() && w.beta != Rgb::ZERO
+    }
+
+    #[inline(always)]
+    fn roulette_unit(&self, _: &Walk<S>) -> Option<f32> {
+        None
     }
 }
 

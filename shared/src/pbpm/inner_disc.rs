@@ -47,10 +47,11 @@ mod tests {
             weight: Rgb::ONE,
             radius2: 1.0,
             pixel: 0,
-            kind: PhotonKind::new(1, false),
+            kind: PhotonKind::new(1, true, false),
             segments: 1,
             spectrum: 0,
             inner_share: 128,
+            stored: crate::pbpm::photon::LAMBERTIAN,
         };
         let n = 1000;
         let d: f32 = (0..n).map(|i| merge_blur(1.0, (i as f32 + 0.5) / n as f32, &photon)).sum();

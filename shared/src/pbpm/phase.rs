@@ -10,14 +10,12 @@
 //! synchronous group runs them over its tile mask on its pinned threads and drives step 3 itself (its light-path
 //! quota, the other groups' maps, the stop). Both reach the same image: the stages are this file's, once.
 
-use super::backward_pass::{trace_camera_path_logged, BackwardSettings, BackwardStats};
+use super::backward_pass::{trace_camera_path, BackwardSettings, BackwardStats};
 use super::executor::Executor;
-use super::forward_pass::{
-    gather, trace_light_path_logged, ForwardStats, Gather, LightEvent, LightSettings, SensorHit,
-};
+use super::forward_pass::{gather, trace_light_path, ForwardStats, Gather, LightEvent, LightSettings, SensorHit};
 use super::gather_buffer::GatherBuffer;
 use super::ghost_paths::trace_ghost_paths;
-use super::photon::BackwardPhoton;
+use super::photon::{BackwardPhoton, PhotonLists, StoredVertex, LAMBERTIAN};
 use super::photon_map::PhotonMap;
 use super::radius::RadiusSchedule;
 use super::sensor_kernel::SensorKernel;
@@ -26,7 +24,7 @@ use crate::accumulation::blur::blur_offsets;
 use crate::accumulation::{auxiliary::add_phase_to, AuxLayout, AuxSums, PixelSums};
 use crate::color::{luminance, Rgb};
 use crate::integrator::{Layer, LayerValues};
-use crate::ray_map::{PathKind, RecordedPath, Recorder};
+use crate::ray_map::{PathKind, RecordedPath, Recorder, Unrecorded};
 use crate::sampling::{replicate_of, Sampler};
 use crate::scene::Scene;
 use crate::spectrum::{band_values, join, PhaseSpectrum, Wavelength};
@@ -133,12 +131,12 @@ impl Phase<'_> {
         let (scene, spectrum) = (self.scene, &self.spectrum);
         match record {
             None => {
-                trace_light_path_logged(scene, settings, spectrum, index, &mut s, stats, visit, None);
+                trace_light_path(scene, settings, spectrum, index, &mut s, stats, visit, &mut Unrecorded);
                 trace_ghost_paths(scene, settings, spectrum, index, self.seed, self.key, stats, visit, None);
             }
             Some((recorder, number, log)) => {
                 (log.phase, log.item) = (number as u32, index as u32);
-                trace_light_path_logged(scene, settings, spectrum, index, &mut s, stats, visit, Some(log));
+                trace_light_path(scene, settings, spectrum, index, &mut s, stats, visit, log);
                 recorder.record(log);
                 let record = Some((recorder, number));
                 trace_ghost_paths(scene, settings, spectrum, index, self.seed, self.key, stats, visit, record);
@@ -268,6 +266,8 @@ pub struct PhaseBuffers {
     aux_camera: Vec<f32>,
     /// The camera pass's photons, one list per `chunk` local pixels, in pixel order.
     photon_lists: Vec<Vec<BackwardPhoton>>,
+    /// The BSDFs of the non-Lambertian photons of each list, parallel to `photon_lists`.
+    vertex_lists: Vec<Vec<StoredVertex>>,
     /// Local pixels per unit of work: `PIXEL_CHUNK`, or every pixel on the calling thread, whose one list then
     /// becomes the map's photons without a copy (and takes the map's buffer back for the next phase), so that
     /// the single-threaded engine holds its photons once.
@@ -302,6 +302,7 @@ impl PhaseBuffers {
             replicates: Vec::new(),
             aux_camera: Vec::new(),
             photon_lists: Vec::new(),
+            vertex_lists: Vec::new(),
             chunk: PIXEL_CHUNK,
             single_list: exec == Executor::CallingThread,
             recorder: None,
@@ -328,6 +329,7 @@ impl PhaseBuffers {
         self.aux_camera.resize(pixels * self.aux.channels(), 0.0);
         self.chunk = if self.single_list { pixels.max(1) } else { PIXEL_CHUNK };
         self.photon_lists.resize_with(pixels.div_ceil(self.chunk), Vec::new);
+        self.vertex_lists.resize_with(pixels.div_ceil(self.chunk), Vec::new);
     }
 
     /// Bytes held.
@@ -336,6 +338,7 @@ impl PhaseBuffers {
             + self.replicates.capacity()
             + self.aux_camera.capacity() * 4
             + self.photon_lists.iter().map(Vec::capacity).sum::<usize>() * std::mem::size_of::<BackwardPhoton>()
+            + self.vertex_lists.iter().map(Vec::capacity).sum::<usize>() * std::mem::size_of::<StoredVertex>()
     }
 
     /// Stage 1: one camera path per local pixel; `pixels[i]` is local pixel i's image pixel (None: the whole
@@ -364,12 +367,13 @@ impl PhaseBuffers {
             .camera
             .par_chunks_mut(chunk_len)
             .zip(self.replicates.par_chunks_mut(chunk_len))
-            .zip(self.photon_lists.par_iter_mut())
+            .zip(self.photon_lists.par_iter_mut().zip(self.vertex_lists.par_iter_mut()))
             .zip(aux_chunks(&mut self.aux_camera, channels, count, chunk_len))
             .enumerate();
         exec.run(chunks)
-            .map(|(chunk, (((values, replicate), photons), mut aux))| {
+            .map(|(chunk, (((values, replicate), (photons, vertices)), mut aux))| {
                 photons.clear();
+                vertices.clear();
                 // A camera path stores at most one photon per diffuse vertex it continues from: at full size
                 // from the first phase, a list never grows, and holds what `--memory-limit` assumed.
                 photons.reserve_exact(values.len() * bdd as usize);
@@ -395,16 +399,16 @@ impl PhaseBuffers {
                     if kept.is_some() {
                         (log.phase, log.item, log.source) = (j as u32, pixel, pixel);
                     }
-                    let (v, ghost) = trace_camera_path_logged(
-                        phase.scene,
-                        &bs,
-                        local as u32,
-                        ray,
-                        &mut s,
-                        &mut stats,
-                        &mut |b| photons.push(b),
-                        kept.is_some().then_some(&mut log),
-                    );
+                    let store = &mut PhotonLists { photons, vertices };
+                    let (v, ghost) = match kept {
+                        Some(_) => {
+                            trace_camera_path(phase.scene, &bs, local as u32, ray, &mut s, &mut stats, store, &mut log)
+                        }
+                        None => {
+                            let log = &mut Unrecorded;
+                            trace_camera_path(phase.scene, &bs, local as u32, ray, &mut s, &mut stats, store, log)
+                        }
+                    };
                     if let Some(r) = kept {
                         r.record(&log);
                     }
@@ -418,12 +422,24 @@ impl PhaseBuffers {
             .reduce(BackwardStats::default, |a, b| a + b)
     }
 
-    /// Stage 2: the photon map of the camera pass's photons, in pixel order.
+    /// Stage 2: the photon map of the camera pass's photons, in pixel order, with the BSDFs of its
+    /// non-Lambertian photons.
     pub fn build_map(&mut self, exec: Executor, map: &mut PhotonMap) {
+        if self.vertex_lists.iter().any(|v| !v.is_empty()) {
+            // A list's photons count their BSDFs within the list: the map holds all lists' one after another.
+            let mut first = 0u32;
+            for (photons, vertices) in self.photon_lists.iter_mut().zip(&self.vertex_lists) {
+                if first > 0 {
+                    photons.iter_mut().filter(|p| p.stored != LAMBERTIAN).for_each(|p| p.stored += first);
+                }
+                first += vertices.len() as u32;
+            }
+        }
         match (&mut self.photon_lists[..], self.single_list) {
             ([list], true) => map.build_from(std::mem::take(list), exec),
             (lists, _) => map.build_from_lists(lists, exec),
         }
+        map.set_vertices(&self.vertex_lists);
     }
 
     /// Stage 4: closes the phase at every local pixel into `sums` and `aux_sums`, with the gathered light divided

@@ -2,7 +2,7 @@
 //! every cell its sphere overlaps, so a gather looks at a single cell.
 
 use super::executor::Executor;
-use super::photon::BackwardPhoton;
+use super::photon::{BackwardPhoton, StoredVertex};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -11,6 +11,8 @@ use rayon::prelude::*;
 #[derive(Default)]
 pub struct PhotonMap {
     photons: Vec<BackwardPhoton>,
+    /// The BSDFs of the photons that are not Lambertian, by `BackwardPhoton::stored`.
+    vertices: Vec<StoredVertex>,
     grid: Grid,
     /// The grid is over the current photons. `starts` and `entries` keep their length from phase to phase, so
     /// that a build writes them once instead of zeroing them first.
@@ -141,6 +143,7 @@ impl PhotonMap {
     /// Forgets the photons of the previous phase (the grid is rebuilt by `build`).
     pub fn clear(&mut self) {
         self.photons.clear();
+        self.vertices.clear();
         self.built = false;
     }
 
@@ -201,9 +204,25 @@ impl PhotonMap {
         photons
     }
 
+    /// Replaces the BSDFs of the map's non-Lambertian photons with those of `lists`, one after another (the
+    /// photons' indices count through them in that order).
+    pub fn set_vertices(&mut self, lists: &[Vec<StoredVertex>]) {
+        self.vertices.clear();
+        for list in lists {
+            self.vertices.extend_from_slice(list);
+        }
+    }
+
+    /// The BSDF of the non-Lambertian photon whose `stored` index is `i`.
+    #[inline]
+    pub fn vertex(&self, i: u32) -> &StoredVertex {
+        &self.vertices[i as usize]
+    }
+
     /// Bytes held by the map's buffers.
     pub fn capacity_bytes(&self) -> usize {
         self.photons.capacity() * std::mem::size_of::<BackwardPhoton>()
+            + self.vertices.capacity() * std::mem::size_of::<StoredVertex>()
             + (self.starts.capacity() + self.entries.capacity()) * 4
             + self.pairs.iter().map(Vec::capacity).sum::<usize>() * 8
             + self.pairs.capacity() * std::mem::size_of::<Vec<u64>>()
@@ -411,10 +430,11 @@ mod tests {
             weight: Rgb::ONE,
             radius2: r * r,
             pixel,
-            kind: crate::pbpm::PhotonKind::new(1, false),
+            kind: crate::pbpm::PhotonKind::new(1, true, false),
             segments: 1,
             spectrum: 0,
             inner_share: 128,
+            stored: crate::pbpm::photon::LAMBERTIAN,
         }
     }
 

@@ -157,10 +157,11 @@ mod tests {
                 weight: Rgb::new(s.next_f32(), s.next_f32(), s.next_f32()),
                 radius2: r * r,
                 pixel: i % 997,
-                kind: PhotonKind::new(1 + (i % 2) as u8, i % 7 == 0),
+                kind: PhotonKind::new(1 + (i % 2) as u8, true, i % 7 == 0),
                 segments: 1 + (i % 5) as u8,
                 spectrum: 0,
                 inner_share: 100 + (i % 50) as u8,
+                stored: crate::pbpm::photon::LAMBERTIAN,
             });
         }
         map.build();
@@ -175,6 +176,7 @@ mod tests {
                     flux: Rgb::new(s.next_f32(), s.next_f32(), s.next_f32()),
                     m: 2 + i % 9,
                     all_specular: i % 4 == 0,
+                    all_pass: i % 4 == 0,
                     spectrum: 0,
                 }
             })
@@ -225,6 +227,7 @@ mod tests {
             flux: Rgb::ONE,
             m: 2,
             all_specular: false,
+            all_pass: false,
             spectrum: 0,
         };
         sorted.push(&map, v);

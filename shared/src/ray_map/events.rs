@@ -1,9 +1,7 @@
 //! What happened at a path vertex: a set of event bits, several at once (an emitter that reflects light is
 //! both an emission and a reflection).
 
-use crate::geometry::SurfaceHit;
-use crate::material::Material;
-use glam::Vec3;
+use crate::bsdf::{BsdfSample, LobeFlags};
 
 /// The events at a vertex, as bits of one byte (the map stores them so).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -72,25 +70,18 @@ impl std::ops::BitOrAssign for Events {
     }
 }
 
-/// The event of a sampled continuation from `wo` to `wi` at `material`: diffuse for a non-delta sample,
-/// otherwise a reflection (with TIR when glass could not have refracted) or a refraction, told apart by the
-/// side of the geometric normal `wi` leaves on, as `ghost::is_dielectric_reflection` tells them.
+/// The event of a sampled continuation: diffuse for a diffuse lobe, otherwise a reflection (with TIR where
+/// glass could not have refracted) or a transmission. Glossy lobes record as the reflection or transmission
+/// they are.
 #[inline]
-pub fn scatter_event(material: &Material, hit: &SurfaceHit, wo: Vec3, wi: Vec3, delta: bool) -> Events {
-    if !delta {
-        return Events::DIFFUSE;
+pub fn scatter_event(s: &BsdfSample) -> Events {
+    if s.lobe.contains(LobeFlags::DIFFUSE) {
+        Events::DIFFUSE
+    } else if s.lobe.contains(LobeFlags::TRANSMISSION) {
+        Events::REFRACT
+    } else if s.lobe.contains(LobeFlags::TOTAL_INTERNAL) {
+        Events::REFLECT | Events::TIR
+    } else {
+        Events::REFLECT
     }
-    if wo.dot(hit.ng) * wi.dot(hit.ng) <= 0.0 {
-        return Events::REFRACT;
-    }
-    if let Material::Dielectric { ior, ext_ior, .. } = material {
-        let front = wo.dot(hit.ng) >= 0.0;
-        let (eta_o, eta_t) = if front { (ext_ior.d, ior.d) } else { (ior.d, ext_ior.d) };
-        let cos_o = wo.dot(hit.ns).abs().min(1.0);
-        let eta = eta_o / eta_t;
-        if eta * eta * (1.0 - cos_o * cos_o) >= 1.0 {
-            return Events::REFLECT | Events::TIR;
-        }
-    }
-    Events::REFLECT
 }

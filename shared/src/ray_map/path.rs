@@ -3,7 +3,8 @@
 //! Vertex 0 is the origin: a camera path's on the sensor (events SENSOR, no normal), a light path's on its
 //! light (events EMISSION, the light's surface normal); neither is on an object, so the map stores only its
 //! point and, for a light path, its normal.
-//! The integrators fill one through `Option<&mut RecordedPath>`, which costs a branch per vertex when off.
+//! The path walk fills one through its `PathLog` type parameter: `RecordedPath` records, `Unrecorded` compiles
+//! to nothing, so a render that records no path pays nothing for the ability.
 
 use super::events::Events;
 use super::quantise::{decode_normal, encode_normal};
@@ -128,4 +129,93 @@ impl RecordedPath {
     fn push(&mut self, p: Vec3, n: Vec3, object: u16, primitive: u32, events: Events) {
         self.vertices.push(Vertex { point: p.to_array(), normal: encode_normal(n), object, primitive, events });
     }
+}
+
+/// What the path walk tells a log as it goes: a `RecordedPath` keeps it, `Unrecorded` ignores it at no cost.
+pub trait PathLog {
+    /// True when the log keeps what it is told (false lets callers skip work done only for the log).
+    const RECORDS: bool;
+
+    /// Starts the path at `origin` (with the light's surface normal for a light path).
+    fn begin(&mut self, origin: Vec3, normal: Vec3);
+    /// Sets the path's source: a light path's emitter (`crate::ray_map::emitter_of`).
+    fn set_source(&mut self, source: u32);
+    /// The vertex where the path met `hit`.
+    fn hit(&mut self, hit: &SurfaceHit);
+    /// Events at the last vertex.
+    fn event(&mut self, events: Events);
+    /// A light path's crossing of the sensor at `point`, registered on image pixel `pixel`.
+    fn sensor(&mut self, point: Vec3, pixel: u32);
+    /// The path left the scene in `direction`.
+    fn escape(&mut self, direction: Vec3);
+    /// Ends the path with its weight and wavelength.
+    fn finish(&mut self, weight: Rgb, wavelength_nm: Option<f32>);
+}
+
+impl PathLog for RecordedPath {
+    const RECORDS: bool = true;
+
+    #[inline]
+    fn begin(&mut self, origin: Vec3, normal: Vec3) {
+        RecordedPath::begin(self, origin, normal)
+    }
+
+    #[inline]
+    fn set_source(&mut self, source: u32) {
+        self.source = source;
+    }
+
+    #[inline]
+    fn hit(&mut self, hit: &SurfaceHit) {
+        RecordedPath::hit(self, hit)
+    }
+
+    #[inline]
+    fn event(&mut self, events: Events) {
+        RecordedPath::event(self, events)
+    }
+
+    #[inline]
+    fn sensor(&mut self, point: Vec3, pixel: u32) {
+        RecordedPath::sensor(self, point, pixel)
+    }
+
+    #[inline]
+    fn escape(&mut self, direction: Vec3) {
+        RecordedPath::escape(self, direction)
+    }
+
+    #[inline]
+    fn finish(&mut self, weight: Rgb, wavelength_nm: Option<f32>) {
+        RecordedPath::finish(self, weight, wavelength_nm)
+    }
+}
+
+/// The log of a path nobody records: every call is empty and compiles away.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Unrecorded;
+
+impl PathLog for Unrecorded {
+    const RECORDS: bool = false;
+
+    #[inline(always)]
+    fn begin(&mut self, _: Vec3, _: Vec3) {}
+
+    #[inline(always)]
+    fn set_source(&mut self, _: u32) {}
+
+    #[inline(always)]
+    fn hit(&mut self, _: &SurfaceHit) {}
+
+    #[inline(always)]
+    fn event(&mut self, _: Events) {}
+
+    #[inline(always)]
+    fn sensor(&mut self, _: Vec3, _: u32) {}
+
+    #[inline(always)]
+    fn escape(&mut self, _: Vec3) {}
+
+    #[inline(always)]
+    fn finish(&mut self, _: Rgb, _: Option<f32>) {}
 }

@@ -7,11 +7,11 @@ use super::settings::RenderSettings;
 use super::totals::{PhaseReport, RayTotals};
 use crate::accumulation::{Accumulator, AuxLayout, AuxSums, PixelSums};
 use crate::integrator::path_tracer;
-use crate::pbpm::forward_pass::{trace_light_path_logged, LightEvent};
+use crate::pbpm::forward_pass::{trace_light_path, LightEvent};
 use crate::pbpm::ghost_paths::trace_ghost_paths;
 use crate::pbpm::phase::{start_aux, Closing, LocalPixels};
 use crate::pbpm::{mean_phase, Executor, ForwardStats, GatherBuffer, PhaseBuffers, PhotonMap, SortedGathers};
-use crate::ray_map::{PathKind, RecordedPath, Recorder};
+use crate::ray_map::{PathKind, RecordedPath, Recorder, Unrecorded};
 use crate::sampling::{replicate_of, Sampler};
 use crate::scene::Scene;
 use crate::spectrum::PhaseSpectrum;
@@ -205,9 +205,22 @@ impl<'s> Engine<'s> {
                 (log.phase, log.item, log.source) = (phase as u32, pixel as u32, pixel as u32);
             }
             let max_depth = self.settings.max_depth;
-            let logged = kept.is_some().then_some(&mut log);
-            let (v, ghost) =
-                path_tracer::trace_logged(scene, max_depth, sensor_ghosts, &spectrum, ray, &mut s, &mut stats, logged);
+            let trace = |log: &mut _, s: &mut Sampler, stats: &mut _| {
+                path_tracer::trace(scene, max_depth, sensor_ghosts, &spectrum, ray, s, stats, log)
+            };
+            let (v, ghost) = match kept {
+                Some(_) => trace(&mut log, &mut s, &mut stats),
+                None => path_tracer::trace(
+                    scene,
+                    max_depth,
+                    sensor_ghosts,
+                    &spectrum,
+                    ray,
+                    &mut s,
+                    &mut stats,
+                    &mut Unrecorded,
+                ),
+            };
             if let Some(r) = kept {
                 r.record(&log);
             }
@@ -249,13 +262,18 @@ impl<'s> Engine<'s> {
             let mut s = Sampler::light(self.settings.seed, p.key, index);
             let kept = self.recorder.as_deref().filter(|r| r.keeps(PathKind::Light, phase, index));
             log.item = index as u32;
-            let logged = kept.is_some().then_some(&mut log);
             let mut visit = |e: &LightEvent| {
                 if let LightEvent::Sensor(hit) = e {
                     p.register(pixels, hit, gathered);
                 }
             };
-            trace_light_path_logged(scene, light, &p.spectrum, index, &mut s, &mut stats, &mut visit, logged);
+            match kept {
+                Some(_) => trace_light_path(scene, light, &p.spectrum, index, &mut s, &mut stats, &mut visit, &mut log),
+                None => {
+                    let log = &mut Unrecorded;
+                    trace_light_path(scene, light, &p.spectrum, index, &mut s, &mut stats, &mut visit, log)
+                }
+            }
             if let Some(r) = kept {
                 r.record(&log);
             }

@@ -8,16 +8,15 @@ mod loader;
 
 pub use error::SceneError;
 
+use crate::bsdf::Bsdf;
 use crate::camera::Camera;
 use crate::color::Rgb;
 use crate::geometry::{SceneGeometry, SurfaceHit};
 use crate::light::Lights;
 use crate::material::Material;
-use crate::spectrum::Dispersive;
-use crate::texture::{barycentric, interpolate_uv, Texture};
+use crate::texture::{barycentric, interpolate_uv};
 use glam::{Vec2, Vec3};
 use std::path::PathBuf;
-use std::sync::Arc;
 
 /// One object of the scene.
 #[derive(Clone, Debug)]
@@ -71,8 +70,6 @@ pub struct Scene {
     pub path: PathBuf,
     pub camera: Camera,
     pub materials: Vec<Material>,
-    /// The albedo texture of each material, parallel to `materials`; it multiplies a diffuse albedo.
-    pub albedo_textures: Vec<Option<Arc<Texture>>>,
     /// Texture coordinates of each triangle, by the index it was added with; None where its shape has none.
     pub triangle_uvs: Vec<Option<[Vec2; 3]>>,
     pub objects: Vec<SceneObject>,
@@ -96,29 +93,30 @@ impl Scene {
         self.materials.iter().any(Material::is_dispersive)
     }
 
-    /// The material at the surface hit, its albedo multiplied by the material's texture there if it has one
-    /// (a copy, so that textured and plain materials look the same to the integrators).
+    /// The material of the object at `hit`.
     #[inline]
-    pub fn material(&self, hit: &SurfaceHit) -> Material {
-        let index = self.objects[hit.object as usize].material as usize;
-        let material = self.materials[index];
-        match (material, &self.albedo_textures[index]) {
-            (Material::Diffuse { albedo }, Some(texture)) => {
-                Material::Diffuse { albedo: albedo * self.texture_at(texture, hit) }
-            }
-            _ => material,
-        }
+    pub fn material_at(&self, hit: &SurfaceHit) -> &Material {
+        &self.materials[self.objects[hit.object as usize].material as usize]
     }
 
-    /// The texture's value at the hit point (one where the surface has no texture coordinates, which the
-    /// loader does not let happen).
-    fn texture_at(&self, texture: &Texture, hit: &SurfaceHit) -> Vec3 {
+    /// The BSDF at `hit` for a path arriving from `wo` (pointing back along the path), with the material's
+    /// textures read at the hit's texture coordinates.
+    #[inline]
+    pub fn bsdf(&self, hit: &SurfaceHit, wo: Vec3) -> Bsdf {
+        let material = self.material_at(hit);
+        let uv = if material.uses_uv() { self.uv_at(hit) } else { Vec2::ZERO };
+        material.bsdf(hit, uv, wo)
+    }
+
+    /// The texture coordinates at the hit point ((0, 0) where the surface has none, which the loader does not
+    /// let a textured material meet).
+    fn uv_at(&self, hit: &SurfaceHit) -> Vec2 {
         match self.triangle_uvs.get(hit.triangle as usize) {
             Some(Some(uv)) => {
                 let b = barycentric(&self.geometry.triangle(hit.triangle).v, hit.p);
-                texture.lookup(interpolate_uv(uv, b))
+                interpolate_uv(uv, b)
             }
-            _ => Vec3::ONE,
+            _ => Vec2::ZERO,
         }
     }
 }

@@ -182,10 +182,11 @@ mod tests {
                 weight: Rgb::new(s.next_f32(), s.next_f32(), s.next_f32()),
                 radius2: r * r,
                 pixel: i % PIXELS,
-                kind: PhotonKind::new(1 + (i % 2) as u8, i % 5 == 0),
+                kind: PhotonKind::new(1 + (i % 2) as u8, true, i % 5 == 0),
                 segments: 1 + (i % 5) as u8,
                 spectrum: 0,
                 inner_share: 100 + (i % 50) as u8,
+                stored: photonfarm::pbpm::photon::LAMBERTIAN,
             });
         }
         map.build();
@@ -240,6 +241,7 @@ mod tests {
                     flux: Rgb::new(s.next_f32(), s.next_f32(), s.next_f32()),
                     m: 2 + i % 9,
                     all_specular: i % 4 == 0,
+                    all_pass: i % 4 == 0,
                     spectrum: 0,
                 }
             })
@@ -337,6 +339,7 @@ mod tests {
             flux: Rgb::ONE,
             m: 2,
             all_specular: false,
+            all_pass: false,
             spectrum: 0,
         };
         for _ in 0..2500 {

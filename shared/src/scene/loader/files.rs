@@ -4,7 +4,7 @@
 use super::state::{Loader, MeshSource};
 use crate::geometry::{Mesh, MeshTriangle};
 use crate::scene::SceneError;
-use crate::texture::Texture;
+use crate::texture::Bitmap;
 use glam::{Vec2, Vec3};
 use sha2::{Digest, Sha256};
 use std::borrow::Cow;
@@ -53,13 +53,13 @@ impl<'a> Loader<'a> {
         name: &str,
         span: Option<std::ops::Range<usize>>,
         field: &str,
-    ) -> Result<Arc<Texture>, SceneError> {
+    ) -> Result<Arc<Bitmap>, SceneError> {
         if let Some(t) = self.textures.get(name) {
             return Ok(t.clone());
         }
         let (path, bytes) = self.external_file(name, span.clone(), field, "texture")?;
         let texture =
-            Texture::from_png(&bytes).map_err(|e| self.error(span, field, format!("{}: {e}", path.display())))?;
+            Bitmap::from_png(&bytes).map_err(|e| self.error(span, field, format!("{}: {e}", path.display())))?;
         let texture = Arc::new(texture);
         self.textures.insert(name.to_string(), texture.clone());
         Ok(texture)

@@ -1,21 +1,19 @@
 //! The `[materials]` table: every material and its albedo texture, by name.
 
 use super::state::Loader;
+use crate::bsdf::conductor::ConductorFresnel;
 use crate::color::Rgb;
-use crate::material::Material;
+use crate::material::{Material, Surface};
 use crate::scene::file::MaterialSection;
 use crate::scene::SceneError;
 use crate::spectrum::RefractiveIndex;
 use crate::texture::Texture;
 use std::collections::BTreeMap;
-use std::sync::Arc;
 use toml::Spanned;
 
-/// The scene's materials in the order of their names, with the albedo texture of each.
+/// The scene's materials in the order of their names.
 pub(super) struct Materials {
     pub(super) list: Vec<Material>,
-    /// Parallel to `list`.
-    pub(super) albedo_textures: Vec<Option<Arc<Texture>>>,
     /// Index into `list` by name.
     pub(super) index: BTreeMap<String, u32>,
 }
@@ -27,69 +25,67 @@ impl Loader<'_> {
         &mut self,
         table: &BTreeMap<String, Spanned<MaterialSection>>,
     ) -> Result<Materials, SceneError> {
-        let mut materials = Materials { list: Vec::new(), albedo_textures: Vec::new(), index: BTreeMap::new() };
+        let mut materials = Materials { list: Vec::new(), index: BTreeMap::new() };
         for (name, m) in table {
             materials.index.insert(name.clone(), materials.list.len() as u32);
-            let (material, texture) = self.material(name, m)?;
+            let material = self.material(name, m)?;
             materials.list.push(material);
-            materials.albedo_textures.push(texture);
         }
         Ok(materials)
     }
 
-    /// A material and its albedo texture.
-    fn material(
-        &mut self,
-        name: &str,
-        m: &Spanned<MaterialSection>,
-    ) -> Result<(Material, Option<Arc<Texture>>), SceneError> {
+    /// A material; every family of this format scatters alike from both sides.
+    fn material(&mut self, name: &str, m: &Spanned<MaterialSection>) -> Result<Material, SceneError> {
         let s = m.span();
         let f = |x: &str| format!("materials.{name}.{x}");
-        Ok((
-            match m.get_ref() {
-                MaterialSection::Diffuse { albedo, albedo_texture } => {
-                    let texture = match albedo_texture {
-                        Some(t) => Some(self.texture(t, Some(s.clone()), &f("albedo_texture"))?),
-                        None => None,
-                    };
-                    let albedo = match (albedo, &texture) {
-                        (Some(a), _) => self.colour(*a, &s, &f("albedo"), Some(1.0))?,
-                        // Texture values are at most 1, so the product stays a valid albedo.
-                        (None, Some(_)) => Rgb::ONE,
-                        (None, None) => {
-                            return Err(self.error(Some(s), f("albedo"), "a diffuse material needs albedo = [r, g, b]"))
-                        }
-                    };
-                    return Ok((Material::Diffuse { albedo }, texture));
-                }
-                MaterialSection::Mirror { reflectance } => {
-                    Material::Mirror { reflectance: self.colour(*reflectance, &s, &f("reflectance"), Some(1.0))? }
-                }
-                MaterialSection::Dielectric { ior, ext_ior, anti_reflection, abbe, ext_abbe } => {
-                    let ior = self.scalar(*ior, &s, &f("ior"), |v| v > 0.0, "a positive index of refraction")?;
-                    let ext_ior =
-                        self.scalar(*ext_ior, &s, &f("ext_ior"), |v| v > 0.0, "a positive index of refraction")?;
-                    Material::Dielectric {
-                        ior: self.refractive_index(ior, *abbe, &s, &f("abbe"))?,
-                        ext_ior: self.refractive_index(ext_ior, *ext_abbe, &s, &f("ext_abbe"))?,
-                        anti_reflection: *anti_reflection,
+        Ok(Material::two_sided(match m.get_ref() {
+            MaterialSection::Diffuse { albedo, albedo_texture } => {
+                let texture = match albedo_texture {
+                    Some(t) => Some(self.texture(t, Some(s.clone()), &f("albedo_texture"))?),
+                    None => None,
+                };
+                let albedo = match (albedo, &texture) {
+                    (Some(a), _) => self.colour(*a, &s, &f("albedo"), Some(1.0))?,
+                    // Texture values are at most 1, so the product stays a valid albedo.
+                    (None, Some(_)) => Rgb::ONE,
+                    (None, None) => {
+                        return Err(self.error(Some(s), f("albedo"), "a diffuse material needs albedo = [r, g, b]"))
                     }
-                }
-                MaterialSection::Coating { reflectance, transmittance } => {
-                    let r = self.colour(*reflectance, &s, &f("reflectance"), Some(1.0))?;
-                    let t = self.colour(*transmittance, &s, &f("transmittance"), Some(1.0))?;
-                    if (r + t).max_element() > 1.0 + 1e-6 {
-                        return Err(self.error(
-                            Some(s),
-                            f("transmittance"),
-                            "reflectance + transmittance must not exceed 1 in any channel",
-                        ));
-                    }
-                    Material::Coating { reflectance: r, transmittance: t }
-                }
+                };
+                let reflectance = match texture {
+                    Some(image) => Texture::Bitmap { image, factor: albedo },
+                    None => Texture::Constant(albedo),
+                };
+                Surface::Diffuse { reflectance }
+            }
+            MaterialSection::Mirror { reflectance } => Surface::Conductor {
+                fresnel: ConductorFresnel::Perfect,
+                specular: Texture::Constant(self.colour(*reflectance, &s, &f("reflectance"), Some(1.0))?),
+                roughness: None,
             },
-            None,
-        ))
+            MaterialSection::Dielectric { ior, ext_ior, anti_reflection, abbe, ext_abbe } => {
+                let ior = self.scalar(*ior, &s, &f("ior"), |v| v > 0.0, "a positive index of refraction")?;
+                let ext_ior =
+                    self.scalar(*ext_ior, &s, &f("ext_ior"), |v| v > 0.0, "a positive index of refraction")?;
+                Surface::Dielectric {
+                    ior: self.refractive_index(ior, *abbe, &s, &f("abbe"))?,
+                    ext_ior: self.refractive_index(ext_ior, *ext_abbe, &s, &f("ext_abbe"))?,
+                    anti_reflection: *anti_reflection,
+                }
+            }
+            MaterialSection::Coating { reflectance, transmittance } => {
+                let r = self.colour(*reflectance, &s, &f("reflectance"), Some(1.0))?;
+                let t = self.colour(*transmittance, &s, &f("transmittance"), Some(1.0))?;
+                if (r + t).max_element() > 1.0 + 1e-6 {
+                    return Err(self.error(
+                        Some(s),
+                        f("transmittance"),
+                        "reflectance + transmittance must not exceed 1 in any channel",
+                    ));
+                }
+                Surface::Coating { reflectance: r, transmittance: t }
+            }
+        }))
     }
 
     /// An index of refraction, dispersive when the glass has an Abbe number.

@@ -121,12 +121,11 @@ impl Loader<'_> {
                 message: "the scene has no light: give an object an `emission` or add a [[lights]] entry".into(),
             });
         }
-        let has_delta_surfaces = parts.objects.iter().any(|o| materials.list[o.material as usize].is_delta());
+        let has_delta_surfaces = parts.objects.iter().any(|o| materials.list[o.material as usize].has_delta());
         Ok(Scene {
             path: self.file.to_path_buf(),
             camera,
             materials: materials.list,
-            albedo_textures: materials.albedo_textures,
             triangle_uvs: parts.triangle_uvs,
             objects: parts.objects,
             geometry,

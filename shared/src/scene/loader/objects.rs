@@ -9,7 +9,7 @@ use crate::geometry::{Analytic, Annulus, LensSurface, Mesh, MeshTriangle, Sphere
 use crate::light::{EmissionTexture, Light};
 use crate::scene::file::{AnnulusSection, LensSurfaceSection, ObjectSection, SphereSection};
 use crate::scene::{SceneError, SceneObject};
-use crate::texture::{quad_uvs, Texture};
+use crate::texture::{quad_uvs, Bitmap};
 use glam::Vec2;
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -39,7 +39,7 @@ impl ObjectParts {
         mesh: Mesh,
         uvs: TriangleUvs,
         emission: Option<Rgb>,
-        emission_texture: Option<Arc<Texture>>,
+        emission_texture: Option<Arc<Bitmap>>,
     ) {
         for (k, t) in mesh.triangles.into_iter().enumerate() {
             let uv = uvs.as_ref().map(|u| u[k]);
@@ -91,7 +91,7 @@ impl Loader<'_> {
         let id = parts.objects.len() as u32;
         let triangles = self.triangle_shape(obj, &field)?;
         if triangles.as_ref().is_none_or(|(_, uvs)| uvs.is_none()) {
-            self.check_no_texture_needed(obj, &field, materials.albedo_textures[material as usize].is_some())?;
+            self.check_no_texture_needed(obj, &field, materials.list[material as usize].uses_uv())?;
         }
         match triangles {
             Some((mesh, uvs)) => parts.add_triangles(id, mesh, uvs, emission, emission_texture),
@@ -138,7 +138,7 @@ impl Loader<'_> {
         &mut self,
         obj: &ObjectSection,
         field: &dyn Fn(&str) -> String,
-    ) -> Result<(Option<Rgb>, Option<Arc<Texture>>), SceneError> {
+    ) -> Result<(Option<Rgb>, Option<Arc<Bitmap>>), SceneError> {
         let emission = match &obj.emission {
             Some(e) => Some(self.colour(*e.get_ref(), &e.span(), &field("emission"), None)?),
             // An emission texture alone emits its own values.

@@ -3,7 +3,7 @@
 
 use crate::scene::error::line_of;
 use crate::scene::SceneError;
-use crate::texture::Texture;
+use crate::texture::Bitmap;
 use sha2::{Digest, Sha256};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -26,7 +26,7 @@ pub(super) struct Loader<'a> {
     pub(super) hasher: Sha256,
     pub(super) mesh_files: Vec<(String, String)>,
     /// Textures decoded so far, by the path the scene writes: a texture used twice is read once.
-    pub(super) textures: BTreeMap<String, Arc<Texture>>,
+    pub(super) textures: BTreeMap<String, Arc<Bitmap>>,
 }
 
 impl<'a> Loader<'a> {

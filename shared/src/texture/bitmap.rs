@@ -1,16 +1,17 @@
-//! Image textures for diffuse albedo and emission: PNG files decoded from sRGB to linear RGB, looked up with
-//! bilinear filtering at texture coordinates interpolated over a triangle.
+//! Bitmaps: images decoded to linear RGB (PNG files from sRGB), looked up with bilinear filtering at texture
+//! coordinates.
 
 use crate::color::Rgb;
 use glam::{Vec2, Vec3};
 
-/// A decoded texture in linear RGB; row 0 is the top of the image, texture coordinate v = 0 its bottom row.
+/// A decoded image in linear RGB; row 0 is the top of the image, texture coordinate v = 0 its bottom row.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Texture {
+pub struct Bitmap {
     width: u32,
     height: u32,
     texels: Vec<Rgb>,
     mean: Rgb,
+    max: Rgb,
 }
 
 /// Largest image accepted, in texels (12 bytes each once decoded): a hostile or mistaken file must not
@@ -29,10 +30,10 @@ pub fn srgb_to_linear(v: f32) -> f32 {
     }
 }
 
-impl Texture {
+impl Bitmap {
     /// A texture from linear texels in row-major order, row 0 at the top; None when the sizes disagree or a
     /// texel is negative or not finite.
-    pub fn from_linear(width: u32, height: u32, texels: Vec<Rgb>) -> Option<Texture> {
+    pub fn from_linear(width: u32, height: u32, texels: Vec<Rgb>) -> Option<Bitmap> {
         if width == 0 || height == 0 || texels.len() != width as usize * height as usize {
             return None;
         }
@@ -42,12 +43,13 @@ impl Texture {
         let sum = texels.iter().fold([0.0f64; 3], |s, t| [s[0] + t.x as f64, s[1] + t.y as f64, s[2] + t.z as f64]);
         let n = texels.len() as f64;
         let mean = Vec3::new((sum[0] / n) as f32, (sum[1] / n) as f32, (sum[2] / n) as f32);
-        Some(Texture { width, height, texels, mean })
+        let max = texels.iter().fold(Rgb::ZERO, |m, t| m.max(*t));
+        Some(Bitmap { width, height, texels, mean, max })
     }
 
     /// Decodes a PNG (grey, grey + alpha, RGB, RGBA or palette, 8 or 16 bits). Samples are taken as sRGB
     /// encoded whatever the file's gAMA or iCCP chunks say, and alpha is ignored: a texture is a colour.
-    pub fn from_png(bytes: &[u8]) -> Result<Texture, String> {
+    pub fn from_png(bytes: &[u8]) -> Result<Bitmap, String> {
         let mut decoder =
             png::Decoder::new_with_limits(std::io::Cursor::new(bytes), png::Limits { bytes: MAX_DECODER_BYTES });
         decoder.set_transformations(png::Transformations::EXPAND | png::Transformations::STRIP_16);
@@ -83,7 +85,7 @@ impl Texture {
                 });
             }
         }
-        Texture::from_linear(width, height, texels).ok_or_else(|| "the PNG has no pixels".into())
+        Bitmap::from_linear(width, height, texels).ok_or_else(|| "the PNG has no pixels".into())
     }
 
     /// Width in texels.
@@ -109,6 +111,11 @@ impl Texture {
         self.mean
     }
 
+    /// The largest texel value of each channel.
+    pub fn max_texel(&self) -> Rgb {
+        self.max
+    }
+
     /// Bilinear lookup at (u, v): u runs left to right, v bottom to top over [0, 1], and the texture repeats
     /// outside. Texel centres sit at half-integer positions. Non-finite coordinates give black.
     pub fn lookup(&self, uv: Vec2) -> Rgb {
@@ -128,38 +135,13 @@ impl Texture {
     }
 }
 
-/// Barycentric coordinates (b1, b2) of `p` on the triangle `v` (p ≈ (1 − b1 − b2) v0 + b1 v1 + b2 v2), found by
-/// least squares so that a point slightly off the plane still gets the nearest answer.
-pub fn barycentric(v: &[Vec3; 3], p: Vec3) -> Vec2 {
-    let (e1, e2, d) = (v[1] - v[0], v[2] - v[0], p - v[0]);
-    let (a, b, c) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
-    let (r1, r2) = (d.dot(e1), d.dot(e2));
-    let det = a * c - b * b;
-    if det <= 0.0 || !det.is_finite() {
-        return Vec2::ZERO;
-    }
-    Vec2::new((c * r1 - b * r2) / det, (a * r2 - b * r1) / det)
-}
-
-/// Texture coordinates at barycentrics `b` of a triangle with vertex coordinates `uv`.
-#[inline]
-pub fn interpolate_uv(uv: &[Vec2; 3], b: Vec2) -> Vec2 {
-    uv[0] * (1.0 - b.x - b.y) + uv[1] * b.x + uv[2] * b.y
-}
-
-/// Texture coordinates of the two triangles `Mesh::quad` makes: u along edge1, v along edge2, (0, 0) at the
-/// corner.
-pub fn quad_uvs() -> [[Vec2; 3]; 2] {
-    [[Vec2::ZERO, Vec2::X, Vec2::ONE], [Vec2::ZERO, Vec2::ONE, Vec2::Y]]
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
     fn bilinear_lookup_hits_texel_centres_and_blends_between_them() {
-        let t = Texture::from_linear(2, 1, vec![Rgb::ZERO, Rgb::ONE]).unwrap();
+        let t = Bitmap::from_linear(2, 1, vec![Rgb::ZERO, Rgb::ONE]).unwrap();
         assert_eq!(t.lookup(Vec2::new(0.25, 0.5)), Rgb::ZERO);
         assert_eq!(t.lookup(Vec2::new(0.75, 0.5)), Rgb::ONE);
         assert!((t.lookup(Vec2::new(0.5, 0.5)).x - 0.5).abs() < 1e-6);
@@ -168,26 +150,8 @@ mod tests {
 
     #[test]
     fn row_zero_is_the_top_and_v_runs_upward() {
-        let t = Texture::from_linear(1, 2, vec![Rgb::ONE, Rgb::ZERO]).unwrap();
+        let t = Bitmap::from_linear(1, 2, vec![Rgb::ONE, Rgb::ZERO]).unwrap();
         assert_eq!(t.lookup(Vec2::new(0.5, 0.75)), Rgb::ONE);
         assert_eq!(t.lookup(Vec2::new(0.5, 0.25)), Rgb::ZERO);
-    }
-
-    #[test]
-    fn barycentrics_reproduce_the_point() {
-        let v = [Vec3::ZERO, Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 1.0, 1.0)];
-        let p = v[0] * 0.2 + v[1] * 0.5 + v[2] * 0.3;
-        let b = barycentric(&v, p);
-        assert!((b - Vec2::new(0.5, 0.3)).length() < 1e-6);
-    }
-
-    #[test]
-    fn quad_uvs_follow_the_quad_triangles() {
-        let m = crate::geometry::Mesh::quad(Vec3::ZERO, Vec3::X * 2.0, Vec3::Y * 3.0);
-        for (t, uv) in m.triangles.iter().zip(quad_uvs()) {
-            for (v, uv) in t.v.iter().zip(uv) {
-                assert!((Vec2::new(v.x / 2.0, v.y / 3.0) - uv).length() < 1e-6);
-            }
-        }
     }
 }
