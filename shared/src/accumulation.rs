@@ -8,7 +8,7 @@ pub mod lit_mask;
 mod non_finite;
 
 pub use auxiliary::{AuxLayer, AuxLayout, AuxSums};
-pub use lit_mask::{LitMask, LitMaskRecord, LIT_LAYER};
+pub use lit_mask::{ErrorOver, LitMask, LitMaskRecord, LIT_LAYER};
 pub use non_finite::non_finite_dropped;
 
 use crate::color::{luminance, luminance_f64, Rgb};

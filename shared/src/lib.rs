@@ -12,17 +12,21 @@
 //! triangle meshes, analytic lens surfaces and the BVH over them) import nothing of the crate. `camera`
 //! (pinhole, thin lens, sensor behind a lens) builds its rays from `geometry` and `sampling`.
 //!
-//! **Spectra, materials and lights.** `spectrum` holds wavelengths, dispersive refractive indices and the
-//! colour state of a path; it knows of materials only through its `Dispersive` trait. `material` (scattering
-//! at a surface hit) and `light` (emitters and their sampling) read `geometry`'s hits and `sampling`'s warps;
-//! `texture` (PNG textures looked up over a triangle) serves lights and the scene's albedo textures.
+//! **Spectra, textures, scattering and lights.** `spectrum` holds wavelengths, dispersive refractive indices
+//! and the colour state of a path; it knows of materials only through its `Dispersive` trait. `texture`
+//! (constants, bitmaps and patterns over a surface's texture coordinates) serves materials and lights. `bsdf`
+//! is the scattering interface with one file per family (diffuse, conductor, dielectric, coating, …) and the
+//! lobe classes the estimator reads; `material` is a scene's material (textured parameters, two sides, an
+//! opacity) resolved into a `bsdf::Bsdf` at a surface point; `light` holds emitters and their sampling. They
+//! read `geometry`'s hits and `sampling`'s warps.
 //!
 //! **Scene.** `scene` is the loaded scene the integrators read (objects, materials, geometry, lights, camera)
 //! and, in `scene::loader`, its construction from a TOML file with errors that name the file, line and field.
 //! It builds on the two layers below it.
 //!
-//! **Integrators and the PBPM estimator.** `integrator` holds the image layers, next-event estimation and the
-//! reference path tracer; `pbpm` the backward pass that stores photons on camera paths, the photon map, the
+//! **Integrators and the PBPM estimator.** `integrator` holds the image layers, next-event estimation, the
+//! one path walk (`integrator::walk`, a bounce loop with a technique for what each kind of path does) with
+//! its camera technique, and the reference path tracer; `pbpm` the backward pass that stores photons on camera paths, the photon map, the
 //! forward pass that gathers light paths into it, the ghost paths and where on the lens they aim, and the radius
 //! schedule; `ghost` tells which light is ghost light (reflected inside a lens). They read the scene.
 //!

@@ -3,6 +3,16 @@
 
 use serde::{Deserialize, Serialize};
 
+/// Which δ a target error refers to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ErrorOver {
+    /// Pixels the lit mask leaves unlit (default: the lights would flatter δ).
+    Unlit,
+    /// Every pixel, the paper's eq. 6.
+    All,
+}
+
 /// Primary rays per pixel the mask is decided from (a 4 × 4 stratification of the pixel and of the aperture).
 pub const LIT_MASK_SAMPLES: u32 = 16;
 

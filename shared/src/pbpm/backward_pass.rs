@@ -3,7 +3,6 @@
 //! diffuse vertices.
 
 use super::gather_disc::gather_disc_areas;
-use super::inner_disc::inner_share;
 use super::photon::{BackwardPhoton, PhotonLists, StoredVertex, LAMBERTIAN};
 use super::radius::RadiusSchedule;
 use super::PhotonKind;
@@ -137,7 +136,7 @@ impl<const S: bool> StoredVertices<S> for Photons<'_, '_> {
                 kind: PhotonKind::new(v.k as u8, v.first, v.ghost),
                 segments: w.segments.min(255) as u8,
                 spectrum: w.spectrum.tag(),
-                inner_share: inner_share(areas),
+                inner_share: areas.inner_share(),
                 stored,
             });
         }

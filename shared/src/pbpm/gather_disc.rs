@@ -25,6 +25,15 @@ pub struct DiscAreas {
     pub inner: f32,
 }
 
+impl DiscAreas {
+    /// The inner disc's share of the photon's gather area, A(r/√2) / A(r), in 256ths (`BackwardPhoton::
+    /// inner_share`): exactly 128 where the disc lies whole on its surface. Both areas are on the surface, so
+    /// that an edge or a corner does not look like blur.
+    pub fn inner_share(self) -> u8 {
+        (self.inner / self.whole * 256.0).round().clamp(1.0, 255.0) as u8
+    }
+}
+
 /// The areas of the discs of radius `r` and r/√2 around `hit.p` that lie on `hit`'s surface: π r² (π r²/2)
 /// minus what lies past the edges of the hit triangle that end the surface (`SceneGeometry::surface_edges`).
 /// One such edge within r cuts off a circular segment, computed exactly; where two or more cut the disc (a

@@ -5,18 +5,10 @@
 //! radius. A pixel's D of each phase goes into the `blur` layers, and `accumulation::blur` turns them into the
 //! bias it adds to δ.
 
-use super::gather_disc::DiscAreas;
 use super::BackwardPhoton;
 
 /// The inner disc's r², as a share of the photon's r²: half the disc's area.
 pub const INNER_RADIUS2: f32 = 0.5;
-
-/// The inner disc's share of the photon's gather area, A(r/√2) / A(r), in 256ths: exactly 128 where the disc
-/// lies whole on its surface. Both areas are the discs' areas on the surface (`gather_disc`), so that an edge
-/// or a corner does not look like blur.
-pub fn inner_share(areas: DiscAreas) -> u8 {
-    (areas.inner / areas.whole * 256.0).round().clamp(1.0, 255.0) as u8
-}
 
 /// A merge's part of its pixel's D: the luminance `y` it adds to the whole disc's estimate, less the
 /// y · A(r) / A(r/√2) it adds to the inner disc's when it lies there (`d2` is its squared distance from the

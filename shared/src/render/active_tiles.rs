@@ -29,8 +29,7 @@
 //! blur this is the closed form above. A tile left to retire by its noise alone would keep its blur, which no
 //! other tile's phases reduce.
 
-use super::session::ErrorOver;
-use crate::accumulation::{Accumulator, LitMask};
+use crate::accumulation::{Accumulator, ErrorOver, LitMask};
 use crate::color::luminance_f64;
 use serde::{Deserialize, Serialize};
 

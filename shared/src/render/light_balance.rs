@@ -16,7 +16,7 @@
 //! depths converge to the same image, so the phases of the comparison count like any other; but the losing
 //! depth's phases can hold several times the variance of the winner's, so the comparison is kept short.
 
-use super::settings::RenderSettings;
+use super::settings::{RenderSettings, START_DEPTH};
 use super::totals::RayTotals;
 use crate::accumulation::Accumulator;
 use crate::color::luminance_f64;
@@ -32,9 +32,6 @@ pub const MERGE_COST: f64 = 0.33;
 /// The L a run that chooses its own starts from.
 pub const START: f32 = 1.0;
 
-/// The camera paths' diffuse depth a run that chooses its own starts from (the deeper of the two, so that memory
-/// is sized for it), and keeps where the comparison cannot tell them apart.
-pub const START_DEPTH: u32 = 2;
 
 /// The two trial L of a step pair lie this factor above and below the current L.
 pub const SPREAD: f64 = std::f64::consts::SQRT_2;

@@ -7,9 +7,9 @@ use super::light_balance::LightBalance;
 use super::record::HistoryEntry;
 use super::settings::RenderSettings;
 use super::totals::RayTotals;
+pub use crate::accumulation::ErrorOver;
 use crate::accumulation::{Accumulator, LitMask};
 use crate::pbpm::RadiusSchedule;
-use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
@@ -97,16 +97,6 @@ impl Progressive for Engine<'_> {
 pub fn set_balance<R: Progressive + ?Sized>(engine: &mut R, balance: &LightBalance) -> bool {
     let light = engine.set_light_paths_per_pixel(balance.next());
     light && balance.depth().is_none_or(|d| engine.set_backward_diffuse_depth(d))
-}
-
-/// Which δ a target error refers to.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum ErrorOver {
-    /// Pixels the lit mask leaves unlit (default: the lights would flatter δ).
-    Unlit,
-    /// Every pixel, the paper's eq. 6.
-    All,
 }
 
 /// When to stop; the first rule met wins. `phases` counts the phases every pixel has received, or with adaptive

@@ -7,6 +7,10 @@ use crate::scene::{Scene, SceneRenderSettings};
 use crate::spectrum::PhaseSpectrum;
 use serde::{Deserialize, Serialize};
 
+/// The camera paths' diffuse depth a run that chooses its own starts from (the deeper of the two, so that memory
+/// is sized for it), and keeps where the comparison cannot tell them apart.
+pub const START_DEPTH: u32 = 2;
+
 /// Everything that, with the scene, determines a run's result.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RenderSettings {
@@ -45,7 +49,7 @@ impl RenderSettings {
             estimator: method.estimator(),
             seed,
             max_depth,
-            backward_diffuse_depth: backward_diffuse_depth.unwrap_or(super::light_balance::START_DEPTH),
+            backward_diffuse_depth: backward_diffuse_depth.unwrap_or(START_DEPTH),
             radius_scale,
             radius_alpha: 2.0 / 3.0,
             light_paths_per_pixel: light_paths_per_pixel.unwrap_or(super::light_balance::START),
@@ -98,7 +102,7 @@ impl RenderSettings {
             s.light_paths_per_pixel = super::light_balance::START;
         }
         if s.adaptive_depth {
-            s.backward_diffuse_depth = super::light_balance::START_DEPTH;
+            s.backward_diffuse_depth = START_DEPTH;
         }
         s
     }
