@@ -92,9 +92,7 @@ pub fn image_points(scene: &Scene, path: &RecordedPath, world: &[Vec3]) -> Vec<(
     let sensor = matches!(cam.lens, photonfarm::camera::Lens::Sensor { .. });
     let in_lens = |object: u16| {
         sensor
-            && scene.objects.get(object as usize).is_some_and(|o| {
-                scene.materials[o.material as usize].is_dielectric()
-            })
+            && scene.objects.get(object as usize).is_some_and(|o| scene.materials[o.material as usize].is_dielectric())
     };
     let pixel_centre = |pixel: u32| {
         (pixel < cam.width * cam.height)

@@ -64,11 +64,7 @@ pub fn write_section(
 ) -> Result<usize> {
     let cam = &scene.camera;
     let plane = Plane { origin: cam.position, across: cam.forward(), up: cam.up() };
-    let glass: Vec<bool> = scene
-        .objects
-        .iter()
-        .map(|o| scene.materials[o.material as usize].is_dielectric())
-        .collect();
+    let glass: Vec<bool> = scene.objects.iter().map(|o| scene.materials[o.material as usize].is_dielectric()).collect();
     let weights = relative_weights(paths);
     let drawn = heaviest(&weights, max_paths);
     // A lens is drawn from its sensor to its front element; any other scene around the drawn paths' vertices.
