@@ -106,8 +106,8 @@ impl Canvas {
 
     fn blend(&mut self, x: usize, y: usize, colour: [f32; 3], alpha: f32) {
         let i = (y * self.width + x) * 3;
-        for k in 0..3 {
-            self.rgb[i + k] += (colour[k] - self.rgb[i + k]) * alpha;
+        for (v, c) in self.rgb[i..i + 3].iter_mut().zip(colour) {
+            *v += (c - *v) * alpha;
         }
     }
 

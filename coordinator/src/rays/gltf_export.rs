@@ -133,7 +133,7 @@ impl Builder {
     fn finish(mut self, nodes: Vec<json::Index<json::Node>>) -> Result<Vec<u8>> {
         let scene = self.root.push(json::Scene { extensions: None, extras: Default::default(), name: None, nodes });
         self.root.scene = Some(scene);
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         self.root.buffers[self.buffer.value()].byte_length = USize64::from(self.bin.len());
@@ -285,7 +285,7 @@ mod tests {
                 match primitive.mode() {
                     gltf::mesh::Mode::Triangles => {
                         objects += 1;
-                        assert!(points.len() % 3 == 0 && !points.is_empty());
+                        assert!(points.len().is_multiple_of(3) && !points.is_empty());
                     }
                     gltf::mesh::Mode::Lines => {
                         let colours = reader.read_colors(0).unwrap().into_rgb_f32().count();
