@@ -143,6 +143,10 @@ pub struct BenchArgs {
     /// Seconds per run.
     #[arg(long, default_value_t = 40.0)]
     pub time: f64,
+    /// Phases per run: each run stops once every pixel has this many (`render --phases`), or at --time if that
+    /// comes first, so that the runs compare at equal work rather than equal time.
+    #[arg(long, value_name = "N")]
+    pub phases: Option<u64>,
     /// Every method on both scenes for 8 s, once: under five minutes on 2 cores.
     #[arg(long)]
     pub quick: bool,
@@ -267,8 +271,9 @@ pub struct RenderArgs {
     #[arg(long, value_name = "DIR")]
     pub tls_dir: Option<PathBuf>,
     /// Continue the run whose output folder is DIR from its checkpoint (combination and three-level): its
-    /// sums, phases, rays and time carry on, and results go to DIR unless --out is given.
-    #[arg(long, value_name = "DIR")]
+    /// sums, phases, rays and time carry on, and results go to DIR unless --out is given. A checkpoint file
+    /// instead of DIR (DIR/checkpoint-previous.bin, the one saved before the latest) continues from that file.
+    #[arg(long, value_name = "DIR|FILE")]
     pub resume: Option<PathBuf>,
     /// A worker that sends nothing (not even a heartbeat) for this many seconds is presumed hung and dropped.
     #[arg(long, default_value_t = 15.0, value_name = "SECONDS")]
@@ -336,9 +341,12 @@ pub struct RenderArgs {
     /// `tev=HOST:PORT`. A tev that is not there is a warning, never a failed render.
     #[arg(long, value_name = "tev[=HOST:PORT]", value_parser = parse_display)]
     pub display: Option<Display>,
-    /// Memory the process may use, e.g. 2G or 500M: checked before the in-process parallel methods allocate
-    /// (memory in use after loading the scene plus the engine's buffers). `async`, whose buffers grow with its
-    /// threads, runs with fewer threads to fit; the other methods refuse to start. The record flags either.
+    /// Memory a rendering process may use, e.g. 2G or 500M: the memory in use after loading the scene plus the
+    /// engine's buffers. The in-process parallel methods check it before they allocate (`async`, whose buffers
+    /// grow with its threads, runs with fewer threads to fit and the record flags it; `sync` and `two-level`
+    /// refuse to start); `pbpm` and `path` check it before their first phase; every worker of `combination`
+    /// and `three-level` checks it for itself before its engine allocates, and a worker over it fails its
+    /// job with the reason.
     #[arg(long, value_name = "SIZE", value_parser = parse_size)]
     pub memory_limit: Option<u64>,
     /// Record a fraction of the camera and light paths of every phase into raymap/ in the output folder, for

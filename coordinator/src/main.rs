@@ -10,9 +10,7 @@ macro_rules! say {
     }};
 }
 
-mod bench_command;
-mod bench_tables;
-mod charts;
+mod bench;
 mod cli;
 mod cluster;
 mod live;
@@ -25,11 +23,12 @@ use clap::Parser;
 
 fn main() -> std::process::ExitCode {
     let cli = cli::Cli::parse();
+    worker::logging::init();
     let result = match cli.command {
         cli::Command::Render(args) => render_command::run(*args),
-        cli::Command::Bench(args) => bench_command::run(args),
+        cli::Command::Bench(args) => bench::run(args),
         cli::Command::Reference(args) => reference_command::run(args),
-        cli::Command::Charts(args) => charts::run(args),
+        cli::Command::Charts(args) => bench::charts::run(args),
         cli::Command::Keys(cli::KeysCommand::Init { dir }) => keys_init(&dir),
         cli::Command::Rays(cli::RaysCommand::Select(args)) => rays::select::select(args),
         cli::Command::Rays(cli::RaysCommand::Ghosts(args)) => rays::ghosts::ghosts(args),

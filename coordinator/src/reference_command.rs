@@ -41,7 +41,7 @@ pub fn run(args: ReferenceArgs) -> Result<()> {
         command.extend(["--radius-scale".into(), r.to_string()]);
     }
     let exe = std::env::current_exe().context("cannot find this program")?;
-    eprintln!("rendering the reference: coordinator {}", command.join(" "));
+    tracing::info!("rendering the reference: coordinator {}", command.join(" "));
     let status = std::process::Command::new(exe)
         .args(&command)
         .arg("--out")

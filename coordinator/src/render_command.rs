@@ -114,7 +114,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
             engine.workers().unwrap_or_default().iter().map(|w| format!("{}: {}", w.name, w.state)).collect();
         bail!("no worker rendered anything ({})", why.join("; "));
     }
-    let record = outputs.save(engine.as_ref(), &history, reason.name(), &forecast)?;
+    let record = outputs.save(engine.as_ref(), &history, reason, &forecast)?;
     if let Some(f) = feed {
         f.finished(engine.as_ref(), &record);
     }
@@ -272,9 +272,30 @@ fn load_checkpoint(args: &RenderArgs, scene: &Scene) -> Result<Option<Checkpoint
     {
         bail!("a resumed run keeps the settings of its checkpoint: drop --max-depth, --backward-diffuse-depth, --radius-scale, --light-paths-per-pixel and --spectral-output");
     }
-    let path = from.join(CHECKPOINT);
+    let (_, path) = resume_paths(from);
     let c = Checkpoint::load(&path, scene)?;
+    if c.method != args.method {
+        bail!(
+            "the checkpoint in {} is of a --method {} run, and --method {} cannot continue it (three-level is the \
+             default when --method is not given): resume it with --method {}",
+            from.display(),
+            c.method,
+            args.method,
+            c.method
+        );
+    }
     Ok(Some(c))
+}
+
+/// The output folder of the run `--resume` names and the checkpoint file it continues from: FROM/checkpoint.bin,
+/// or FROM itself when it is a file (`checkpoint-previous.bin`), in its folder.
+fn resume_paths(from: &Path) -> (PathBuf, PathBuf) {
+    if from.is_file() {
+        let dir = from.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        (dir.to_path_buf(), from.to_path_buf())
+    } else {
+        (from.to_path_buf(), from.join(CHECKPOINT))
+    }
 }
 
 /// Refuses to resume a run whose checkpoint already meets the stop rule: starting workers only to stop them at
@@ -330,8 +351,11 @@ fn check_resume_has_work(
 
 /// The output folder (`--out`, the resumed run's, or a new one under out/), created.
 fn output_dir(args: &RenderArgs) -> Result<PathBuf> {
-    let dir =
-        args.out.clone().or_else(|| args.resume.clone()).unwrap_or_else(|| output_folder::default_dir(&args.scene));
+    let dir = args
+        .out
+        .clone()
+        .or_else(|| args.resume.as_deref().map(|r| resume_paths(r).0))
+        .unwrap_or_else(|| output_folder::default_dir(&args.scene));
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create the output folder {}", dir.display()))?;
     Ok(dir)
 }
@@ -409,7 +433,15 @@ fn start_engine<'s>(
             Ok((Box::new(cluster), layout))
         }
         (Processes::One, None) => {
+            let base = memory::current_rss_bytes().unwrap_or(0);
             let mut engine = Engine::new(scene, settings);
+            if let Some(limit) = args.memory_limit {
+                // The engine's buffers are sized once, for the whole image: what it holds now is what it needs.
+                let need = base + (engine.bytes_per_pixel() * scene.camera.pixel_count() as f64) as u64;
+                if need > limit {
+                    bail!("{}", memory::over_limit(limit, need, base, ""));
+                }
+            }
             engine.set_recorder(recorder);
             Ok((Box::new(engine), "1 thread".to_string()))
         }
@@ -493,6 +525,7 @@ fn launch_options(args: &RenderArgs) -> LaunchOptions {
         tile_size: args.tile_size,
         phases_per_deal: args.phases_per_deal,
         ray_map_fraction: args.ray_map.then_some(args.ray_map_fraction),
+        memory_limit: args.memory_limit,
     }
 }
 
@@ -528,7 +561,7 @@ impl Outputs<'_> {
         &self,
         engine: &dyn Progressive,
         history: &[HistoryEntry],
-        reason: &str,
+        reason: StopReason,
         forecast: &Forecast,
     ) -> RunRecord {
         let workers = engine.workers();
@@ -547,7 +580,7 @@ impl Outputs<'_> {
             settings: engine.settings().as_recorded(),
             radius_at_1m: engine.settings().radius_schedule(scene).radius(1.0, 1),
             threads: engine.threads() as u32,
-            stop_reason: reason.to_string(),
+            stop_reason: reason,
             totals: engine.totals(),
             stage_seconds: engine.stage_seconds(),
             wall_time_s: self.elapsed_s(),
@@ -571,7 +604,7 @@ impl Outputs<'_> {
         &self,
         engine: &dyn Progressive,
         history: &[HistoryEntry],
-        reason: &str,
+        reason: StopReason,
         forecast: &Forecast,
     ) -> Result<RunRecord> {
         if self.args.method.is_distributed() {
@@ -622,7 +655,7 @@ fn run_until_stop(
         }
         if last_save.elapsed() >= save_interval && save_error.is_none() {
             last_save = Instant::now();
-            if let Err(e) = outputs.save(engine, history, "running", forecast) {
+            if let Err(e) = outputs.save(engine, history, StopReason::Running, forecast) {
                 save_error = Some(e);
             }
         }
@@ -688,24 +721,17 @@ fn finish(engine: &mut dyn Progressive, outputs: &Outputs, history: &mut Vec<His
     if !outputs.args.method.is_distributed() {
         return;
     }
-    let (e, t) = (engine.sums().error(outputs.lit), engine.totals());
+    let e = engine.sums().error(outputs.lit);
     forecast.step(outputs.elapsed_s(), engine.sums().image_phases(), outputs.stop.delta_of(&e));
-    let truth = outputs.reference.map(|r| r.compare(engine.sums(), outputs.lit));
-    history.push(HistoryEntry {
-        phase: t.phases,
-        time_s: outputs.elapsed_s(),
-        delta_all: e.delta_all,
-        delta_unlit: e.delta_unlit,
-        backward_rays: t.backward_rays,
-        forward_rays: t.forward_rays,
-        light_paths_per_pixel: (!engine.settings().adaptive_light).then_some(engine.settings().light_paths_per_pixel),
-        backward_diffuse_depth: (!engine.settings().adaptive_depth).then_some(engine.settings().backward_diffuse_depth),
-        true_all: truth.as_ref().map(|t| t.rmse_all),
-        true_unlit: truth.as_ref().map(|t| t.rmse_unlit),
-        active_tiles: history.last().and_then(|h| h.active_tiles),
-        blur_all: e.blur_all,
-        blur_unlit: e.blur_unlit,
-    });
+    let s = engine.settings();
+    let light = (!s.adaptive_light).then_some(s.light_paths_per_pixel);
+    let depth = (!s.adaptive_depth).then_some(s.backward_diffuse_depth);
+    let tiles = history.last().and_then(|h| h.active_tiles);
+    let mut entry = HistoryEntry::after_step(outputs.elapsed_s(), &e, &engine.totals(), light, depth, tiles);
+    if let Some(truth) = outputs.reference.map(|r| r.compare(engine.sums(), outputs.lit)) {
+        (entry.true_all, entry.true_unlit) = (Some(truth.rmse_all), Some(truth.rmse_unlit));
+    }
+    history.push(entry);
 }
 
 fn print_summary(record: &RunRecord, reason: StopReason, dir: &Path) {
@@ -776,14 +802,8 @@ fn fit_memory(
             return Ok(t);
         }
     }
-    bail!(
-        "--memory-limit {} is too small: this render needs about {} ({} in use after loading the scene, plus the \
-         engine's buffers){}",
-        mb(limit),
-        mb(need(if grows_with_threads { 1 } else { threads })?),
-        mb(base),
-        if grows_with_threads { " even with one thread" } else { "" }
-    )
+    let least = need(if grows_with_threads { 1 } else { threads })?;
+    bail!("{}", memory::over_limit(limit, least, base, if grows_with_threads { " even with one thread" } else { "" }))
 }
 
 fn stop_rule(args: &RenderArgs) -> Result<StopRule> {

@@ -91,8 +91,8 @@ fn ray_tracing(c: &mut Criterion) {
                 reference_backend.name(),
                 rays.len()
             );
-            // Rays that graze an edge shared by two triangles may be given to either, or to neither by obvhs's
-            // test, which is not watertight: a handful of the 262,144, never more.
+            // Rays that graze an edge shared by two triangles may be given to either: a handful of the 262,144,
+            // never more.
             assert!(differ * 10_000 < rays.len(), "the backends disagree on {differ} {name} rays");
             assert!(max_dt < 1e-4, "the backends' distances differ by up to {max_dt} (relative)");
         }

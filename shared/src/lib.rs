@@ -21,7 +21,8 @@
 //! read `geometry`'s hits and `sampling`'s warps.
 //!
 //! **Scene.** `scene` is the loaded scene the integrators read (objects, materials, geometry, lights, camera)
-//! and, in `scene::loader`, its construction from a TOML file with errors that name the file, line and field.
+//! and, in `scene::loader`, its construction from a TOML file with errors that name the file, line and field;
+//! `scene::mitsuba` reads Mitsuba 3 XML scenes and serialized meshes into a typed document (not yet a scene).
 //! It builds on the two layers below it.
 //!
 //! **Integrators and the PBPM estimator.** `integrator` holds the image layers, next-event estimation, the

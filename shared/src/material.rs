@@ -5,7 +5,12 @@
 
 use crate::bsdf::conductor::ConductorFresnel;
 use crate::bsdf::microfacet::{Distribution, Microfacet};
-use crate::bsdf::{Bsdf, Coating, Conductor, Dielectric, Diffuse, LobeFlags, Model};
+use crate::bsdf::plastic::Coat;
+use crate::bsdf::principled::PrincipledParams;
+use crate::bsdf::{
+    Bsdf, Coating, Conductor, Dielectric, Diffuse, LobeFlags, Model, Plastic, Principled, RoughDielectric,
+    ThinDielectric,
+};
 use crate::color::Rgb;
 use crate::geometry::SurfaceHit;
 use crate::sampling::Frame;
@@ -36,6 +41,11 @@ impl Roughness {
     fn varies(&self) -> bool {
         self.alpha_u.varies() || self.alpha_v.varies()
     }
+
+    /// True when α may differ between the two tangents: the shading frame's orientation then matters.
+    pub fn is_anisotropic(&self) -> bool {
+        self.alpha_u != self.alpha_v
+    }
 }
 
 /// The scattering family of one side of a surface, with its parameters.
@@ -47,8 +57,120 @@ pub enum Surface {
     Conductor { fresnel: ConductorFresnel, specular: Texture, roughness: Option<Roughness> },
     /// A smooth interface with `ior` behind the surface normal and `ext_ior` in front of it.
     Dielectric { ior: RefractiveIndex, ext_ior: RefractiveIndex, anti_reflection: bool },
+    /// A rough interface (Mitsuba's `roughdielectric`): `ior` behind the surface normal, `ext_ior` in front,
+    /// factors on the reflected and the refracted light.
+    RoughDielectric {
+        ior: RefractiveIndex,
+        ext_ior: RefractiveIndex,
+        roughness: Roughness,
+        specular_reflectance: Texture,
+        specular_transmittance: Texture,
+    },
+    /// A thin pane of index `ior` in `ext_ior` (Mitsuba's `thindielectric`), alike from both sides.
+    ThinDielectric {
+        ior: RefractiveIndex,
+        ext_ior: RefractiveIndex,
+        specular_reflectance: Texture,
+        specular_transmittance: Texture,
+    },
+    /// A diffuse base under a smooth or rough dielectric coat of relative index `eta` (Mitsuba's `plastic`
+    /// and `roughplastic`; `Coat::rough` computes a rough coat's table).
+    Plastic { diffuse_reflectance: Texture, specular_reflectance: Texture, eta: f32, nonlinear: bool, coat: Coat },
+    /// Mitsuba's `principled`.
+    Principled(Box<PrincipledSurface>),
     /// A thin partial reflector that transmits straight through.
     Coating { reflectance: Rgb, transmittance: Rgb },
+}
+
+/// The parameters of a principled surface, each a texture but the index and the sampling rates (as in
+/// Mitsuba); `Default` gives Mitsuba's defaults.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PrincipledSurface {
+    pub base_color: Texture,
+    pub roughness: Texture,
+    pub anisotropic: Texture,
+    pub metallic: Texture,
+    pub spec_trans: Texture,
+    /// Interior over exterior index (`crate::bsdf::principled::eta_of_specular` turns Mitsuba's `specular`
+    /// into it).
+    pub eta: f32,
+    pub spec_tint: Texture,
+    pub sheen: Texture,
+    pub sheen_tint: Texture,
+    pub flatness: Texture,
+    pub clearcoat: Texture,
+    pub clearcoat_gloss: Texture,
+    pub diffuse_reflectance_sampling_rate: f32,
+    pub main_specular_sampling_rate: f32,
+    pub clearcoat_sampling_rate: f32,
+}
+
+impl Default for PrincipledSurface {
+    fn default() -> Self {
+        let d = PrincipledParams::default();
+        PrincipledSurface {
+            base_color: Texture::Constant(d.base_color),
+            roughness: Texture::grey(d.roughness),
+            anisotropic: Texture::grey(d.anisotropic),
+            metallic: Texture::grey(d.metallic),
+            spec_trans: Texture::grey(d.spec_trans),
+            eta: d.eta,
+            spec_tint: Texture::grey(d.spec_tint),
+            sheen: Texture::grey(d.sheen),
+            sheen_tint: Texture::grey(d.sheen_tint),
+            flatness: Texture::grey(d.flatness),
+            clearcoat: Texture::grey(d.clearcoat),
+            clearcoat_gloss: Texture::grey(d.clearcoat_gloss),
+            diffuse_reflectance_sampling_rate: d.diffuse_reflectance_sampling_rate,
+            main_specular_sampling_rate: d.main_specular_sampling_rate,
+            clearcoat_sampling_rate: d.clearcoat_sampling_rate,
+        }
+    }
+}
+
+impl PrincipledSurface {
+    fn textures(&self) -> [&Texture; 11] {
+        [
+            &self.base_color,
+            &self.roughness,
+            &self.anisotropic,
+            &self.metallic,
+            &self.spec_trans,
+            &self.spec_tint,
+            &self.sheen,
+            &self.sheen_tint,
+            &self.flatness,
+            &self.clearcoat,
+            &self.clearcoat_gloss,
+        ]
+    }
+
+    /// The parameters at texture coordinates `uv`.
+    #[inline]
+    pub fn at(&self, uv: Vec2) -> PrincipledParams {
+        PrincipledParams {
+            base_color: self.base_color.eval(uv),
+            roughness: self.roughness.eval_scalar(uv),
+            anisotropic: self.anisotropic.eval_scalar(uv),
+            metallic: self.metallic.eval_scalar(uv),
+            spec_trans: self.spec_trans.eval_scalar(uv),
+            eta: self.eta,
+            spec_tint: self.spec_tint.eval_scalar(uv),
+            sheen: self.sheen.eval_scalar(uv),
+            sheen_tint: self.sheen_tint.eval_scalar(uv),
+            flatness: self.flatness.eval_scalar(uv),
+            clearcoat: self.clearcoat.eval_scalar(uv),
+            clearcoat_gloss: self.clearcoat_gloss.eval_scalar(uv),
+            diffuse_reflectance_sampling_rate: self.diffuse_reflectance_sampling_rate,
+            main_specular_sampling_rate: self.main_specular_sampling_rate,
+            clearcoat_sampling_rate: self.clearcoat_sampling_rate,
+        }
+    }
+
+    /// True when some point may transmit: the surface is then an interface with an inside.
+    fn transmits(&self) -> bool {
+        self.spec_trans.varies() || self.spec_trans.eval_scalar(Vec2::ZERO) > 0.0
+    }
 }
 
 impl Surface {
@@ -59,14 +181,47 @@ impl Surface {
             Surface::Conductor { specular, roughness, .. } => {
                 specular.varies() || roughness.as_ref().is_some_and(Roughness::varies)
             }
+            Surface::RoughDielectric { roughness, specular_reflectance, specular_transmittance, .. } => {
+                roughness.varies() || specular_reflectance.varies() || specular_transmittance.varies()
+            }
+            Surface::ThinDielectric { specular_reflectance, specular_transmittance, .. } => {
+                specular_reflectance.varies() || specular_transmittance.varies()
+            }
+            Surface::Plastic { diffuse_reflectance, specular_reflectance, .. } => {
+                diffuse_reflectance.varies() || specular_reflectance.varies()
+            }
+            Surface::Principled(p) => p.textures().iter().any(|t| t.varies()),
             Surface::Dielectric { .. } | Surface::Coating { .. } => false,
+        }
+    }
+
+    /// True when the family reads the direction of the shading frame's tangent (anisotropic roughness), which
+    /// the surface must then supply. A family with an anisotropic parameter answers here.
+    fn needs_tangent(&self) -> bool {
+        match self {
+            Surface::Conductor { roughness: Some(r), .. } => r.is_anisotropic(),
+            _ => false,
         }
     }
 
     /// True for the families that are an interface between two media, which scatter from both sides by
     /// their nature and tell the sides apart by their indices.
     fn is_interface(&self) -> bool {
-        matches!(self, Surface::Dielectric { .. })
+        match self {
+            Surface::Dielectric { .. } | Surface::RoughDielectric { .. } | Surface::ThinDielectric { .. } => true,
+            Surface::Principled(p) => p.transmits(),
+            _ => false,
+        }
+    }
+
+    /// True when the family's behaviour depends on wavelength (a dispersive index).
+    fn is_dispersive(&self) -> bool {
+        match self {
+            Surface::Dielectric { ior, ext_ior, .. }
+            | Surface::RoughDielectric { ior, ext_ior, .. }
+            | Surface::ThinDielectric { ior, ext_ior, .. } => ior.is_dispersive() || ext_ior.is_dispersive(),
+            _ => false,
+        }
     }
 
     /// The family at texture coordinates `uv`, seen from the front of the surface or from its back.
@@ -83,6 +238,28 @@ impl Surface {
                 let (eta_o, eta_t) = if front { (ext_ior, ior) } else { (ior, ext_ior) };
                 Model::Dielectric(Dielectric { eta_o, eta_t, anti_reflection })
             }
+            Surface::RoughDielectric { ior, ext_ior, roughness, specular_reflectance, specular_transmittance } => {
+                let (eta_o, eta_t) = if front { (*ext_ior, *ior) } else { (*ior, *ext_ior) };
+                Model::RoughDielectric(RoughDielectric {
+                    eta_o,
+                    eta_t,
+                    microfacet: roughness.at(uv),
+                    specular_reflectance: specular_reflectance.eval(uv),
+                    specular_transmittance: specular_transmittance.eval(uv),
+                })
+            }
+            Surface::ThinDielectric { ior, ext_ior, specular_reflectance, specular_transmittance } => {
+                Model::ThinDielectric(ThinDielectric {
+                    int_ior: *ior,
+                    ext_ior: *ext_ior,
+                    specular_reflectance: specular_reflectance.eval(uv),
+                    specular_transmittance: specular_transmittance.eval(uv),
+                })
+            }
+            Surface::Plastic { diffuse_reflectance, specular_reflectance, eta, nonlinear, coat } => Model::Plastic(
+                Plastic::new(diffuse_reflectance.eval(uv), specular_reflectance.eval(uv), *eta, *nonlinear, *coat),
+            ),
+            Surface::Principled(p) => Model::Principled(Principled::new(&p.at(uv), !front)),
             &Surface::Coating { reflectance, transmittance } => Model::Coating(Coating { reflectance, transmittance }),
         }
     }
@@ -113,17 +290,19 @@ pub struct Material {
     /// The probability that the surface is there, 1 where None.
     pub opacity: Option<Texture>,
     uses_uv: bool,
+    needs_tangent: bool,
 }
 
 impl Material {
     /// A material of `front` and `back` with an optional opacity.
     pub fn new(front: Surface, back: Back, opacity: Option<Texture>) -> Self {
-        let back_varies = match &back {
-            Back::Other(s) => s.varies(),
-            _ => false,
+        let (back_varies, back_tangent) = match &back {
+            Back::Other(s) => (s.varies(), s.needs_tangent()),
+            _ => (false, false),
         };
         let uses_uv = front.varies() || back_varies || opacity.as_ref().is_some_and(Texture::varies);
-        Material { front, back, opacity, uses_uv }
+        let needs_tangent = front.needs_tangent() || back_tangent;
+        Material { front, back, opacity, uses_uv, needs_tangent }
     }
 
     /// A material that scatters alike from both sides (every family of photonfarm's own scene format).
@@ -137,6 +316,13 @@ impl Material {
         self.uses_uv
     }
 
+    /// True when the BSDF depends on the direction of the surface's tangent (anisotropic roughness): a surface
+    /// point must then supply ∂p/∂u ([`Material::bsdf_with_tangent`]).
+    #[inline]
+    pub fn needs_tangent(&self) -> bool {
+        self.needs_tangent
+    }
+
     /// True for a smooth dielectric interface, where ghosts reflect.
     pub fn is_dielectric(&self) -> bool {
         matches!(self.front, Surface::Dielectric { .. })
@@ -144,7 +330,11 @@ impl Material {
 
     /// True when the material's behaviour depends on wavelength: a scene with one renders spectrally.
     pub fn is_dispersive(&self) -> bool {
-        matches!(self.front, Surface::Dielectric { ior, ext_ior, .. } if ior.is_dispersive() || ext_ior.is_dispersive())
+        let back = match &self.back {
+            Back::Other(s) => s.is_dispersive(),
+            _ => false,
+        };
+        self.front.is_dispersive() || back
     }
 
     /// True when some side has a delta lobe (then caustics exist), or the surface is partly cut out.
@@ -157,9 +347,22 @@ impl Material {
     }
 
     /// The BSDF at `hit` (texture coordinates `uv`) for a path arriving from `wo`: the side `wo` lies on, by
-    /// the geometric normal, chooses the family, and the frame is turned to that side.
+    /// the geometric normal, chooses the family, and the frame is turned to that side. The frame's tangents are
+    /// those `Frame::from_normal` picks (Mitsuba's `coordinate_system`).
     #[inline]
     pub fn bsdf(&self, hit: &SurfaceHit, uv: Vec2, wo: Vec3) -> Bsdf {
+        self.bsdf_in_frame(hit, uv, None, wo)
+    }
+
+    /// The BSDF as [`Material::bsdf`] gives it, with the shading frame's first tangent along `tangent` (∂p/∂u,
+    /// made perpendicular to the shading normal), as Mitsuba orients anisotropic materials.
+    #[inline]
+    pub fn bsdf_with_tangent(&self, hit: &SurfaceHit, uv: Vec2, tangent: Vec3, wo: Vec3) -> Bsdf {
+        self.bsdf_in_frame(hit, uv, Some(tangent), wo)
+    }
+
+    #[inline]
+    fn bsdf_in_frame(&self, hit: &SurfaceHit, uv: Vec2, tangent: Option<Vec3>, wo: Vec3) -> Bsdf {
         let front = wo.dot(hit.ng) >= 0.0;
         let (ng, ns) = if front { (hit.ng, hit.ns) } else { (-hit.ng, -hit.ns) };
         let surface = match (&self.back, front) {
@@ -169,6 +372,10 @@ impl Material {
             (Back::Black, _) => return Bsdf::new(Model::Black, Frame::from_normal(ns), ng, 1.0),
         };
         let opacity = self.opacity.as_ref().map_or(1.0, |t| t.eval_scalar(uv).clamp(0.0, 1.0));
-        Bsdf::new(surface.resolve(uv, front), Frame::from_normal(ns), ng, opacity)
+        let frame = match tangent {
+            Some(t) => Frame::from_normal_tangent(ns, t),
+            None => Frame::from_normal(ns),
+        };
+        Bsdf::new(surface.resolve(uv, front), frame, ng, opacity)
     }
 }

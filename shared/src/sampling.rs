@@ -1,7 +1,9 @@
 //! Random streams and the warps from uniform numbers to the directions and points the estimators need.
 
+mod piecewise;
 mod square_grid;
 
+pub use piecewise::{DistributionError, Piecewise1d, Piecewise2d};
 pub use square_grid::{GridShape, SquareGrid};
 
 use glam::{Vec2, Vec3};
@@ -158,6 +160,19 @@ impl Frame {
         Frame { s, t, n }
     }
 
+    /// Builds a frame whose third axis is `n` and whose first is `tangent` made perpendicular to it, as Mitsuba
+    /// orients shading frames by ∂p/∂u; the frame of `from_normal` where the tangent is parallel to `n` (within
+    /// a millionth of a radian) or not finite.
+    pub fn from_normal_tangent(n: Vec3, tangent: Vec3) -> Self {
+        let s = tangent - n * n.dot(tangent);
+        let (len2, scale2) = (s.length_squared(), tangent.length_squared());
+        if !(len2 > 1e-12 * scale2 && len2.is_finite() && len2 > 0.0) {
+            return Frame::from_normal(n);
+        }
+        let s = s / len2.sqrt();
+        Frame { s, t: n.cross(s), n }
+    }
+
     /// Local to world coordinates.
     #[inline]
     pub fn to_world(&self, v: Vec3) -> Vec3 {
@@ -308,6 +323,25 @@ mod tests {
             let f = Frame::from_normal(n);
             assert!(f.s.dot(f.t).abs() < 1e-5 && f.s.dot(n).abs() < 1e-5 && f.t.dot(n).abs() < 1e-5);
             assert!((f.s.length() - 1.0).abs() < 1e-5 && (f.t.length() - 1.0).abs() < 1e-5);
+        }
+    }
+
+    #[test]
+    fn a_tangent_frame_takes_the_tangent_perpendicular_to_the_normal_and_is_right_handed() {
+        let n = Vec3::new(0.0, 0.196_116, 0.980_581).normalize();
+        // Mitsuba 3.9.1 gives this frame for ∂p/∂u = (1, 1, 0) at that shading normal: s = (0.714006,
+        // 0.686544, −0.137309), t = (−0.70014, 0.70014, −0.140028).
+        let f = Frame::from_normal_tangent(n, Vec3::new(1.0, 1.0, 0.0));
+        assert!((f.s - Vec3::new(0.714_006, 0.686_544, -0.137_309)).length() < 1e-5, "{}", f.s);
+        assert!((f.t - Vec3::new(-0.700_14, 0.700_14, -0.140_028)).length() < 1e-5, "{}", f.t);
+        assert!((f.s.cross(f.t) - n).length() < 1e-5);
+        // Turned to the other side the tangent stays, and the frame stays right-handed.
+        let b = Frame::from_normal_tangent(-n, Vec3::new(1.0, 1.0, 0.0));
+        assert!((b.s - f.s).length() < 1e-6 && (b.s.cross(b.t) + n).length() < 1e-5);
+        // A tangent along the normal, a zero one or a NaN one leaves the frame of the normal alone.
+        for bad in [n * 3.0, Vec3::ZERO, Vec3::NAN] {
+            let g = Frame::from_normal_tangent(n, bad);
+            assert_eq!((g.s, g.t), (Frame::from_normal(n).s, Frame::from_normal(n).t));
         }
     }
 

@@ -1,6 +1,6 @@
 //! The Embree backend (the `embree` feature) returns the hits obvhs returns, with each of its build presets: on
 //! random rays over every shipped scene's geometry, the same hit or miss, object, triangle, distance and
-//! normals, and the same occlusion answers, but for rare numerical ties (`Comparison`). `cargo test -p photonfarm --features embree --test backend_agreement`.
+//! normals, but for rare numerical ties (`Comparison`), and the same occlusion answers, every one. `cargo test -p photonfarm --features embree --test backend_agreement`.
 
 #![cfg(feature = "embree")]
 
@@ -16,8 +16,8 @@ use std::path::Path;
 /// Random rays per kind and scene.
 const RAYS: usize = 20_000;
 
-/// The smallest barycentric coordinate of the hit point in its triangle: near 0 on an edge, where two
-/// triangles (or none, for obvhs's test, which is not watertight) may take the ray.
+/// The smallest barycentric coordinate of the hit point in its triangle: near 0 on an edge, where either of two
+/// triangles may take the ray.
 fn edge_distance(g: &SceneGeometry, h: &SurfaceHit) -> f32 {
     if h.triangle == u32::MAX {
         return f32::INFINITY;
@@ -30,10 +30,11 @@ fn edge_distance(g: &SceneGeometry, h: &SurfaceHit) -> f32 {
     u.min(v).min(1.0 - u - v)
 }
 
-/// How the two backends' answers to the rays compare. Three kinds of difference are numerical and allowed, in
-/// small numbers: a ray that grazes a triangle edge, where two triangles (or none, for obvhs's test, which is
-/// not watertight) may take it; coincident surfaces (a box standing on a floor), where either may win the tie;
-/// and a hit just past the ray's origin, which obvhs's traversal sometimes misses. Any other difference fails.
+/// How the two backends' answers to the rays compare. Two kinds of difference are numerical and allowed, in
+/// small numbers: a ray that grazes a triangle edge, where either of two triangles may take it; and coincident
+/// surfaces (a box standing on a floor), where either may win the tie. A hit just past the ray's origin that one
+/// backend misses (obvhs's traversal did, before `geometry::accel` started it further back) fails, as does any
+/// other difference.
 #[derive(Default)]
 struct Comparison {
     rays: usize,
@@ -52,8 +53,11 @@ impl Comparison {
             (Some(a), Some(b)) if a.object == b.object && a.triangle == b.triangle => {
                 self.hits += 1;
                 let close = |x: Vec3, y: Vec3, tol: f32| (x - y).length() <= tol;
+                // Embree's robust mode takes t from the ray's sheared coordinates, which lose a few dozen ulps of
+                // the coordinates' size on a hit near the origin.
+                let t_tolerance = 1e-4 * a.t.max(1e-3) + 64.0 * f32::EPSILON * ray.origin.abs().max_element();
                 assert!(
-                    (a.t - b.t).abs() <= 1e-4 * a.t.max(1e-3)
+                    (a.t - b.t).abs() <= t_tolerance
                         && close(a.ng, b.ng, 1e-4)
                         && close(a.ns, b.ns, 1e-3)
                         && close(a.p, b.p, 1e-4 * (1.0 + a.p.abs().max_element())),
@@ -131,13 +135,9 @@ fn compare_scene(name: &str, scene: &Scene, preset: ObvhsPreset) {
     assert!(cmp.hits * 10 > cmp.rays, "{name}: too few rays hit ({} of {}) to compare", cmp.hits, cmp.rays);
     // A ray lands within 1e-4 of an edge with a probability of about 1e-4 per edge it crosses.
     assert!(cmp.grazing * 1000 <= cmp.rays, "{name}: {} of {} rays differ at edges", cmp.grazing, cmp.rays);
-    assert!(
-        cmp.near_origin * 2000 <= cmp.rays,
-        "{name}: {} of {} rays differ near the origin",
-        cmp.near_origin,
-        cmp.rays
-    );
-    assert!(occlusion_differs * 1000 <= RAYS, "{name}: {occlusion_differs} of {RAYS} occlusion answers differ");
+    assert_eq!(cmp.near_origin, 0, "{name}: {} of {} rays differ near the origin", cmp.near_origin, cmp.rays);
+    // Both backends' triangle tests are watertight: an occlusion answer that differs is a ray that leaked.
+    assert_eq!(occlusion_differs, 0, "{name}: {occlusion_differs} of {RAYS} occlusion answers differ");
 }
 
 #[test]

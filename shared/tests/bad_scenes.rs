@@ -343,3 +343,85 @@ fn a_ghost_radius_outside_its_range_is_refused_with_the_range() {
         expect_error(&t, line_of(&t, "ghost_radius"), &["render.ghost_radius", "in [0, 32] (pixels)"]);
     }
 }
+
+/// GOOD with the floor's material replaced by the TOML lines `material`.
+fn with_material(material: &str) -> String {
+    GOOD.replace("type = \"diffuse\"\nalbedo = [0.5, 0.5, 0.5]", material)
+}
+
+#[test]
+fn every_material_family_loads_into_its_own_surface() {
+    use photonfarm::material::{Back, Surface};
+    type IsFamily = fn(&Surface) -> bool;
+    let cases: [(&str, IsFamily); 8] = [
+        ("type = \"conductor\"\nmaterial = \"Au\"", |s| matches!(s, Surface::Conductor { roughness: None, .. })),
+        (
+            "type = \"conductor\"\nmaterial = \"Cu\"\nalpha_u = 0.1\nalpha_v = 0.3",
+            |s| matches!(s, Surface::Conductor { roughness: Some(r), .. } if r.is_anisotropic()),
+        ),
+        ("type = \"conductor\"\neta = [0.2, 0.9, 1.1]\nk = [3.9, 2.4, 2.2]\nalpha = 0.2", |s| {
+            matches!(s, Surface::Conductor { roughness: Some(_), .. })
+        }),
+        ("type = \"dielectric\"\nior = 1.5", |s| matches!(s, Surface::Dielectric { .. })),
+        ("type = \"dielectric\"\nior = 1.5\nalpha = 0.1", |s| matches!(s, Surface::RoughDielectric { .. })),
+        ("type = \"thin_dielectric\"\nior = 1.5", |s| matches!(s, Surface::ThinDielectric { .. })),
+        ("type = \"plastic\"\nalpha = 0.2", |s| matches!(s, Surface::Plastic { .. })),
+        ("type = \"principled\"\nbase_color = [0.8, 0.2, 0.3]\nmetallic = 0.5", |s| {
+            matches!(s, Surface::Principled(_))
+        }),
+    ];
+    for (toml, is_family) in cases {
+        let s = load(&with_material(toml)).unwrap_or_else(|e| panic!("{toml}: {e}"));
+        assert!(is_family(&s.materials[0].front), "{toml} loaded as {:?}", s.materials[0].front);
+        assert_eq!(s.materials[0].back, Back::Same, "{toml}: photonfarm's materials are two-sided by default");
+    }
+}
+
+#[test]
+fn an_unknown_metal_is_refused_with_the_known_ones() {
+    let t = with_material("type = \"conductor\"\nmaterial = \"Unobtainium\"");
+    expect_error(&t, line_of(&t, "[materials.white]"), &["materials.white.material", "Unobtainium", "Au"]);
+}
+
+#[test]
+fn a_roughness_of_zero_or_an_unknown_distribution_is_refused() {
+    let t = with_material("type = \"conductor\"\nmaterial = \"Al\"\nalpha = 0.0");
+    expect_error(&t, line_of(&t, "[materials.white]"), &["materials.white.alpha", "above 0"]);
+    let t = with_material("type = \"conductor\"\nmaterial = \"Al\"\nalpha = 0.1\ndistribution = \"phong\"");
+    expect_error(&t, line_of(&t, "[materials.white]"), &["materials.white.distribution", "phong", "ggx"]);
+    let t = with_material("type = \"conductor\"\nmaterial = \"Al\"\nalpha_u = 0.1");
+    expect_error(&t, line_of(&t, "[materials.white]"), &["materials.white.alpha"]);
+}
+
+#[test]
+fn a_conductor_needs_a_metal_or_both_eta_and_k() {
+    let t = with_material("type = \"conductor\"\neta = [0.2, 0.9, 1.1]");
+    expect_error(&t, line_of(&t, "[materials.white]"), &["materials.white.eta", "both eta and k"]);
+    let t = with_material("type = \"conductor\"\nmaterial = \"Au\"\neta = [0.2, 0.9, 1.1]\nk = [1.0, 1.0, 1.0]");
+    expect_error(&t, line_of(&t, "[materials.white]"), &["materials.white.material", "not both"]);
+}
+
+#[test]
+fn the_back_of_a_material_is_black_the_same_or_another_material() {
+    use photonfarm::material::{Back, Surface};
+    let s = load(&with_material("type = \"diffuse\"\nalbedo = 0.5\nback = \"black\"")).unwrap();
+    assert_eq!(s.materials[0].back, Back::Black);
+    let t = format!(
+        "{}\n[materials.red]\ntype = \"diffuse\"\nalbedo = [0.5, 0.0, 0.0]\n",
+        with_material("type = \"plastic\"\nback = \"red\"")
+    );
+    let s = load(&t).unwrap();
+    let white = &s.materials[s.objects[0].material as usize];
+    assert!(matches!(&white.back, Back::Other(b) if matches!(**b, Surface::Diffuse { .. })), "{:?}", white.back);
+    let t = with_material("type = \"diffuse\"\nalbedo = 0.5\nback = \"grene\"");
+    expect_error(&t, line_of(&t, "[materials.white]"), &["materials.white.back", "grene", "black"]);
+}
+
+#[test]
+fn an_opacity_mask_loads_as_a_texture_and_needs_texture_coordinates_when_it_varies() {
+    let s = load(&with_material("type = \"diffuse\"\nalbedo = 0.5\nopacity = 0.5")).unwrap();
+    assert!(s.materials[0].opacity.is_some());
+    assert!(s.materials[0].has_delta(), "a cut-out passes light straight through");
+    let s = load(&with_material("type = \"diffuse\"\nalbedo = 0.5\nopacity = { bitmap = \"hud/slide.png\" }")).unwrap();
+    assert!(s.materials[0].uses_uv());
+}

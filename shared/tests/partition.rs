@@ -1,4 +1,4 @@
-//! The layer partition of DESIGN §1 counts every light path exactly once: on a scene where all four layers
+//! The layer partition (docs/estimator.md, "Layers") counts every light path exactly once: on a scene where all four layers
 //! are non-zero, PBPM converges to the path tracer, layer by layer and in total.
 
 mod common;

@@ -15,8 +15,11 @@ fn csv_rows(path: &std::path::Path) -> (Vec<String>, Vec<Vec<String>>) {
 #[test]
 fn bench_writes_a_row_per_run_their_error_series_and_the_report() {
     let out = scratch_dir("bench");
+    // Each run stops at its phases, however loaded the machine: what the checks below need, not a wall-clock
+    // budget that a slow phase can use up (the time is only a cap).
     let result = Command::new(binary("coordinator"))
-        .args(["bench", "--time", "1", "--scenes", "cornell", "--methods", "path,pbpm,two-level,three-level"])
+        .args(["bench", "--phases", "4", "--time", "300", "--scenes", "cornell"])
+        .args(["--methods", "path,pbpm,two-level,three-level"])
         .args(["--threads", "1,2", "--out"])
         .arg(&out)
         .current_dir(repo_root())
@@ -44,7 +47,8 @@ fn bench_writes_a_row_per_run_their_error_series_and_the_report() {
     for r in &rows {
         assert_eq!(r.len(), header.len(), "{r:?}");
         let number = |name: &str| r[col(name)].parse::<f64>().unwrap_or_else(|_| panic!("{name} in {r:?}"));
-        assert!(number("wall_s") > 0.9 && number("peak_memory_bytes") > 1e6, "{r:?}");
+        assert!(number("wall_s") > 0.0 && number("peak_memory_bytes") > 1e6, "{r:?}");
+        assert!(number("phases") >= 4.0, "{r:?}");
         // cornell ships a reference, so every run has a true error.
         assert!(number("true_unlit") > 0.0 && number("true_unlit") < 1.0, "{r:?}");
         let processes = if r[col("method")] == "three-level" { r[col("threads")].as_str() } else { "1" };
@@ -66,8 +70,9 @@ fn bench_writes_a_row_per_run_their_error_series_and_the_report() {
     assert_eq!(series_header[..5], ["scene", "method", "threads", "repeat", "time_s"]);
     for (method, threads) in expected {
         let points: Vec<&Vec<String>> = series.iter().filter(|p| p[1] == method && p[2] == threads).collect();
-        // A parallel step is a whole round (or snapshot), longer than a one-second run may last.
-        let least = if method == "path" || method == "pbpm" { 2 } else { 1 };
+        // A single-threaded step is a phase: four of them. A parallel step is a whole round (or snapshot), which
+        // may hold all four.
+        let least = if method == "path" || method == "pbpm" { 4 } else { 1 };
         assert!(points.len() >= least, "{method} at {threads} threads has {} series points", points.len());
         let times: Vec<f64> = points.iter().map(|p| p[4].parse().unwrap()).collect();
         assert!(times.windows(2).all(|w| w[0] <= w[1]), "{method}: series out of time order");

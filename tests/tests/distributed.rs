@@ -226,6 +226,11 @@ fn a_coordinator_killed_mid_run_resumes_without_losing_or_recounting_a_checkpoin
         assert!(start.elapsed() < Duration::from_secs(30), "workers outlived their coordinator");
         std::thread::sleep(Duration::from_millis(100));
     }
+    // Another method cannot continue it: refused before any worker starts, naming both methods.
+    let mut c = coordinator(&scene, &out, &["--method", "combination", "--topology", TWO_NODES, "--phases", "1200"]);
+    let o = c.arg("--resume").arg(&out).output().unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("--method three-level") && e.contains("--method combination"), "{e}");
     let mut c = coordinator(&scene, &out, &three);
     c.arg("--resume").arg(&out);
     run_ok(c);
@@ -476,4 +481,144 @@ fn a_host_whose_workers_keep_failing_is_refused_for_the_rest_of_the_job_and_the_
     assert!(flaky.iter().all(|w| w["failures"] == 2 && w["state"].as_str().unwrap().starts_with("lost")), "{flaky:?}");
     let local = workers.iter().find(|w| w["name"] == "node0").unwrap();
     assert_eq!((&local["state"], &local["failures"]), (&"finished".into(), &0.into()), "{local}");
+}
+
+/// The mean of an output's `phases` layer: the phases the image's pixels had.
+fn mean_phases(out: &Path) -> f64 {
+    use photonfarm::image_io::exr_file::{find_layer, read_exr};
+    let path = out.join("image.exr");
+    let layers = read_exr(&path).unwrap();
+    let phases = find_layer(&layers, &path, "phases").unwrap();
+    phases.rgb.iter().map(|p| p[0] as f64).sum::<f64>() / phases.rgb.len() as f64
+}
+
+#[test]
+fn two_workers_that_dial_in_give_the_blur_and_delta_of_the_planned_three_level_run() {
+    let dir = scratch_dir("dialled-share");
+    let scene = cornell_at(&dir, 32);
+    let (planned, dialled) = (dir.join("planned"), dir.join("dialled"));
+    // Wide discs, so that the blur stands far above its estimate's noise; light and depth fixed, so that the
+    // runs differ only in how their workers came; frequent snapshots, so that both stop near 300 phases.
+    let common = [
+        "--group-size",
+        "1",
+        "--phases",
+        "300",
+        "--radius-scale",
+        "12",
+        "--light-paths-per-pixel",
+        "1",
+        "--backward-diffuse-depth",
+        "1",
+        "--snapshot-interval",
+        "0.25",
+    ];
+    let mut c = coordinator(&scene, &planned, &["--method", "three-level", "--topology", TWO_NODES, "--seed", "61"]);
+    c.args(common);
+    run_ok(c);
+    // As a Slurm job runs it: the coordinator starts no worker, and two `worker join` processes, each confined
+    // to one core as hwloc-bind confines Slurm's, dial in.
+    let secret = dir.join("secret");
+    std::fs::write(&secret, "a secret for the dialled-in workers").unwrap();
+    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let addr = format!("127.0.0.1:{port}");
+    let mut c = coordinator(&scene, &dialled, &["--method", "three-level", "--remote-only", "--listen", &addr]);
+    c.args(common).args(["--seed", "62", "--secret-file"]).arg(&secret);
+    let child = c.stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let join = |name: &str, core: usize| {
+        let mut w = Command::new("taskset");
+        w.args(["-c", &(core % cores).to_string()]).arg(binary("worker"));
+        w.args(["join", &addr, "--name", name, "--secret-file"]).arg(&secret);
+        w.stdout(Stdio::null()).stderr(Stdio::piped()).spawn().expect("taskset (util-linux) runs the workers")
+    };
+    let workers = [join("a", 0), join("b", 1)];
+    let o = child.wait_with_output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for w in workers {
+        let o = w.wait_with_output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let (rp, rd) = (record(&planned), record(&dialled));
+    let workers = rd["workers"].as_array().unwrap();
+    assert_eq!(workers.len(), 2, "{workers:?}");
+    assert!(workers.iter().all(|w| w["state"] == "finished"), "{workers:?}");
+    // The blur falls about as N^(α − 1) = N^(−1/3) with the pixels' phases N: compared at the planned run's.
+    // With a lone process's schedule on each dialled-in worker it came out 14–16% above the planned run's.
+    let (np, nd) = (mean_phases(&planned), mean_phases(&dialled));
+    let error = |r: &serde_json::Value, key: &str| r["error"][key].as_f64().unwrap();
+    let (bp, bd) = (error(&rp, "blur_unlit"), error(&rd, "blur_unlit") * (nd / np).cbrt());
+    // δ² is the noise's SEM² plus the blur², and the noise part falls as 1/√N.
+    let noise = |r: &serde_json::Value, n: f64| {
+        let (d, b) = (error(r, "delta_unlit"), error(r, "blur_unlit"));
+        (d * d - b * b).max(0.0).sqrt() * (n / np).sqrt()
+    };
+    let (sp, sd) = (noise(&rp, np), noise(&rd, nd));
+    eprintln!(
+        "mean phases {np:.1} planned, {nd:.1} dialled in; at the planned phases blur_unlit {bp:.5} and {bd:.5} \
+         (ratio {:.3}), δ_unlit's noise part {sp:.5} and {sd:.5} (ratio {:.3})",
+        bd / bp,
+        sd / sp
+    );
+    assert!((bd / bp - 1.0).abs() < 0.06, "blur: dialled in {bd:.5} against planned {bp:.5}");
+    // A numbering that starved replicates of phases made δ's spread of the replicates several times larger.
+    assert!((sd / sp - 1.0).abs() < 0.25, "δ's noise part: dialled in {sd:.5} against planned {sp:.5}");
+    assert_same_image(&planned, &dialled, "dialled-in workers against planned ones");
+}
+
+#[test]
+fn a_checkpoint_with_one_bit_flipped_is_refused_and_the_previous_one_resumes() {
+    let dir = scratch_dir("damaged-checkpoint");
+    let scene = cornell_at(&dir, 32);
+    let out = dir.join("run");
+    let three = ["--method", "three-level", "--topology", TWO_NODES, "--group-size", "1"];
+    let mut c = coordinator(&scene, &out, &three);
+    c.args(["--time", "3", "--save-interval", "0.5", "--seed", "71"]);
+    run_ok(c);
+    let (latest, previous) = (out.join("checkpoint.bin"), out.join("checkpoint-previous.bin"));
+    assert!(previous.is_file(), "the save before the last one is kept beside it");
+    let whole = std::fs::read(&latest).unwrap();
+    let record_before = std::fs::read(out.join("run.json")).unwrap();
+    // As a user would try it: one bit flipped at 10%, 30%, 50%, 70% or 90% of the file, then --resume.
+    for percent in [10, 30, 50, 70, 90] {
+        let mut bytes = whole.clone();
+        bytes[whole.len() * percent / 100] ^= 0x10;
+        std::fs::write(&latest, &bytes).unwrap();
+        let mut c = coordinator(&scene, &out, &three);
+        let o = c.args(["--time", "6", "--resume"]).arg(&out).output().unwrap();
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "a checkpoint damaged at {percent}% was resumed: {e}");
+        assert!(
+            e.contains("is damaged") && e.contains(&format!("--resume {}", previous.display())),
+            "at {percent}%: {e}"
+        );
+        assert_eq!(std::fs::read(out.join("run.json")).unwrap(), record_before, "the refusal wrote nothing");
+    }
+    // The latest one stays damaged; the previous one continues the run.
+    let mut c = coordinator(&scene, &out, &three);
+    c.args(["--time", "5", "--resume"]).arg(&previous);
+    run_ok(c);
+    let r = record(&out);
+    assert_eq!(r["session"], 2);
+    assert_eq!(r["stop_reason"], "time");
+    assert!(r["wall_time_s"].as_f64().unwrap() >= 5.0, "{}", r["wall_time_s"]);
+}
+
+#[test]
+fn a_memory_limit_is_checked_by_every_worker_against_its_own_engine() {
+    let dir = scratch_dir("worker-memory-limit");
+    let scene = cornell_at(&dir, 256);
+    let three = ["--method", "three-level", "--topology", TWO_NODES, "--group-size", "1", "--phases", "2"];
+    // Each worker fails its job with the reason, and a run none of whose workers fit says why.
+    let mut c = coordinator(&scene, &dir.join("small"), &three);
+    let o = c.args(["--memory-limit", "20M"]).output().unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{e}");
+    assert!(e.contains("no worker rendered anything") && e.contains("--memory-limit 20 MiB is too small"), "{e}");
+    assert!(e.contains("on this worker's 1 thread"), "{e}");
+    // A limit the workers fit in renders as without one.
+    let mut c = coordinator(&scene, &dir.join("fits"), &three);
+    c.args(["--memory-limit", "4G"]);
+    run_ok(c);
+    assert_eq!(record(&dir.join("fits"))["stop_reason"], "phases");
 }

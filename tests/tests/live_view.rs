@@ -354,8 +354,21 @@ fn every_layer_reaches_tev_in_well_formed_packets_and_a_missing_tev_is_only_a_wa
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&run.stderr);
-    assert!(run.status.success() && err.contains("warning: no tev at"), "{err}");
+    assert!(run.status.success() && err.contains("WARN") && err.contains("no tev at"), "{err}");
     assert!(dir.join("no-tev/image.exr").is_file());
+    // The warning is a log event: RUST_LOG=error filters it out, and the run's summary stays.
+    let quiet = Command::new(binary("coordinator"))
+        .arg("render")
+        .arg(&scene)
+        .arg("--out")
+        .arg(dir.join("no-tev-quiet"))
+        .args(["--method", "pbpm", "--phases", "2", "--display", &closed])
+        .env("RUST_LOG", "error")
+        .output()
+        .unwrap();
+    let (err, out) = (String::from_utf8_lossy(&quiet.stderr), String::from_utf8_lossy(&quiet.stdout));
+    assert!(quiet.status.success() && !err.contains("no tev at"), "{err}");
+    assert!(out.contains("phases in") && out.contains("wrote"), "the summary: {out}");
     let _ = std::fs::remove_dir_all(dir);
 }
 

@@ -191,6 +191,29 @@ fn a_memory_limit_makes_async_give_up_threads_and_other_methods_refuse_up_front(
         .unwrap();
     let stderr = String::from_utf8_lossy(&refused.stderr);
     assert!(!refused.status.success() && stderr.contains("--memory-limit 20 MiB is too small"), "{stderr}");
+
+    // The one-thread methods check it too: refused under 20 MiB, rendering under a limit they fit in.
+    for method in ["pbpm", "path"] {
+        let out = scratch_dir(&format!("memory-limit-{method}"));
+        let run = |limit: &str| {
+            Command::new(binary("coordinator"))
+                .args(["render", scene, "--method", method, "--phases", "1", "--memory-limit", limit, "--quiet"])
+                .arg("--out")
+                .arg(&out)
+                .current_dir(repo_root())
+                .output()
+                .unwrap()
+        };
+        let refused = run("20M");
+        let stderr = String::from_utf8_lossy(&refused.stderr);
+        assert!(
+            !refused.status.success() && stderr.contains("--memory-limit 20 MiB is too small"),
+            "{method}: {stderr}"
+        );
+        assert!(!out.join("run.json").exists(), "{method}: a refused run wrote a record");
+        let fits = run("4G");
+        assert!(fits.status.success(), "{method}: {}", String::from_utf8_lossy(&fits.stderr));
+    }
 }
 
 #[test]

@@ -6,7 +6,8 @@ use crate::machine;
 use crate::memory_binding::{self, MemoryBinding};
 use crate::parallel::{EngineConfig, ParallelEngine};
 use photonfarm::accumulation::delta::{encode_delta, Compression};
-use photonfarm::protocol::{Job, Snapshot, WorkerInfo};
+use photonfarm::pbpm::ProcessShare;
+use photonfarm::protocol::{Job, Share, Snapshot, WorkerInfo};
 use photonfarm::ray_map::{self, PortionSink, Recorder};
 use photonfarm::render::light_balance::LightBalance;
 use photonfarm::render::session::{self, Progressive};
@@ -72,9 +73,32 @@ pub fn engine_config(job: &Job) -> Result<EngineConfig, String> {
     Ok(config)
 }
 
+/// Refuses an engine of `config` whose buffers, with the memory this process holds now (the scene loaded), would
+/// not fit in `limit` bytes (`--memory-limit`, per worker process), before it allocates them.
+fn check_memory_limit(
+    limit: u64,
+    config: &EngineConfig,
+    scene: &Scene,
+    settings: &photonfarm::render::RenderSettings,
+) -> Result<(), String> {
+    let base = photonfarm::render::memory::current_rss_bytes().unwrap_or(0);
+    let pixels = scene.camera.pixel_count();
+    let aux = photonfarm::accumulation::AuxLayout::for_scene(scene, settings.spectral_bands);
+    let need = base + (config.bytes_per_pixel(pixels, settings.backward_diffuse_depth, &aux) * pixels as f64) as u64;
+    if need <= limit {
+        return Ok(());
+    }
+    let detail =
+        format!(" on this worker's {} thread{}", config.threads(), if config.threads() == 1 { "" } else { "s" });
+    Err(photonfarm::render::memory::over_limit(limit, need, base, &detail))
+}
+
 /// Tiles the coordinator restricted a job to and the engine has not taken yet: the tile edge and one flag per
 /// tile.
 pub type PendingTiles = std::sync::Mutex<Option<(u32, Vec<bool>)>>;
+
+/// The latest share of the image's phases the coordinator announced and the engine has not taken yet.
+pub type PendingShare = std::sync::Mutex<Option<Share>>;
 
 /// What the link changes while a job runs.
 pub struct Control<'a> {
@@ -84,6 +108,8 @@ pub struct Control<'a> {
     pub interval_ms: &'a AtomicU64,
     /// Tiles the coordinator restricted the job to since the last round (tile edge, one flag per tile).
     pub tiles: &'a PendingTiles,
+    /// The processes rendering the image, announced since the last round.
+    pub share: &'a PendingShare,
     /// Where the portions of the job's ray map go (the link), when the job asks for one.
     pub ray_map: Option<Box<dyn PortionSink>>,
 }
@@ -114,6 +140,12 @@ pub fn run(
         Some(node) => memory_binding::bind_memory(node),
         None => MemoryBinding::FirstTouch("no NUMA node given".into()),
     };
+    if let Some(limit) = job.engine.memory_limit {
+        if let Err(reason) = check_memory_limit(limit, &config, scene, &job.settings) {
+            emit(JobEvent::Failed(reason));
+            return;
+        }
+    }
     let mut settings = job.settings;
     settings.seed = stream_seed(job.settings.seed, job.stream);
     let layout = config.layout();
@@ -169,8 +201,27 @@ pub fn run(
     let mut base = engine.sums().clone();
     let mut seq = 0;
     let mut last = Instant::now();
-    let Control { stop, interval_ms, tiles, .. } = control;
+    let Control { stop, interval_ms, tiles, share, .. } = control;
     loop {
+        let announced = share.lock().unwrap_or_else(|e| e.into_inner()).take();
+        if let Some(announced) = announced {
+            // `base` holds what this worker has sent, which the coordinator's merged phases include (or will).
+            let own: Vec<u32> = engine.sums().pixels.iter().map(|p| p.phases).collect();
+            let sent: Vec<u32> = base.pixels.iter().map(|p| p.phases).collect();
+            let share = announced
+                .merged_phases(own.len())
+                .map_err(|e| e.to_string())
+                .and_then(|merged| ProcessShare::announced(announced.processes, announced.rank, &merged, &own, &sent));
+            match share {
+                Ok(s) => engine.set_share(s),
+                Err(e) => {
+                    emit(JobEvent::Failed(format!(
+                        "the coordinator's share of the phases does not fit the image: {e}"
+                    )));
+                    return;
+                }
+            }
+        }
         let pending = tiles.lock().unwrap_or_else(|e| e.into_inner()).take();
         if let Some((tile, flags)) = pending {
             match ActiveTiles::from_flags(scene.camera.width, scene.camera.height, tile, flags) {
@@ -192,8 +243,8 @@ pub fn run(
                 let comparing = b.is_comparing_depths();
                 b.observe(engine.sums(), engine.totals());
                 if comparing && !b.is_comparing_depths() {
-                    eprintln!(
-                        "worker: backward_diffuse_depth {} from here on, chosen from the first rounds",
+                    tracing::info!(
+                        "backward_diffuse_depth {} from here on, chosen from the first rounds",
                         b.depth().expect("a chosen depth once the comparison has ended")
                     );
                 }
@@ -209,10 +260,12 @@ pub fn run(
         if stopping || last.elapsed() >= interval {
             seq += 1;
             let current = engine.sums();
+            let delta = encode_delta(current, &base, compression);
             let snapshot = Snapshot {
                 seq,
                 totals: engine.totals(),
-                delta: encode_delta(current, &base, compression),
+                checksum: Snapshot::checksum_of(&delta),
+                delta,
                 interval_ms: interval.as_millis() as u64,
                 previous_send_ms: 0,
                 peak_memory_bytes: photonfarm::render::memory::peak_rss_bytes().unwrap_or(0),
@@ -229,8 +282,8 @@ pub fn run(
             // The map's last portions go to the link before `Finished`, which the coordinator reads after them.
             if let Some(r) = &recorder {
                 match r.finish() {
-                    Ok(s) => eprintln!("worker: ray map: {} paths, {} segments sent", s.paths, s.segments),
-                    Err(e) => eprintln!("worker: the ray map is incomplete: {e}"),
+                    Ok(s) => tracing::info!("ray map: {} paths, {} segments sent", s.paths, s.segments),
+                    Err(e) => tracing::warn!("the ray map is incomplete: {e}"),
                 }
             }
             emit(JobEvent::Finished);

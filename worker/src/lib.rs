@@ -6,6 +6,7 @@
 
 pub mod job;
 pub mod link;
+pub mod logging;
 pub mod machine;
 pub mod memory_binding;
 pub mod parallel;

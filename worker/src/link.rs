@@ -47,6 +47,8 @@ pub type FileCache = BTreeMap<String, Vec<u8>>;
 #[derive(Debug)]
 pub struct JobOutcome {
     pub coordinator: String,
+    /// The job's scene file name (empty when the link ended before a job arrived).
+    pub job: String,
     pub snapshots_sent: u64,
     pub snapshots_acked: u64,
 }
@@ -74,11 +76,18 @@ pub async fn serve_job(
     };
     // Tiles the coordinator restricts the job to (adaptive tiles), handed to the engine thread before a round.
     let tiles: Arc<job::PendingTiles> = Arc::default();
+    // The processes rendering the image, as the coordinator announces them, likewise.
+    let share: Arc<job::PendingShare> = Arc::default();
     if fetch_files(&mut conn, &job, cache, &tiles).await? == Fetched::Stopped {
         // The run ended while this worker was still being set up: nothing rendered, nothing lost.
         conn.write(&Message::Finished).await?;
         drain_until_closed(&mut conn).await;
-        return Ok(JobOutcome { coordinator: peer.name, snapshots_sent: 0, snapshots_acked: 0 });
+        return Ok(JobOutcome {
+            coordinator: peer.name,
+            job: job.scene_name.clone(),
+            snapshots_sent: 0,
+            snapshots_acked: 0,
+        });
     }
     let meshes: BTreeMap<String, Vec<u8>> =
         job.files.iter().map(|f| (f.path.clone(), cache[&f.sha256].clone())).collect();
@@ -115,13 +124,17 @@ pub async fn serve_job(
     };
     let engine = {
         let (job, stop, interval_ms, slowdown) = (job.clone(), stop.clone(), interval_ms.clone(), opts.slowdown);
-        let tiles = tiles.clone();
+        let (tiles, share) = (tiles.clone(), share.clone());
         // On this machine the link is free and the worker's time is not: compress fast.
         let compression = Compression::for_peer(conn.peer);
+        // The engine's events name the job and the worker.
+        let span = tracing::info_span!("job", job = %job.scene_name, worker = %opts.name);
         std::thread::Builder::new()
             .name("job".into())
             .spawn(move || {
-                let control = job::Control { stop: &stop, interval_ms: &interval_ms, tiles: &tiles, ray_map };
+                let _span = span.enter();
+                let control =
+                    job::Control { stop: &stop, interval_ms: &interval_ms, tiles: &tiles, share: &share, ray_map };
                 job::run(&scene, &job, control, slowdown, compression, |e| events_tx.send(e).is_ok())
             })
             .map_err(|e| LinkError::Job(format!("cannot start the engine thread: {e}")))?
@@ -201,9 +214,12 @@ pub async fn serve_job(
                     Some(Ok(Message::ActiveTiles { tile, flags })) => {
                         *tiles.lock().unwrap_or_else(|e| e.into_inner()) = Some((tile, flags));
                     }
+                    Some(Ok(Message::Share(s))) => {
+                        *share.lock().unwrap_or_else(|e| e.into_inner()) = Some(s);
+                    }
                     Some(Ok(Message::Heartbeat)) => {}
                     Some(Ok(other)) => {
-                        break Err(ProtocolError::Unexpected { expected: "Ack, Stop, ActiveTiles or Heartbeat", got: other.kind().into() }.into())
+                        break Err(ProtocolError::Unexpected { expected: "Ack, Stop, ActiveTiles, Share or Heartbeat", got: other.kind().into() }.into())
                     }
                     // After `Finished` the coordinator may close once it has what it needs.
                     Some(Err(ProtocolError::Closed)) | None if finished => break Ok(()),
@@ -232,7 +248,12 @@ pub async fn serve_job(
     drop(events);
     // The engine notices the stop flag within a round; its thread holds no lock the link needs.
     let _ = tokio::task::spawn_blocking(move || engine.join()).await;
-    result.map(|()| JobOutcome { coordinator: peer.name, snapshots_sent: sent, snapshots_acked: acked })
+    result.map(|()| JobOutcome {
+        coordinator: peer.name,
+        job: job.scene_name.clone(),
+        snapshots_sent: sent,
+        snapshots_acked: acked,
+    })
 }
 
 /// Portions of the ray map that may wait for the link before the recorder's writer waits.
@@ -371,6 +392,7 @@ mod tests {
                 processes_per_pixel: 1,
                 process_rank: 0,
                 resumed_phases: 0,
+                memory_limit: None,
             },
             snapshot_interval_ms: 1000,
             ray_map: None,

@@ -4,7 +4,7 @@
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use photonfarm::protocol::auth::Secret;
-use photonfarm::protocol::tls::{self, Tls, Transport};
+use photonfarm::protocol::tls::{Tls, Transport};
 use photonfarm::protocol::Role;
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -67,25 +67,7 @@ enum Command {
 }
 
 fn secret(args: &SecretArgs, loopback: bool) -> Result<Secret> {
-    if let Some(path) = &args.secret_file {
-        return Ok(Secret::from_file(path)?);
-    }
-    if let Some(s) = Secret::from_env()? {
-        return Ok(s);
-    }
-    if let Some(dir) = &args.tls_dir {
-        let path = dir.join(tls::SECRET_FILE);
-        if path.exists() {
-            return Ok(Secret::from_file(&path)?);
-        }
-    }
-    if args.insecure || loopback {
-        return Ok(Secret::insecure());
-    }
-    bail!(
-        "a link that is not loopback needs a shared secret: --secret-file FILE, $PHOTONFARM_SECRET or the secret \
-         of --tls-dir DIR (or --insecure)"
-    )
+    Ok(Secret::resolve(args.secret_file.as_deref(), args.tls_dir.as_deref(), args.insecure || loopback)?)
 }
 
 /// TLS with the `--tls-dir` keys; plaintext only on loopback or with an explicit `--insecure`.
@@ -104,17 +86,18 @@ fn transport(args: &SecretArgs, loopback: bool) -> Result<Transport> {
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
+    worker::logging::init();
     let runtime = match tokio::runtime::Builder::new_current_thread().enable_all().build() {
         Ok(r) => r,
         Err(e) => {
-            eprintln!("worker: cannot start the network runtime: {e}");
+            tracing::error!("cannot start the network runtime: {e}");
             return std::process::ExitCode::FAILURE;
         }
     };
     match runtime.block_on(run(cli)) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("worker: {e:#}");
+            tracing::error!("{e:#}");
             std::process::ExitCode::FAILURE
         }
     }
@@ -143,9 +126,13 @@ async fn run(cli: Cli) -> Result<()> {
             };
             let conn = transport.connect(stream).await.with_context(|| format!("cannot set up the link to {addr}"))?;
             let outcome = serve_job(conn, &opts, &mut FileCache::new()).await?;
-            eprintln!(
-                "worker {}: job for {} done, {} snapshots sent, {} acknowledged",
-                opts.name, outcome.coordinator, outcome.snapshots_sent, outcome.snapshots_acked
+            tracing::info!(
+                worker = %opts.name,
+                job = %outcome.job,
+                coordinator = %outcome.coordinator,
+                "job done, {} snapshots sent, {} acknowledged",
+                outcome.snapshots_sent,
+                outcome.snapshots_acked
             );
             Ok(())
         }
@@ -158,27 +145,31 @@ async fn run(cli: Cli) -> Result<()> {
             let transport = transport(&s, listen.ip().is_loopback())?;
             let listener =
                 tokio::net::TcpListener::bind(listen).await.with_context(|| format!("cannot listen on {listen}"))?;
-            eprintln!("worker {}: listening on {}", opts.name, listener.local_addr()?);
+            tracing::info!(worker = %opts.name, "listening on {}", listener.local_addr()?);
             let mut cache = FileCache::new();
             loop {
                 let (stream, peer) = listener.accept().await.context("accept failed")?;
                 if opts.secret.is_insecure() && !peer.ip().is_loopback() && !s.insecure {
-                    eprintln!("worker {}: refused {peer}: no secret is set and the link is not loopback", opts.name);
+                    tracing::warn!(worker = %opts.name, "refused {peer}: no secret is set and the link is not loopback");
                     continue;
                 }
                 let conn = match transport.accept(stream).await {
                     Ok(c) => c,
                     Err(e) => {
-                        eprintln!("worker {}: refused {peer}: {e}", opts.name);
+                        tracing::warn!(worker = %opts.name, "refused {peer}: {e}");
                         continue;
                     }
                 };
                 match serve_job(conn, &opts, &mut cache).await {
-                    Ok(o) => eprintln!(
-                        "worker {}: job from {peer} ({}) done, {} snapshots sent, {} acknowledged",
-                        opts.name, o.coordinator, o.snapshots_sent, o.snapshots_acked
+                    Ok(o) => tracing::info!(
+                        worker = %opts.name,
+                        job = %o.job,
+                        coordinator = %o.coordinator,
+                        "job from {peer} done, {} snapshots sent, {} acknowledged",
+                        o.snapshots_sent,
+                        o.snapshots_acked
                     ),
-                    Err(e) => eprintln!("worker {}: link with {peer} ended: {e}", opts.name),
+                    Err(e) => tracing::warn!(worker = %opts.name, "link with {peer} ended: {e}"),
                 }
             }
         }

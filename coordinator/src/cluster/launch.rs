@@ -6,7 +6,7 @@ use super::numa_nodes::{self, NumaNode, NumaNodes};
 use super::{Cluster, Member};
 use anyhow::{bail, Context, Result};
 use photonfarm::protocol::auth::SECRET_ENV;
-use photonfarm::protocol::tls::{self, Tls, Transport};
+use photonfarm::protocol::tls::{Tls, Transport};
 use photonfarm::protocol::{EngineSpec, FileRef, Job, RayMapRequest, Role, Secret};
 use photonfarm::ray_map::Recorder;
 use photonfarm::render::method::Grouping;
@@ -50,6 +50,8 @@ pub struct LaunchOptions {
     pub phases_per_deal: u32,
     /// The fraction of paths each worker records into the run's ray map (`--ray-map`).
     pub ray_map_fraction: Option<f64>,
+    /// `--memory-limit`: what each worker process may use.
+    pub memory_limit: Option<u64>,
 }
 
 /// What a resumed run continues from.
@@ -150,25 +152,8 @@ fn loopback_only(options: &LaunchOptions) -> bool {
 }
 
 fn remote_secret(options: &LaunchOptions) -> Result<Secret> {
-    if let Some(f) = &options.secret_file {
-        return Ok(Secret::from_file(f)?);
-    }
-    if let Some(s) = Secret::from_env()? {
-        return Ok(s);
-    }
-    if let Some(dir) = &options.tls_dir {
-        let path = dir.join(tls::SECRET_FILE);
-        if path.exists() {
-            return Ok(Secret::from_file(&path)?);
-        }
-    }
-    if options.insecure || loopback_only(options) {
-        return Ok(Secret::insecure());
-    }
-    bail!(
-        "remote workers need a shared secret: --secret-file FILE, ${SECRET_ENV} or the secret of --tls-dir DIR \
-         (or --insecure to allow anyone who can reach the port)"
-    )
+    let insecure_allowed = options.insecure || loopback_only(options);
+    Ok(Secret::resolve(options.secret_file.as_deref(), options.tls_dir.as_deref(), insecure_allowed)?)
 }
 
 /// TLS with the `--tls-dir` keys; plaintext only on loopback or with an explicit `--insecure`.
@@ -243,6 +228,7 @@ impl JobTemplate {
                 processes_per_pixel: 1,
                 process_rank: 0,
                 resumed_phases,
+                memory_limit: options.memory_limit,
             },
             stream_base: (session as usize - 1) << 16,
             synthetic_nodes: nodes.synthetic,

@@ -1,4 +1,4 @@
-//! The distributed renderer (paper §5, DESIGN §2.4): worker processes, one per NUMA node and any remote ones,
+//! The distributed renderer (paper §5, docs/distribution.md): worker processes, one per NUMA node and any remote ones,
 //! render independently; the coordinator merges their snapshots into one set of sums and computes δ over them.
 //! It is a `Progressive` like the in-process engines, so the same run loop, outputs and record serve it.
 
@@ -10,6 +10,7 @@ use anyhow::{Context, Result};
 use network::{Blocklist, Control, Event, NetworkPlan, Planned};
 use photonfarm::accumulation::delta::apply_delta;
 use photonfarm::accumulation::{Accumulator, AuxLayout};
+use photonfarm::protocol::{Share, Snapshot};
 use photonfarm::render::record::{WorkerRecord, WorkerState};
 use photonfarm::render::session::Progressive;
 use photonfarm::render::{ActiveTiles, RayTotals, RenderSettings};
@@ -32,6 +33,8 @@ pub struct WorkerView {
 
 /// A running distributed render.
 pub struct Cluster {
+    /// The job's scene file name, for the log.
+    job: String,
     sums: Accumulator,
     /// Totals of earlier sessions (a resumed run).
     base_totals: RayTotals,
@@ -83,6 +86,7 @@ impl Cluster {
             None => (Accumulator::with_aux(width, height, aux), RayTotals::default()),
         };
         let accepts_joins = plan.public.is_some();
+        let job = plan.join_template.scene_name.clone();
         let blocklist = plan.blocklist.clone();
         let (events_tx, events) = std::sync::mpsc::channel();
         let (control_tx, control_rx) = tokio::sync::mpsc::unbounded_channel();
@@ -113,6 +117,7 @@ impl Cluster {
             })
             .collect();
         Ok(Cluster {
+            job,
             sums,
             base_totals,
             settings,
@@ -140,11 +145,37 @@ impl Cluster {
             return;
         }
         if let WorkerState::Lost(why) = &state {
-            eprintln!("coordinator: worker {} lost ({why}); the run goes on with the others", r.name);
+            tracing::warn!(job = %self.job, worker = %r.name, "lost ({why}); the run goes on with the others");
         }
+        let was_rendering = r.state == WorkerState::Running;
+        tracing::debug!(job = %self.job, worker = %r.name, "{state}");
         r.state = state;
+        let rendering = r.state == WorkerState::Running;
         if matches!(r.state, WorkerState::Lost(_)) {
             self.count_failure(w);
+        }
+        if was_rendering != rendering {
+            self.announce_share();
+        }
+    }
+
+    /// Tells every rendering worker how many workers render the image now, its rank among them, and every
+    /// pixel's merged phases, so that each numbers its phases as the pixel really receives them (the radius
+    /// schedule; docs/distribution.md). Nothing is announced once the run is being collected.
+    fn announce_share(&self) {
+        if self.collected {
+            return;
+        }
+        let rendering: Vec<usize> =
+            (0..self.workers.len()).filter(|&w| self.workers[w].record.state == WorkerState::Running).collect();
+        if rendering.is_empty() {
+            return;
+        }
+        let merged_phases = Share::compress_phases(self.sums.pixels.iter().map(|p| p.phases));
+        for (rank, &worker) in rendering.iter().enumerate() {
+            let share =
+                Share { processes: rendering.len() as u32, rank: rank as u32, merged_phases: merged_phases.clone() };
+            self.send(Control::Share { worker, share });
         }
     }
 
@@ -157,9 +188,10 @@ impl Cluster {
             v.record.failures = n;
         }
         if n == self.blocklist.max() {
-            eprintln!(
-                "coordinator: workers from {ip} failed {n} times in this job: it is refused for the rest of it \
-                (--max-worker-failures)"
+            tracing::warn!(
+                job = %self.job,
+                "workers from {ip} failed {n} times in this job: it is refused for the rest of it \
+                 (--max-worker-failures)"
             );
         }
     }
@@ -208,7 +240,12 @@ impl Cluster {
                     self.set_state(worker, WorkerState::Lost(reason));
                     return false;
                 }
-                match apply_delta(&snapshot.delta, &mut self.sums) {
+                let merged = if Snapshot::checksum_of(&snapshot.delta) == snapshot.checksum {
+                    apply_delta(&snapshot.delta, &mut self.sums).map_err(|e| e.to_string())
+                } else {
+                    Err("its delta does not match its checksum (damaged on the way)".to_string())
+                };
+                match merged {
                     Ok(summary) => {
                         let v = &mut self.workers[worker];
                         v.last_seq = snapshot.seq;
@@ -234,7 +271,7 @@ impl Cluster {
             Event::Finished { worker } => self.set_state(worker, WorkerState::Finished),
             Event::Lost { worker, reason } => self.set_state(worker, WorkerState::Lost(reason)),
             Event::Refused { address, reason } => {
-                eprintln!("coordinator: refused a connection from {address}: {reason}");
+                tracing::warn!(job = %self.job, "refused a connection from {address}: {reason}");
             }
         }
         false

@@ -5,7 +5,7 @@
 use photonfarm::protocol::auth::{handshake, Peer};
 use photonfarm::protocol::tls::Transport;
 use photonfarm::protocol::{
-    Connection, Job, Message, ProtocolError, RayMapPortion, Role, Secret, Snapshot, WorkerInfo,
+    Connection, Job, Message, ProtocolError, RayMapPortion, Role, Secret, Share, Snapshot, WorkerInfo,
 };
 use photonfarm::ray_map::format::PortionHeader;
 use photonfarm::ray_map::{Portion, Recorder};
@@ -72,6 +72,11 @@ pub enum Control {
     ActiveTiles {
         tile: u32,
         flags: Arc<Vec<bool>>,
+    },
+    /// The worker's share of the image's phases among the workers rendering it now.
+    Share {
+        worker: usize,
+        share: Share,
     },
 }
 
@@ -172,11 +177,12 @@ pub async fn run(
     events: std_mpsc::Sender<Event>,
     mut control: mpsc::UnboundedReceiver<Control>,
 ) {
+    let job = plan.join_template.scene_name.clone();
     let adopt = |l: Option<(std::net::TcpListener, Secret)>| {
         l.and_then(|(l, s)| match TcpListener::from_std(l) {
             Ok(l) => Some((l, s)),
             Err(e) => {
-                eprintln!("coordinator: cannot use a listener: {e}");
+                tracing::error!(job = %job, "cannot use a listener: {e}");
                 None
             }
         })
@@ -189,6 +195,8 @@ pub async fn run(
     let mut stopping = false;
     // The latest active tiles, for workers whose link starts after they were decided.
     let mut tiles: Option<(u32, Arc<Vec<bool>>)> = None;
+    // Shares announced before the worker's link was registered here.
+    let mut shares: BTreeMap<usize, Share> = BTreeMap::new();
     // Remote daemons: dial them.
     for (i, p) in plan.planned.iter().enumerate() {
         if let Planned::Remote { address } = p {
@@ -247,7 +255,7 @@ pub async fn run(
                         (true, true) => "without authentication",
                         _ => "without encryption",
                     };
-                    eprintln!("coordinator: accepting {addr} {what} (--insecure)");
+                    tracing::warn!(job = %plan2.join_template.scene_name, "accepting {addr} {what} (--insecure)");
                 }
                 let Some((mut conn, peer)) = accept(stream, addr, &plan2.remote_transport, &secret, &events).await
                 else {
@@ -295,13 +303,26 @@ pub async fn run(
                     }
                     tiles = Some((tile, flags));
                 }
+                Some(Control::Share { worker, share }) => match links.get(&worker) {
+                    Some(l) => {
+                        let _ = l.send(Control::Share { worker, share });
+                    }
+                    None => {
+                        shares.insert(worker, share);
+                    }
+                },
                 None => return,
             },
             Some((worker, tx)) = link_rx.recv() => {
                 if stopping {
                     let _ = tx.send(Control::StopAll);
-                } else if let Some((tile, flags)) = &tiles {
-                    let _ = tx.send(Control::ActiveTiles { tile: *tile, flags: flags.clone() });
+                } else {
+                    if let Some((tile, flags)) = &tiles {
+                        let _ = tx.send(Control::ActiveTiles { tile: *tile, flags: flags.clone() });
+                    }
+                    if let Some(share) = shares.remove(&worker) {
+                        let _ = tx.send(Control::Share { worker, share });
+                    }
                 }
                 links.insert(worker, tx);
             }
@@ -422,6 +443,7 @@ async fn drive(
                         Some(Control::Ack { seq, .. }) => Message::Ack { seq },
                         Some(Control::StopAll) => Message::Stop,
                         Some(Control::ActiveTiles { tile, flags }) => Message::ActiveTiles { tile, flags: flags.to_vec() },
+                        Some(Control::Share { share, .. }) => Message::Share(share),
                         Some(Control::Drop { reason, .. }) => {
                             let _ = writer.write(&Message::Refused { reason: reason.clone() }).await;
                             break Err(reason);

@@ -126,7 +126,7 @@ impl LiveFeed {
     pub fn finished(&mut self, engine: &dyn Progressive, record: &RunRecord) {
         let workers = self.worker_rows(engine, record.wall_time_s);
         let true_error = record.true_error.as_ref().map(|t| (t.rmse_all, t.rmse_unlit));
-        let state = RunState::Finished(record.stop_reason.clone());
+        let state = RunState::Finished(record.stop_reason.to_string());
         let mut view = self.view(engine, &record.history, workers, true_error, state, record.wall_time_s);
         (view.error, view.totals) = (record.error, record.totals);
         view.forecast = record.forecast.as_ref().and_then(|f| f.latest);

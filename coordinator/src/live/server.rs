@@ -55,7 +55,7 @@ impl LiveThread {
         let listener = tokio::net::TcpListener::from_std(listener).context("--serve: cannot adopt the listener")?;
         self.handle.spawn(async move {
             if let Err(e) = axum::serve(listener, router).await {
-                eprintln!("coordinator: the live page stopped: {e}");
+                tracing::error!("the live page stopped: {e}");
             }
         });
         Ok(bound)

@@ -54,7 +54,7 @@ impl TevLink {
             match connect(&self.address) {
                 Ok(stream) => {
                     if self.warned {
-                        eprintln!("coordinator: connected to tev at {}", self.address);
+                        tracing::info!("connected to tev at {}", self.address);
                     }
                     self.client = Some(TevClient::wrap(stream));
                     self.created = None;
@@ -62,9 +62,8 @@ impl TevLink {
                 }
                 Err(e) => {
                     if !self.warned {
-                        eprintln!(
-                            "coordinator: warning: no tev at {} ({e}); the render goes on, and the layers go to tev \
-                             once it listens there",
+                        tracing::warn!(
+                            "no tev at {} ({e}); the render goes on, and the layers go to tev once it listens there",
                             self.address
                         );
                         self.warned = true;
@@ -74,7 +73,7 @@ impl TevLink {
             }
         }
         if let Err(e) = self.send_layers(view) {
-            eprintln!("coordinator: warning: tev at {} went away ({e}); the render goes on", self.address);
+            tracing::warn!("tev at {} went away ({e}); the render goes on", self.address);
             self.client = None;
             self.warned = true;
         }

@@ -1,7 +1,7 @@
 //! A picture the `rays` commands draw paths on: anti-aliased lines and dots blended over a background in
 //! floating point, then a legend strip below the picture with text in the embedded font, and a PNG.
 
-use crate::charts::{register_embedded_font, FONT};
+use crate::bench::charts::{register_embedded_font, FONT};
 use anyhow::{Context, Result};
 use photonfarm::ray_map::Events;
 use plotters::prelude::*;

@@ -88,7 +88,7 @@ pub fn ghosts(args: RaysGhostsArgs) -> Result<()> {
             portions.push(p);
         }
         if let Some(bytes) = s.truncated_bytes() {
-            eprintln!("note: {} ends inside a portion; its last {bytes} bytes were left", s.path().display());
+            tracing::warn!("{} ends inside a portion; its last {bytes} bytes were left", s.path().display());
         }
     }
     // A light path's weight is what it registered before the division by its phase's light paths; the record
@@ -191,7 +191,7 @@ pub fn ghosts(args: RaysGhostsArgs) -> Result<()> {
             image_total,
             100.0 * total / header.fraction / image_total.max(f64::MIN_POSITIVE)
         ),
-        Err(e) => eprintln!("note: no comparison with the ghost layer: {e:#}"),
+        Err(e) => tracing::warn!("no comparison with the ghost layer: {e:#}"),
     }
     std::fs::write(out.join("ghosts.txt"), &table).context("cannot write ghosts.txt")?;
     let report = serde_json::json!({

@@ -9,6 +9,7 @@ use glam::Vec3;
 use gltf_json as json;
 use json::validation::Checked::Valid;
 use json::validation::USize64;
+use photonfarm::color::Rgb;
 use photonfarm::material::{Material, Surface};
 use photonfarm::ray_map::{PathKind, RecordedPath};
 use photonfarm::scene::Scene;
@@ -148,14 +149,23 @@ impl Builder {
     }
 }
 
-/// A material's base colour (with its opacity) and whether it is metal, as a viewer would show the surface: a
-/// textured parameter shows its mean, a conductor its reflectance at normal incidence.
-fn look(material: &Material) -> ([f32; 4], f32) {
-    let mean = |t: &Texture| match t {
+/// A texture's mean over a whole period of (u, v): a bitmap's mean texel times its factor, a checkerboard's
+/// two halves averaged.
+fn mean(t: &Texture) -> Rgb {
+    match t {
         Texture::Constant(c) => *c,
-        Texture::Bitmap { image, factor } => image.mean() * *factor,
-    };
-    match &material.front {
+        Texture::Bitmap(b) => b.image.mean() * b.factor,
+        Texture::Checkerboard(c) => (mean(&c.color0) + mean(&c.color1)) * 0.5,
+    }
+}
+
+/// A material's base colour (with its opacity) and whether it is metal, as a viewer would show the surface: a
+/// textured parameter shows its mean, a conductor its reflectance at normal incidence, a plastic its diffuse
+/// base, every dielectric a pale translucent glass, and a principled surface its base colour, metallic and
+/// transmission; an opacity texture scales the alpha by its mean.
+fn look(material: &Material) -> ([f32; 4], f32) {
+    let glass = [0.75, 0.88, 1.0, 0.25];
+    let (colour, metallic) = match &material.front {
         Surface::Diffuse { reflectance } => {
             let c = mean(reflectance);
             ([c.x, c.y, c.z, 1.0], 0.0)
@@ -164,12 +174,24 @@ fn look(material: &Material) -> ([f32; 4], f32) {
             let c = fresnel.at(1.0) * mean(specular);
             ([c.x, c.y, c.z, 1.0], 1.0)
         }
-        Surface::Dielectric { .. } => ([0.75, 0.88, 1.0, 0.25], 0.0),
+        Surface::Dielectric { .. } | Surface::RoughDielectric { .. } | Surface::ThinDielectric { .. } => (glass, 0.0),
+        Surface::Plastic { diffuse_reflectance, .. } => {
+            let c = mean(diffuse_reflectance);
+            ([c.x, c.y, c.z, 1.0], 0.0)
+        }
+        Surface::Principled(p) => {
+            let c = mean(&p.base_color);
+            let metallic = mean(&p.metallic).x.clamp(0.0, 1.0);
+            let transmits = mean(&p.spec_trans).x.clamp(0.0, 1.0) * (1.0 - metallic);
+            ([c.x, c.y, c.z, (1.0 - transmits).clamp(glass[3], 1.0)], metallic)
+        }
         Surface::Coating { reflectance, transmittance } => {
             let t = (transmittance.x + transmittance.y + transmittance.z) / 3.0;
             ([reflectance.x, reflectance.y, reflectance.z, (1.0 - t).clamp(0.15, 1.0)], 0.0)
         }
-    }
+    };
+    let opacity = material.opacity.as_ref().map_or(1.0, |o| mean(o).x.clamp(0.0, 1.0));
+    ([colour[0], colour[1], colour[2], colour[3] * opacity], metallic)
 }
 
 /// Writes the scene's objects (their `triangles`, by object) and the paths (with their world points

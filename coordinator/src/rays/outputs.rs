@@ -4,10 +4,9 @@
 
 use super::gltf_export::write_glb;
 use super::overlay::{write_overlay, OverlayStyle};
-use super::render_folder;
 use super::section::write_section;
-use super::selection::Selection;
 use super::surfaces::object_triangles;
+use super::{render_folder, Selection};
 use anyhow::{Context, Result};
 use glam::Vec3;
 use photonfarm::ray_map::path::NO_OBJECT;
@@ -53,8 +52,8 @@ pub fn write_all(
     let scene = match Scene::load(Path::new(&header.scene)) {
         Ok(scene) => scene,
         Err(e) => {
-            eprintln!(
-                "note: no overlay and no glTF file: the map's scene {} cannot be loaded for its camera and geometry \
+            tracing::warn!(
+                "no overlay and no glTF file: the map's scene {} cannot be loaded for its camera and geometry \
                  ({e})",
                 header.scene
             );
@@ -62,8 +61,8 @@ pub fn write_all(
         }
     };
     if scene.hash != header.scene_hash {
-        eprintln!(
-            "note: {} changed since the map was recorded; the overlay and the glTF file show it as it is now",
+        tracing::warn!(
+            "{} changed since the map was recorded; the overlay and the glTF file show it as it is now",
             header.scene
         );
     }

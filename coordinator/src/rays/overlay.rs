@@ -131,7 +131,7 @@ pub fn write_overlay(
     let (w, h) = (cam.width as usize, cam.height as usize);
     let scale = TARGET_WIDTH.div_ceil(w.max(1)).clamp(1, MAX_SCALE);
     let background = read_rgb8(preview, w, h).unwrap_or_else(|e| {
-        eprintln!("note: the overlay is drawn on black: {e}");
+        tracing::warn!("the overlay is drawn on black: {e}");
         vec![0; w * h * 3]
     });
     let mut canvas = Canvas::from_background(&background, w, h, scale, BACKGROUND_DIM);

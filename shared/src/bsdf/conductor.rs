@@ -3,6 +3,7 @@
 //! refraction η + i k (or none: a perfect mirror), times an optional specular reflectance.
 
 use super::fresnel::fresnel_conductor_rgb;
+use super::metals::{self, UnknownMetal};
 use super::microfacet::Microfacet;
 use super::{grey_at, stores_glossy, BsdfSample, LobeFlags, Scatter, Transport};
 use crate::color::Rgb;
@@ -19,6 +20,16 @@ pub enum ConductorFresnel {
 }
 
 impl ConductorFresnel {
+    /// The conductor called `name` in Mitsuba 3's table (`super::metals`, Mitsuba's `material` parameter), in
+    /// air; `none` is the perfect mirror, as in Mitsuba. An unknown name's error lists the known ones.
+    pub fn named(name: &str) -> Result<Self, UnknownMetal> {
+        if name == "none" {
+            return Ok(ConductorFresnel::Perfect);
+        }
+        let (eta, k) = metals::index_of(name).ok_or_else(|| UnknownMetal { name: name.to_string() })?;
+        Ok(ConductorFresnel::Complex { eta, k })
+    }
+
     /// The reflectance at cos θ.
     #[inline]
     pub fn at(&self, cos: f32) -> Rgb {

@@ -32,7 +32,12 @@ pub mod conductor;
 pub mod dielectric;
 pub mod diffuse;
 pub mod fresnel;
+pub mod metals;
 pub mod microfacet;
+pub mod plastic;
+pub mod principled;
+pub mod rough_dielectric;
+pub mod thin_dielectric;
 
 use crate::color::Rgb;
 use crate::sampling::Frame;
@@ -43,6 +48,10 @@ pub use coating::Coating;
 pub use conductor::Conductor;
 pub use dielectric::{Dielectric, Reflection};
 pub use diffuse::Diffuse;
+pub use plastic::Plastic;
+pub use principled::Principled;
+pub use rough_dielectric::RoughDielectric;
+pub use thin_dielectric::ThinDielectric;
 
 /// Which quantity a path carries across a scattering event: camera paths carry radiance (they are adjoint to
 /// light flow), light paths carry flux (importance transport). Veach's thesis §5.2 gives the two rules.
@@ -180,6 +189,17 @@ pub trait Scatter {
     /// The solid-angle density with which `sample` returns `wi` through a non-delta lobe.
     fn pdf(&self, wo: Vec3, wi: Vec3) -> f32;
 
+    /// The density with which `sample` returns `wi` through a stored lobe (and picks that class): `pdf` where
+    /// every non-delta lobe is stored, zero where none is. Families with lobes of both classes say it.
+    fn pdf_stored(&self, wo: Vec3, wi: Vec3) -> f32 {
+        let f = self.flags();
+        if f.contains(LobeFlags::STORED) && !f.contains(LobeFlags::PASS) {
+            self.pdf(wo, wi)
+        } else {
+            0.0
+        }
+    }
+
     /// Samples a continuation for the uniform numbers `u`; None when the path is absorbed.
     fn sample(&self, wo: Vec3, u: Vec2, mode: Transport) -> Option<BsdfSample>;
 
@@ -203,6 +223,10 @@ pub enum Model {
     Diffuse(Diffuse),
     Conductor(Conductor),
     Dielectric(Dielectric),
+    RoughDielectric(RoughDielectric),
+    ThinDielectric(ThinDielectric),
+    Plastic(Plastic),
+    Principled(Principled),
     Coating(Coating),
 }
 
@@ -214,6 +238,10 @@ macro_rules! dispatch {
             Model::Diffuse($m) => $body,
             Model::Conductor($m) => $body,
             Model::Dielectric($m) => $body,
+            Model::RoughDielectric($m) => $body,
+            Model::ThinDielectric($m) => $body,
+            Model::Plastic($m) => $body,
+            Model::Principled($m) => $body,
             Model::Coating($m) => $body,
         }
     };
@@ -224,6 +252,11 @@ impl Model {
     #[inline]
     pub fn flags(&self) -> LobeFlags {
         dispatch!(self, m => m.flags(), LobeFlags::NONE)
+    }
+
+    /// The family in its local frame, for checks of its own (None for `Black`).
+    pub fn scatter(&self) -> Option<&dyn Scatter> {
+        dispatch!(self, m => Some(m as &dyn Scatter), None)
     }
 }
 
@@ -436,7 +469,9 @@ impl Bsdf {
             Model::Dielectric(d) => d.delta_branches(lo),
             Model::Conductor(c) => c.delta_branches(lo),
             Model::Coating(c) => c.delta_branches(lo),
-            Model::Diffuse(_) | Model::Black => Vec::new(),
+            Model::ThinDielectric(t) => t.delta_branches(lo),
+            Model::Plastic(p) => p.delta_branches(lo),
+            Model::Diffuse(_) | Model::RoughDielectric(_) | Model::Principled(_) | Model::Black => Vec::new(),
         };
         for (mut s, p) in family {
             s.wi = self.frame.to_world(s.wi);
@@ -473,10 +508,78 @@ impl Dispersive for Bsdf {
             Model::Diffuse(m) => Model::Diffuse(m.at_wavelength(w)),
             Model::Conductor(m) => Model::Conductor(m.at_wavelength(w)),
             Model::Dielectric(m) => Model::Dielectric(m.at_wavelength(w)),
+            Model::RoughDielectric(m) => Model::RoughDielectric(m.at_wavelength(w)),
+            Model::ThinDielectric(m) => Model::ThinDielectric(m.at_wavelength(w)),
+            Model::Plastic(m) => Model::Plastic(m.at_wavelength(w)),
+            Model::Principled(m) => Model::Principled(m.at_wavelength(w)),
             Model::Coating(m) => Model::Coating(m.at_wavelength(w)),
         };
         Bsdf { model, ..*self }
     }
+}
+
+/// A family's non-delta BSDF and sampling density at one pair of directions, split by lobe class: what a family
+/// with lobes of both classes (stored and pass) turns into a sample of one class.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ByClass {
+    /// f of the stored lobes.
+    pub stored_f: Rgb,
+    /// The density of sampling the direction through a stored lobe (the class's choice included).
+    pub stored_pdf: f32,
+    /// f of the pass lobes.
+    pub pass_f: Rgb,
+    /// The density of sampling the direction through a pass lobe.
+    pub pass_pdf: f32,
+}
+
+impl ByClass {
+    /// f over every non-delta lobe, or over the stored ones alone.
+    #[inline]
+    pub fn f(&self, stored_only: bool) -> Rgb {
+        if stored_only {
+            self.stored_f
+        } else {
+            self.stored_f + self.pass_f
+        }
+    }
+
+    /// The density over every non-delta lobe.
+    #[inline]
+    pub fn pdf(&self) -> f32 {
+        self.stored_pdf + self.pass_pdf
+    }
+
+    /// The sample of `wi` (cosine `cos_i` with the local normal) taken through a lobe of the stored class or of
+    /// the pass class: its weight estimates that class, its `direct` weight every non-delta lobe. None where the
+    /// class's density vanishes or a weight is not finite.
+    #[inline]
+    pub fn sample(&self, wi: Vec3, lobe: LobeFlags, stored: bool, radiance_scale: f32) -> Option<BsdfSample> {
+        let cos = wi.z.abs();
+        let (f, pdf) = if stored { (self.stored_f, self.stored_pdf) } else { (self.pass_f, self.pass_pdf) };
+        let pdf_all = self.pdf();
+        if !(pdf > 0.0 && pdf.is_finite()) {
+            return None;
+        }
+        let weight = f * (cos / pdf);
+        let direct = self.f(false) * (cos / pdf_all);
+        if !(weight.is_finite() && direct.is_finite()) {
+            return None;
+        }
+        Some(BsdfSample { wi, weight, direct, pdf: pdf_all, lobe, stored, radiance_scale })
+    }
+}
+
+/// A third uniform number for a family whose sampling needs one more than the two it is given (a choice that
+/// depends on the microfacet normal the two numbers drew, as Mitsuba's rough dielectric makes): a hash of the
+/// two numbers' bits. Every pair of inputs gives an unrelated output, so over the pairs the three numbers are as
+/// independent as a pseudo-random stream's, and the path walk's count of numbers per bounce stays two.
+#[inline]
+pub fn third_uniform(u: Vec2) -> f32 {
+    let mut z = ((u.x.to_bits() as u64) << 32 | u.y.to_bits() as u64).wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^= z >> 31;
+    (z >> 40) as f32 * (1.0 / 16_777_216.0)
 }
 
 /// Mirror reflection of `wo` about `n`.

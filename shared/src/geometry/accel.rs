@@ -9,15 +9,16 @@ use super::{
     mesh::MeshTriangle,
     ray::{slab_entry, slab_inverse, Ray},
     surface_edges::SurfaceEdges,
+    watertight::ShearedRay,
 };
 use glam::{Vec3, Vec3A};
 use obvhs::{
-    cwbvh::{builder::build_cwbvh_from_tris, CwBvh},
+    cwbvh::CwBvh,
     ray::{Ray as BvhRay, RayHit},
     triangle::Triangle,
     BvhBuildParams,
 };
-use std::{ops::ControlFlow, time::Duration};
+use std::ops::ControlFlow;
 
 /// obvhs's build presets, from the fastest build to the most thorough (a better BVH should trace faster).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -163,6 +164,19 @@ struct ObvhsTriangles {
     data: Vec<TriangleData>,
 }
 
+impl ObvhsTriangles {
+    /// The distance to triangle `id` (in BVH order) along the traversal ray `bounds` (`bvh_ray`'s, whose origin
+    /// lies `BVH_ORIGIN_SHIFT` before the true one's) within its bounds, infinity for none, as obvhs's traversal
+    /// asks: with the watertight test from the true origin rather than obvhs's own test, which lets rays
+    /// through the shared edges of a closed mesh.
+    #[inline]
+    fn intersect(&self, ray: &ShearedRay, id: usize, bounds: &BvhRay) -> f32 {
+        let t = &self.triangles[id];
+        let (t_min, t_max) = (bounds.tmin - BVH_ORIGIN_SHIFT, bounds.tmax - BVH_ORIGIN_SHIFT);
+        ray.intersect(t.v0, t.v1, t.v2, t_min, t_max).map_or(f32::INFINITY, |t| t + BVH_ORIGIN_SHIFT)
+    }
+}
+
 /// The BVH over the triangles, by backend; `None` when the scene has no triangles.
 enum TriangleAccel {
     None,
@@ -228,7 +242,7 @@ impl SceneGeometry {
             TriangleAccel::None
         } else {
             match backend {
-                Backend::Obvhs(preset) => TriangleAccel::Obvhs(build_obvhs(&triangles, preset)),
+                Backend::Obvhs(preset) => TriangleAccel::Obvhs(build_obvhs(&triangles, preset, extent)),
                 #[cfg(feature = "embree")]
                 Backend::Embree => TriangleAccel::Embree(super::embree::EmbreeTriangles::build(&triangles)?),
             }
@@ -345,11 +359,14 @@ impl SceneGeometry {
         match &self.accel {
             TriangleAccel::None => None,
             TriangleAccel::Obvhs(o) => {
-                let bray = BvhRay::new(Vec3A::from(ray.origin), Vec3A::from(ray.direction), self.t_min, t_max);
+                let (origin, direction) = (Vec3A::from(ray.origin), Vec3A::from(ray.direction));
+                let bray = bvh_ray(origin, direction, self.t_min, t_max);
+                let sheared = ShearedRay::new(origin, direction);
                 let mut hit = RayHit::none();
-                if !o.bvh.ray_traverse(bray, &mut hit, |r, id| o.triangles[id].intersect(r)) || hit.t >= t_max {
+                if !o.bvh.ray_traverse(bray, &mut hit, |r, id| o.intersect(&sheared, id, r)) || hit.t >= bray.tmax {
                     return None;
                 }
+                hit.t -= BVH_ORIGIN_SHIFT;
                 let id = hit.primitive_id as usize;
                 let (tri, data) = (&o.triangles[id], &o.data[id]);
                 let uv = || barycentrics(tri, ray);
@@ -436,8 +453,10 @@ impl SceneGeometry {
         let blocked = match &self.accel {
             TriangleAccel::None => false,
             TriangleAccel::Obvhs(o) => {
-                let bray = BvhRay::new(Vec3A::from(from), Vec3A::from(dir), self.t_min, t_max);
-                !o.bvh.ray_traverse_miss(bray, |r, id| o.triangles[id].intersect(r))
+                let (origin, direction) = (Vec3A::from(from), Vec3A::from(dir));
+                let bray = bvh_ray(origin, direction, self.t_min, t_max);
+                let sheared = ShearedRay::new(origin, direction);
+                !o.bvh.ray_traverse_miss(bray, |r, id| o.intersect(&sheared, id, r))
             }
             #[cfg(feature = "embree")]
             TriangleAccel::Embree(e) => e.occluded(from, dir, self.t_min, t_max),
@@ -462,12 +481,59 @@ impl SceneGeometry {
     }
 }
 
-fn build_obvhs(triangles: &[(u32, MeshTriangle)], preset: ObvhsPreset) -> ObvhsTriangles {
+/// How far before a ray's origin obvhs's traversal starts it. obvhs skips every box the ray leaves within 1e-4
+/// of its origin (its `cwbvh::node::EPSILON`), whatever the ray's own t_min: a shadow ray from the ceiling
+/// beside a light 0.1 mm below it missed the light. From this far back, the boxes near the true origin lie
+/// beyond that distance; the triangle test still runs from the true origin.
+const BVH_ORIGIN_SHIFT: f32 = 2e-4;
+
+/// obvhs's ray for the segment [t_min, t_max] of the ray from `origin` along `direction` (unit length): started
+/// `BVH_ORIGIN_SHIFT` back, its bounds shifted alike. A direction component of −0 becomes +0: obvhs takes the
+/// inverse of −0 as negative but orders a box's slabs by `direction < 0`, which −0 is not, so such a ray (a
+/// reflection off an axis-aligned wall gives them) would miss every box it runs along.
+#[inline]
+fn bvh_ray(origin: Vec3A, direction: Vec3A, t_min: f32, t_max: f32) -> BvhRay {
+    let direction = direction + Vec3A::ZERO;
+    let shift = BVH_ORIGIN_SHIFT;
+    BvhRay::new(origin - direction * shift, direction, t_min + shift, t_max + shift)
+}
+
+/// How far each triangle's box is widened in obvhs's BVH, relative to the scene's size. obvhs tests a ray
+/// against a box with a slab test that can miss by an ulp a ray through the box's edge, and a box's edge is a
+/// triangle's wherever the geometry is axis-aligned (the corners of a room): widened boxes keep such rays for
+/// the triangle test, which is watertight. Far more than the slab test's rounding, far less than a triangle.
+const BVH_BOX_MARGIN: f32 = 1e-5;
+
+/// obvhs's `build_cwbvh_from_tris` over triangle boxes widened by `BVH_BOX_MARGIN` × (1 + `extent`).
+fn build_obvhs(triangles: &[(u32, MeshTriangle)], preset: ObvhsPreset, extent: f32) -> ObvhsTriangles {
+    use obvhs::{bvh2::reinsertion::ReinsertionOptimizer, cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh, ploc::PlocBuilder};
     let tris: Vec<Triangle> = triangles
         .iter()
         .map(|(_, t)| Triangle { v0: Vec3A::from(t.v[0]), v1: Vec3A::from(t.v[1]), v2: Vec3A::from(t.v[2]) })
         .collect();
-    let bvh = build_cwbvh_from_tris(&tris, preset.params(), &mut Duration::default());
+    let params = preset.params();
+    let mut boxes: Vec<obvhs::aabb::Aabb> = tris.iter().map(Triangle::aabb).collect();
+    let mut indices: Vec<u32> = (0..tris.len() as u32).collect();
+    if params.pre_split {
+        let areas = boxes.iter().map(|b| b.half_area());
+        let (largest, total) = areas.fold((0.0f32, 0.0f32), |(l, t), a| (l.max(a), t + a));
+        let average = total / tris.len() as f32;
+        obvhs::splits::split_aabbs_preset(&mut boxes, &mut indices, &tris, average, largest);
+    }
+    let margin = Vec3A::splat(BVH_BOX_MARGIN * (1.0 + extent));
+    for b in &mut boxes {
+        (b.min, b.max) = (b.min - margin, b.max + margin);
+    }
+    let mut bvh2 = PlocBuilder::with_capacity(boxes.len()).build(
+        params.ploc_search_distance,
+        &boxes,
+        indices,
+        params.sort_precision,
+        params.search_depth_threshold,
+    );
+    bvh2.uses_spatial_splits = params.pre_split;
+    ReinsertionOptimizer::default().run(&mut bvh2, params.reinsertion_batch_ratio, None);
+    let bvh = bvh2_to_cwbvh(&bvh2, params.max_prims_per_leaf.clamp(1, 3), true, false);
     let order: Vec<usize> = bvh.primitive_indices.iter().map(|&i| i as usize).collect();
     let triangles_bvh = order.iter().map(|&i| tris[i]).collect();
     let data = order
@@ -559,7 +625,6 @@ mod tests {
     fn occlusion_sees_the_blocker_between_the_points() {
         for &b in &Backend::all() {
             let g = two_quads(b);
-            // Off the quads' shared diagonal: obvhs's Möller test is not watertight exactly on an edge.
             assert!(!g.unoccluded(Vec3::new(0.1, -0.2, 0.0), Vec3::new(0.1, -0.2, 1.5)), "{b:?}");
             assert!(g.unoccluded(Vec3::new(0.1, -0.2, 1.2), Vec3::new(0.1, -0.2, 1.8)), "{b:?}");
         }
@@ -609,6 +674,103 @@ mod tests {
             assert_eq!(h.triangle, u32::MAX, "{b:?}");
             // The sphere blocks the segment to the quad.
             assert!(!g.unoccluded(Vec3::ZERO, Vec3::new(0.0, 0.0, 1.9)), "{b:?}");
+        }
+    }
+
+    /// A closed mesh: the 20 faces of an icosahedron around `centre`, turned off the axes so that no edge is
+    /// axis-aligned, the shared vertices stored once.
+    fn icosahedron(centre: Vec3, radius: f32) -> Vec<(u32, MeshTriangle)> {
+        let g = (1.0 + 5f32.sqrt()) / 2.0;
+        let turn = glam::Quat::from_euler(glam::EulerRot::XYZ, 0.3, 0.7, 1.1);
+        let v: Vec<Vec3> = [
+            (-1.0, g, 0.0),
+            (1.0, g, 0.0),
+            (-1.0, -g, 0.0),
+            (1.0, -g, 0.0),
+            (0.0, -1.0, g),
+            (0.0, 1.0, g),
+            (0.0, -1.0, -g),
+            (0.0, 1.0, -g),
+            (g, 0.0, -1.0),
+            (g, 0.0, 1.0),
+            (-g, 0.0, -1.0),
+            (-g, 0.0, 1.0),
+        ]
+        .iter()
+        .map(|&(x, y, z)| centre + turn * Vec3::new(x, y, z).normalize() * radius)
+        .collect();
+        let faces = [
+            [0, 11, 5],
+            [0, 5, 1],
+            [0, 1, 7],
+            [0, 7, 10],
+            [0, 10, 11],
+            [1, 5, 9],
+            [5, 11, 4],
+            [11, 10, 2],
+            [10, 7, 6],
+            [7, 1, 8],
+            [3, 9, 4],
+            [3, 4, 2],
+            [3, 2, 6],
+            [3, 6, 8],
+            [3, 8, 9],
+            [4, 9, 5],
+            [2, 4, 11],
+            [6, 2, 10],
+            [8, 6, 7],
+            [9, 8, 1],
+        ];
+        faces.iter().map(|f| (0, MeshTriangle { v: f.map(|i| v[i]), n: None })).collect()
+    }
+
+    #[test]
+    fn rays_aimed_at_the_shared_edges_and_vertices_of_a_closed_mesh_never_pass_through() {
+        let centre = Vec3::new(0.37, -0.21, 2.9);
+        let meshes = [
+            icosahedron(centre, 1.3),
+            Mesh::axis_box(Vec3::new(-1.0, -0.5, 2.0), Vec3::new(0.75, 1.25, 3.5))
+                .triangles
+                .into_iter()
+                .map(|t| (0, t))
+                .collect(),
+        ];
+        for tris in meshes {
+            // Every vertex, and points along every edge (the middle and off the middle).
+            let mut targets = Vec::new();
+            for (_, t) in &tris {
+                for i in 0..3 {
+                    let (a, b) = (t.v[i], t.v[(i + 1) % 3]);
+                    targets.extend([a, (a + b) * 0.5, a + (b - a) * 0.25, a + (b - a) * 0.8125]);
+                }
+            }
+            let inside = (tris.iter().flat_map(|(_, t)| t.v).sum::<Vec3>()) / (3 * tris.len()) as f32;
+            let origins = [inside, inside + Vec3::new(0.11, -0.07, 0.05), inside + Vec3::new(-0.2, 0.13, -0.17)];
+            for &b in &Backend::all() {
+                let g = SceneGeometry::build_with(b, tris.clone(), vec![]).unwrap();
+                let mut leaks = Vec::new();
+                for &o in &origins {
+                    for &p in &targets {
+                        let d = (p - o).normalize();
+                        // From inside, out through the edge or vertex: the mesh must stop it.
+                        if g.intersect(&Ray::new(o, d)).is_none() || g.unoccluded(o, o + d * 10.0) {
+                            leaks.push(("out", o, p));
+                        }
+                        // From outside, in through it and on to the inside point: the mesh must block it.
+                        let outside = o + d * 10.0;
+                        if g.intersect(&Ray::new(outside, -d)).is_none() || g.unoccluded(outside, o) {
+                            leaks.push(("in", o, p));
+                        }
+                    }
+                }
+                assert!(
+                    leaks.is_empty(),
+                    "{b:?}: {} of {} rays through edges and vertices leak, e.g. {:?}",
+                    leaks.len(),
+                    2 * origins.len() * targets.len(),
+                    &leaks[..leaks.len().min(3)]
+                );
+            }
         }
     }
 }

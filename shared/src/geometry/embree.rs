@@ -6,7 +6,7 @@ use super::mesh::MeshTriangle;
 use super::ray::Ray;
 use embree3::{
     BufferUsage, Device, Format, GeometryKind, IntersectContext, Ray as EmbreeRay, RayHit as EmbreeRayHit, Scene,
-    INVALID_ID,
+    SceneFlags, INVALID_ID,
 };
 use glam::Vec3;
 
@@ -61,6 +61,9 @@ impl EmbreeTriangles {
         }
         let mesh = mesh.commit();
         let mut scene = device.create_scene().map_err(|e| error(format!("no Embree scene: {e}")))?;
+        // Robust traversal and watertight triangle tests: without it, Embree lets rays aimed at the shared
+        // edges and vertices of a closed mesh through (`accel`'s tests).
+        scene.set_flags(scene.get_flags() | SceneFlags::ROBUST);
         scene.attach_geometry(&mesh);
         scene.commit();
         // Embree reports failures of the build (out of memory, above all) through the device, not the call.

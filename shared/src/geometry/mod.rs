@@ -9,6 +9,7 @@ pub mod hit;
 pub mod mesh;
 pub mod ray;
 pub mod surface_edges;
+pub mod watertight;
 
 pub use accel::{AccelError, Backend, ObvhsPreset, SceneGeometry, BACKEND_VARIABLE};
 pub use analytic::{Analytic, Annulus, LensSurface, Sphere};

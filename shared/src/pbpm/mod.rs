@@ -1,4 +1,4 @@
-//! Progressive backward photon mapping (paper §2, DESIGN §1): each phase traces camera paths that store
+//! Progressive backward photon mapping (paper §2, docs/estimator.md): each phase traces camera paths that store
 //! backward photons, builds a map of them, traces light paths that gather into the map, and closes the phase
 //! into the running sums. `phase` puts the stages together once, for the single-threaded engine and the
 //! worker's groups alike; the other files are the stages' parts (camera and light paths, the photon and its
@@ -31,6 +31,6 @@ pub use ghost_paths::{trace_ghost_paths, GhostPair, GhostPairs};
 pub use phase::{LocalPixels, Phase, PhaseBuffers};
 pub use photon::{BackwardPhoton, PhotonKind};
 pub use photon_map::PhotonMap;
-pub use radius::{mean_phase, PhaseNumbering, RadiusSchedule};
+pub use radius::{mean_phase, PhaseNumbering, PixelPhase, ProcessShare, RadiusSchedule};
 pub use sensor_kernel::SensorKernel;
 pub use sorted_gather::{SortedGathers, SORTED_GATHER_BATCH};

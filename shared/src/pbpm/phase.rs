@@ -1,4 +1,4 @@
-//! One phase of progressive backward photon mapping over a set of pixels (DESIGN §1, paper §2):
+//! One phase of progressive backward photon mapping over a set of pixels (paper §2, docs/estimator.md, "Phases"):
 //!
 //! 1. the camera pass traces one camera path per pixel, keeps its visible-light and direct-light values and
 //!    stores backward photons at its diffuse vertices ([`PhaseBuffers::camera_pass`]);
@@ -109,7 +109,7 @@ impl Phase<'_> {
         self
     }
 
-    /// Traces light path number `index` of the phase and hands each vertex that may gather (DESIGN §1 step 3)
+    /// Traces light path number `index` of the phase and hands each vertex that may gather (step 3 above)
     /// and each ghost chain that reaches the sensor to `visit`.
     #[inline]
     pub fn trace_light_path(&self, index: u64, stats: &mut ForwardStats, visit: &mut impl FnMut(&LightEvent)) {
@@ -342,15 +342,16 @@ impl PhaseBuffers {
     }
 
     /// Stage 1: one camera path per local pixel; `pixels[i]` is local pixel i's image pixel (None: the whole
-    /// image, local pixel i being image pixel i), and `next_phase(i)` its phase number j, which sets the radius
-    /// and the point and replicate of the pixel's quasi-random sequences. `map` is the previous phase's, whose
-    /// photon buffer a single list takes back. Returns the rays traced and the photons stored.
+    /// image, local pixel i being image pixel i), and `next_phase(i)` its phase numbers: the radius's j, and the
+    /// j that picks the point and replicate of the pixel's quasi-random sequences (`PixelPhase`). `map` is the
+    /// previous phase's, whose photon buffer a single list takes back. Returns the rays traced and the photons
+    /// stored.
     pub fn camera_pass(
         &mut self,
         exec: Executor,
         phase: &Phase,
         pixels: Option<&[u32]>,
-        next_phase: impl Fn(usize) -> u64 + Sync,
+        next_phase: impl Fn(usize) -> super::PixelPhase + Sync,
         map: &mut PhotonMap,
     ) -> BackwardStats {
         let count = pixels.map_or(phase.scene.camera.pixel_count(), <[u32]>::len);
@@ -382,13 +383,13 @@ impl PhaseBuffers {
                 for (i, out) in values.iter_mut().enumerate() {
                     let local = chunk * chunk_len + i;
                     let pixel = pixels.map_or(local as u32, |p| p[local]);
-                    let j = next_phase(local);
+                    let super::PixelPhase { radius: radius_j, sample: j } = next_phase(local);
                     replicate[i] = replicate_of(j).0 as u8;
                     let bs = BackwardSettings {
                         max_depth: phase.max_depth,
                         backward_diffuse_depth: bdd,
                         radius: phase.radius,
-                        phase: j,
+                        phase: radius_j,
                         spectrum: phase.spectrum,
                         sensor_ghosts: phase.sensor_ghosts,
                     };
@@ -513,7 +514,7 @@ impl Closing {
     }
 
     /// Closes one pixel: its phase value L_ij is the camera pass's `value` plus the `gathered` light over the
-    /// light paths (DESIGN §1 step 4), counted in the pixel's `replicate`; the auxiliary channels (`aux`,
+    /// light paths (step 4 above), counted in the pixel's `replicate`; the auxiliary channels (`aux`,
     /// started by `start_aux`, and the pixel's wavelength) get their gathered light too and the spectral bands
     /// of the phase total. Leaves `gathered` zero.
     #[inline]

@@ -37,6 +37,11 @@ pub enum SecretError {
     Read { path: String, source: std::io::Error },
     #[error("the secret in {0} is shorter than 16 bytes")]
     TooShort(String),
+    #[error(
+        "a link that is not loopback needs a shared secret: --secret-file FILE, ${SECRET_ENV} or the secret of \
+         --tls-dir DIR (or --insecure to let anyone who can reach the port in)"
+    )]
+    Missing,
 }
 
 impl Secret {
@@ -54,6 +59,29 @@ impl Secret {
         let bytes =
             std::fs::read(path).map_err(|source| SecretError::Read { path: path.display().to_string(), source })?;
         Self::from_bytes(&bytes, &path.display().to_string())
+    }
+
+    /// The secret of a program's command line, looked for in this order: `--secret-file`, `$PHOTONFARM_SECRET`,
+    /// the `secret` file of `--tls-dir`. Without any, the empty secret of `--insecure` where `insecure_allowed`
+    /// (`--insecure` given, or every link on loopback), otherwise `SecretError::Missing`.
+    pub fn resolve(
+        secret_file: Option<&Path>,
+        tls_dir: Option<&Path>,
+        insecure_allowed: bool,
+    ) -> Result<Self, SecretError> {
+        if let Some(path) = secret_file {
+            return Self::from_file(path);
+        }
+        if let Some(s) = Self::from_env()? {
+            return Ok(s);
+        }
+        if let Some(path) = tls_dir.map(|d| d.join(super::tls::SECRET_FILE)).filter(|p| p.exists()) {
+            return Self::from_file(&path);
+        }
+        if insecure_allowed {
+            return Ok(Self::insecure());
+        }
+        Err(SecretError::Missing)
     }
 
     /// The secret in `PHOTONFARM_SECRET`, if set.
@@ -160,6 +188,27 @@ pub async fn handshake(conn: &mut Connection, role: Role, name: &str, secret: &S
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_secret_is_resolved_from_the_file_then_the_environment_then_the_tls_folder() {
+        let dir = tempfile::Builder::new().prefix("pf-secret-").tempdir().unwrap();
+        let file = dir.path().join("given");
+        std::fs::write(&file, "the secret of the file given").unwrap();
+        std::fs::write(dir.path().join(super::super::tls::SECRET_FILE), "the secret of the tls folder").unwrap();
+        let tls = Some(dir.path());
+        // The one test of this process that sets the variable, and it removes it before any other resolve.
+        std::env::set_var(SECRET_ENV, "the secret of the environment");
+        let from_file = Secret::resolve(Some(&file), tls, false).unwrap();
+        let from_env = Secret::resolve(None, tls, false).unwrap();
+        std::env::remove_var(SECRET_ENV);
+        assert!(from_file.matches(b"the secret of the file given"));
+        assert!(from_env.matches(b"the secret of the environment"));
+        assert!(Secret::resolve(None, tls, false).unwrap().matches(b"the secret of the tls folder"));
+        assert!(matches!(Secret::resolve(None, None, false), Err(SecretError::Missing)));
+        assert!(Secret::resolve(None, None, true).unwrap().is_insecure());
+        std::fs::write(&file, "short").unwrap();
+        assert!(matches!(Secret::resolve(Some(&file), tls, true), Err(SecretError::TooShort(_))));
+    }
 
     #[test]
     fn a_secret_matches_itself_only_and_the_insecure_secret_matches_nothing() {

@@ -12,8 +12,10 @@ use serde::{Deserialize, Serialize};
 /// 7: the coordinator may restrict workers to the tiles still above the target error (`ActiveTiles`).
 /// 8: jobs say whether the worker chooses its light paths per pixel (`RenderSettings::adaptive_light`).
 /// 9: and whether it chooses the camera paths' diffuse depth (`RenderSettings::adaptive_depth`).
-/// 10: jobs may ask for a ray map (`Job::ray_map`), whose portions workers send (`RayMapPortion`).
-pub const PROTOCOL_VERSION: u32 = 10;
+/// 10: the coordinator announces the processes rendering the image when they change (`Share`), jobs carry
+/// `--memory-limit`, and snapshots a CRC-32 of their delta.
+/// 11: jobs may ask for a ray map (`Job::ray_map`), whose portions workers send (`RayMapPortion`).
+pub const PROTOCOL_VERSION: u32 = 11;
 
 /// Which end of a link a peer is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -45,12 +47,16 @@ pub struct EngineSpec {
     pub numa_node: Option<u32>,
     /// The node's cores are a synthetic topology's, mapped onto real cores modulo their count.
     pub synthetic_topology: bool,
-    /// Worker processes rendering the image, and this one's index: the radius schedule of a pixel counts
-    /// every process's phases (DESIGN §1), assuming they progress alike.
+    /// Worker processes planned to render the image, and this one's index: the radius schedule of a pixel
+    /// counts every process's phases, assuming they progress alike, until the coordinator announces the
+    /// processes that really render (`Message::Share`; docs/distribution.md, "Radius schedule across
+    /// processes").
     pub processes_per_pixel: u32,
     pub process_rank: u32,
     /// Phases the image already has from earlier sessions (a resumed run), added to the radius schedule's j.
     pub resumed_phases: u32,
+    /// `--memory-limit`: the bytes this worker process may use, checked before its engine allocates.
+    pub memory_limit: Option<u64>,
 }
 
 /// What a worker renders.
@@ -114,6 +120,9 @@ pub struct Snapshot {
     pub totals: RayTotals,
     /// Per-pixel sums added since the previous snapshot (see `accumulation::delta`).
     pub delta: Vec<u8>,
+    /// CRC-32 of `delta`: a delta damaged on its way (a plaintext link has only TCP's 16-bit checksum) is refused
+    /// rather than merged.
+    pub checksum: u32,
     /// The snapshot interval the worker uses now, and how long sending its previous snapshot took, from the
     /// start of the write to the acknowledgement (ms).
     pub interval_ms: u64,
@@ -122,6 +131,39 @@ pub struct Snapshot {
     pub peak_memory_bytes: u64,
     /// Phase values with a NaN or an infinity the worker has dropped so far.
     pub non_finite_dropped: u64,
+}
+
+/// Coordinator → worker: which processes render the image from now on, sent to every rendering worker when one
+/// starts or is lost, so that each counts a pixel's phases over all of them (`pbpm::ProcessShare`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Share {
+    /// Workers rendering the image, and this one's rank among them.
+    pub processes: u32,
+    pub rank: u32,
+    /// Each pixel's phases merged at the coordinator (every worker's, lost ones' and earlier sessions'
+    /// included), row-major, as little-endian u32 compressed with zstd.
+    pub merged_phases: Vec<u8>,
+}
+
+impl Share {
+    /// Compresses the merged phases of every pixel, for `Share`s that differ only in their rank.
+    pub fn compress_phases(phases: impl Iterator<Item = u32>) -> Vec<u8> {
+        let raw: Vec<u8> = phases.flat_map(u32::to_le_bytes).collect();
+        zstd::bulk::compress(&raw, 1).expect("zstd compression of an in-memory buffer cannot fail")
+    }
+
+    /// The merged phases of an image of `pixels` pixels; refused if they are not exactly that many.
+    pub fn merged_phases(&self, pixels: usize) -> Result<Vec<u32>, ProtocolError> {
+        let raw = zstd::bulk::decompress(&self.merged_phases, pixels * 4)
+            .map_err(|e| ProtocolError::Malformed(format!("the announced phases do not decompress: {e}")))?;
+        if raw.len() != pixels * 4 {
+            return Err(ProtocolError::Malformed(format!(
+                "the announced phases cover {} pixels, the image has {pixels}",
+                raw.len() / 4
+            )));
+        }
+        Ok(raw.chunks_exact(4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect())
+    }
 }
 
 /// The protocol's messages.
@@ -157,9 +199,19 @@ pub enum Message {
     /// merged sums): one flag per `tile`-pixel tile of the image, row-major. A worker never told renders every
     /// tile.
     ActiveTiles { tile: u32, flags: Vec<bool> },
+    /// Coordinator → worker: the processes rendering the image changed; number the phases accordingly from the
+    /// next round on.
+    Share(Share),
     /// Worker → coordinator: a portion of the worker's ray map. A worker sends its last portions before
     /// `Finished`.
     RayMapPortion(RayMapPortion),
+}
+
+impl Snapshot {
+    /// The checksum `delta` must carry.
+    pub fn checksum_of(delta: &[u8]) -> u32 {
+        crc32fast::hash(delta)
+    }
 }
 
 impl Message {
@@ -180,6 +232,7 @@ impl Message {
             Message::Finished => "Finished",
             Message::Failed { .. } => "Failed",
             Message::ActiveTiles { .. } => "ActiveTiles",
+            Message::Share(_) => "Share",
             Message::RayMapPortion(_) => "RayMapPortion",
         }
     }
@@ -222,6 +275,19 @@ mod tests {
         assert_eq!(decode(&encode(&m).unwrap()).unwrap(), m);
         let m = Message::RayMapPortion(RayMapPortion { raw_bytes: 9, paths: 1, segments: 2, frame: vec![1, 2, 3] });
         assert_eq!(decode(&encode(&m).unwrap()).unwrap(), m);
+    }
+
+    #[test]
+    fn a_share_carries_every_pixel_s_merged_phases_and_is_refused_for_another_image() {
+        let phases = [3u32, 0, 7, 4_000_000_000];
+        let share = Share { processes: 2, rank: 1, merged_phases: Share::compress_phases(phases.into_iter()) };
+        let m = Message::Share(share.clone());
+        assert_eq!(decode(&encode(&m).unwrap()).unwrap(), m);
+        assert_eq!(share.merged_phases(4).unwrap(), phases);
+        assert!(share.merged_phases(3).is_err());
+        assert!(share.merged_phases(5).is_err());
+        let garbage = Share { merged_phases: vec![1, 2, 3], ..share };
+        assert!(garbage.merged_phases(4).is_err());
     }
 
     #[test]

@@ -1,4 +1,4 @@
-//! The coordinator–worker protocol (DESIGN §3): length-prefixed frames, one message enum encoded with bincode,
+//! The coordinator–worker protocol (docs/distribution.md, "Protocol"): length-prefixed frames, one message enum encoded with bincode,
 //! a handshake that checks the protocol version and proves a shared secret both ways, and snapshots that carry
 //! only completed phases, as exact deltas of the sums (`accumulation::delta`); links that leave the machine run
 //! inside mutually authenticated TLS (`tls`).
@@ -14,5 +14,6 @@ pub use auth::Secret;
 pub use connection::{Connection, MessageReader, MessageWriter};
 pub use error::ProtocolError;
 pub use message::{
-    EngineSpec, FileRef, Job, Message, RayMapPortion, RayMapRequest, Role, Snapshot, WorkerInfo, PROTOCOL_VERSION,
+    EngineSpec, FileRef, Job, Message, RayMapPortion, RayMapRequest, Role, Share, Snapshot, WorkerInfo,
+    PROTOCOL_VERSION,
 };

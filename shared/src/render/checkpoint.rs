@@ -1,5 +1,8 @@
 //! Checkpoints: the merged sums of a run with what is needed to continue it (`coordinator render --resume`),
-//! written atomically beside the image so that a crash loses at most the phases since the last one.
+//! written atomically beside the image so that a crash loses at most the phases since the last one. The file
+//! ends with a CRC-32 of its content, so that a damaged one is refused rather than continued from, and each save
+//! keeps the checkpoint it replaces beside it (`previous_path`), so that a damaged latest one costs at most one
+//! save interval.
 
 use super::method::Method;
 use super::record::HistoryEntry;
@@ -9,15 +12,18 @@ use crate::accumulation::delta::{apply_delta, encode_delta, max_delta_bytes, Com
 use crate::accumulation::{Accumulator, AuxLayout};
 use crate::scene::Scene;
 use serde::{Deserialize, Serialize};
-use std::io::Read;
-use std::path::Path;
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
 
 /// 2: the sums' auxiliary layers (the ghost layer) are kept. 3: the settings hold the spectral-output bands.
 /// 4: the totals count the light paths counted against photon maps. 5: the sums keep their replicates.
 /// 6: the history says how many tiles each step rendered. 7: the sums keep the photon discs' blur layers, and
 /// the history the blur's part of δ. 8: the settings say whether the run chose the camera paths' diffuse depth,
-/// and the history which depth each step had.
-const FORMAT: u32 = 8;
+/// and the history which depth each step had. 9: the file ends with a CRC-32 of what comes before it.
+const FORMAT: u32 = 9;
+
+/// Bytes of the CRC-32 that ends the file.
+const CHECKSUM_BYTES: usize = 4;
 
 /// Everything a resumed run continues from.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -53,6 +59,15 @@ pub enum CheckpointError {
     TooLarge { path: String, size: u64, max: u64 },
     #[error("{path} does not belong to this scene: {reason}")]
     OtherScene { path: String, reason: String },
+    #[error(
+        "{path} is damaged: its content does not match the checksum it was saved with (a bit changed on the disk \
+         or in a copy), so none of it is used{}",
+        previous.as_ref().map_or(String::new(), |p| format!(
+            ". The checkpoint saved before it, {p}, is at most one save interval older: resume from it with \
+             --resume {p}"
+        ))
+    )]
+    Damaged { path: String, previous: Option<String> },
 }
 
 /// Bytes a checkpoint may hold beside its sums (settings, counters and the δ history, which grows by one small
@@ -104,13 +119,28 @@ impl Checkpoint {
         Ok(a)
     }
 
-    /// Writes the checkpoint atomically (a temporary file renamed over the old one).
+    /// Writes the checkpoint atomically (a temporary file, flushed to the disk, renamed over the old one), with
+    /// its CRC-32 at the end; the checkpoint it replaces becomes `previous_path(path)`. A checkpoint exists at
+    /// `path` at every moment, the old one or the new one.
     pub fn save(&self, path: &Path) -> Result<(), CheckpointError> {
         let err = |source| CheckpointError::Write { path: path.display().to_string(), source };
-        let bytes = bincode::serde::encode_to_vec(self, bincode::config::standard())
+        let mut bytes = bincode::serde::encode_to_vec(self, bincode::config::standard())
             .map_err(|e| err(std::io::Error::other(e.to_string())))?;
+        bytes.extend_from_slice(&crc32fast::hash(&bytes).to_le_bytes());
         let tmp = path.with_extension("tmp");
-        std::fs::write(&tmp, bytes).map_err(err)?;
+        let mut file = std::fs::File::create(&tmp).map_err(err)?;
+        file.write_all(&bytes).and_then(|()| file.sync_all()).map_err(err)?;
+        if path.exists() {
+            // Linked (or copied where links are not allowed), then renamed, so that the previous checkpoint is
+            // also always whole.
+            let previous = previous_path(path);
+            let previous_tmp = previous.with_extension("tmp");
+            let _ = std::fs::remove_file(&previous_tmp);
+            std::fs::hard_link(path, &previous_tmp)
+                .or_else(|_| std::fs::copy(path, &previous_tmp).map(|_| ()))
+                .and_then(|()| std::fs::rename(&previous_tmp, &previous))
+                .map_err(|source| CheckpointError::Write { path: previous.display().to_string(), source })?;
+        }
         std::fs::rename(&tmp, path).map_err(err)
     }
 
@@ -137,7 +167,14 @@ impl Checkpoint {
         let mut bytes = Vec::with_capacity(size as usize);
         // `take` keeps a file that grows while it is read within the bound.
         file.take(max + 1).read_to_end(&mut bytes).map_err(read_err)?;
-        Self::from_bytes(&bytes, scene, &p)
+        Self::from_bytes(&bytes, scene, &p).map_err(|e| match e {
+            CheckpointError::Damaged { path: damaged, .. } => {
+                let previous = previous_path(path);
+                let previous = (previous != path && previous.is_file()).then(|| previous.display().to_string());
+                CheckpointError::Damaged { path: damaged, previous }
+            }
+            e => e,
+        })
     }
 
     /// Checks and decodes the bytes of a checkpoint of `scene` (`path` names it in errors), in the order
@@ -147,14 +184,28 @@ impl Checkpoint {
         if bytes.len() as u64 > max {
             return Err(CheckpointError::TooLarge { path: path.into(), size: bytes.len() as u64, max });
         }
-        let c = Self::decode(bytes).map_err(|reason| CheckpointError::Format { path: path.into(), reason })?;
+        let body = checked_body(bytes).map_err(|damage| match damage {
+            Damage::Checksum => CheckpointError::Damaged { path: path.into(), previous: None },
+            Damage::Format(reason) => CheckpointError::Format { path: path.into(), reason },
+        })?;
+        let c = Self::decode_body(body).map_err(|reason| CheckpointError::Format { path: path.into(), reason })?;
         c.check_scene(scene).map_err(|reason| CheckpointError::OtherScene { path: path.into(), reason })?;
         c.sums().map_err(|reason| CheckpointError::Format { path: path.into(), reason })?;
         Ok(c)
     }
 
-    /// Decodes the bytes of a checkpoint file and checks its format number; the sums stay encoded.
+    /// Decodes the bytes of a checkpoint file, after its checksum, and checks its format number; the sums stay
+    /// encoded.
     pub fn decode(bytes: &[u8]) -> Result<Self, String> {
+        match checked_body(bytes) {
+            Ok(body) => Self::decode_body(body),
+            Err(Damage::Checksum) => Err("its content does not match its checksum".into()),
+            Err(Damage::Format(reason)) => Err(reason),
+        }
+    }
+
+    /// Decodes a checkpoint without its checksum.
+    fn decode_body(bytes: &[u8]) -> Result<Self, String> {
         let (c, used): (Checkpoint, usize) =
             bincode::serde::decode_from_slice(bytes, decode_config()).map_err(|e| e.to_string())?;
         if used != bytes.len() {
@@ -184,6 +235,44 @@ impl Checkpoint {
         }
         Ok(())
     }
+}
+
+/// Where a save keeps the checkpoint at `path` that it replaces: `checkpoint-previous.bin` beside
+/// `checkpoint.bin`.
+pub fn previous_path(path: &Path) -> PathBuf {
+    let stem = path.file_stem().map_or_else(|| "checkpoint".into(), |s| s.to_string_lossy().into_owned());
+    let name = match path.extension() {
+        Some(e) => format!("{stem}-previous.{}", e.to_string_lossy()),
+        None => format!("{stem}-previous"),
+    };
+    path.with_file_name(name)
+}
+
+/// Why the bytes of a checkpoint file are not a checkpoint's.
+enum Damage {
+    /// The content does not match the CRC-32 at the end.
+    Checksum,
+    /// Not this version's file at all.
+    Format(String),
+}
+
+/// The content of a checkpoint file, once its CRC-32 matches. A file whose first byte (bincode's encoding of
+/// the format number, below 251) names another format is reported as such, not as damaged: versions before 9
+/// wrote no checksum.
+fn checked_body(bytes: &[u8]) -> Result<&[u8], Damage> {
+    let other_format = bytes.first().map(|&b| b as u32).filter(|&f| f < 251 && f != FORMAT);
+    if let Some(f) = other_format {
+        return Err(Damage::Format(format!("format {f} (expected {FORMAT})")));
+    }
+    if bytes.len() < CHECKSUM_BYTES {
+        return Err(Damage::Format(format!("{} bytes are too few for a checkpoint", bytes.len())));
+    }
+    let (body, sum) = bytes.split_at(bytes.len() - CHECKSUM_BYTES);
+    let sum = u32::from_le_bytes(sum.try_into().expect("four bytes"));
+    if crc32fast::hash(body) != sum {
+        return Err(Damage::Checksum);
+    }
+    Ok(body)
 }
 
 #[cfg(test)]
@@ -285,6 +374,40 @@ quad = {{ corner = [-1.0, -1.0, 0.0], edge1 = [2.0, 0.0, 0.0], edge2 = [0.0, 2.0
         assert!(matches!(Checkpoint::load(&path, &scene), Err(CheckpointError::OtherScene { .. })));
         std::fs::write(&path, b"garbage").unwrap();
         assert!(matches!(Checkpoint::load(&path, &scene), Err(CheckpointError::Format { .. })));
+    }
+
+    #[test]
+    fn a_bit_flipped_anywhere_is_refused_as_damaged_and_names_the_previous_checkpoint() {
+        let dir = tempfile::Builder::new().prefix("pf-checkpoint-damage-").tempdir().unwrap();
+        let path = dir.path().join("checkpoint.bin");
+        let (scene, c) = empty_scene_and_checkpoint(8, 4);
+        c.save(&path).unwrap();
+        assert!(!previous_path(&path).exists(), "a first save has nothing to keep");
+        c.save(&path).unwrap();
+        assert_eq!(previous_path(&path), dir.path().join("checkpoint-previous.bin"));
+        assert_eq!(Checkpoint::load(&previous_path(&path), &scene).unwrap(), c);
+        let whole = std::fs::read(&path).unwrap();
+        // Every bit of the file but the format number's byte, which names another version instead.
+        for bit in 8..whole.len() * 8 {
+            let mut bytes = whole.clone();
+            bytes[bit / 8] ^= 1 << (bit % 8);
+            std::fs::write(&path, &bytes).unwrap();
+            match Checkpoint::load(&path, &scene) {
+                Err(e @ CheckpointError::Damaged { .. }) => {
+                    let text = e.to_string();
+                    assert!(
+                        text.contains("damaged") && text.contains("--resume") && text.contains("previous"),
+                        "{text}"
+                    );
+                }
+                other => panic!("bit {bit} of {}: {other:?}", whole.len() * 8),
+            }
+        }
+        // A file of an older version says so, rather than that it is damaged.
+        let mut old = whole.clone();
+        old[0] = 8;
+        let e = Checkpoint::from_bytes(&old, &scene, "old").unwrap_err().to_string();
+        assert!(e.contains("format 8 (expected 9)"), "{e}");
     }
 
     #[test]

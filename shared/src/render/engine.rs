@@ -10,7 +10,9 @@ use crate::integrator::path_tracer;
 use crate::pbpm::forward_pass::{trace_light_path, LightEvent};
 use crate::pbpm::ghost_paths::trace_ghost_paths;
 use crate::pbpm::phase::{start_aux, Closing, LocalPixels};
-use crate::pbpm::{mean_phase, Executor, ForwardStats, GatherBuffer, PhaseBuffers, PhotonMap, SortedGathers};
+use crate::pbpm::{
+    mean_phase, Executor, ForwardStats, GatherBuffer, PhaseBuffers, PhotonMap, PixelPhase, SortedGathers,
+};
 use crate::ray_map::{PathKind, RecordedPath, Recorder, Unrecorded};
 use crate::sampling::{replicate_of, Sampler};
 use crate::scene::Scene;
@@ -289,9 +291,11 @@ impl<'s> Engine<'s> {
         let mask = self.tiles.as_ref().map(|t| &t.mask[..]);
         let pixels = &self.sums.pixels;
         // A pixel's phase j is its own phase count plus one: the engine's phase count unless tiles have retired.
-        let next_phase = |local: usize| pixels[mask.map_or(local, |m| m[local] as usize)].phases as u64 + 1;
+        let next_phase =
+            |local: usize| PixelPhase::alone(pixels[mask.map_or(local, |m| m[local] as usize)].phases as u64 + 1);
         let rendered = mask.map_or(pixels.len(), <[u32]>::len);
-        let phase = self.settings.phase(self.scene, number).at_pixel_phase(mean_phase(rendered, next_phase));
+        let mean = mean_phase(rendered, |i| next_phase(i).radius);
+        let phase = self.settings.phase(self.scene, number).at_pixel_phase(mean);
         let backward = self.buffers.camera_pass(exec, &phase, mask, next_phase, &mut self.map);
         self.buffers.build_map(exec, &mut self.map);
         let (local, rendered) = TilePixels::rendered(&self.tiles, self.scene);

@@ -1,4 +1,5 @@
-//! The rendering methods and how each lays out its processes, groups and threads (DESIGN §2). One table,
+//! The rendering methods and how each lays out its processes, groups and threads (docs/parallel-engine.md,
+//! "Configurations"; README's methods table). One table,
 //! [`Method::layout`], answers every question about a method: the command line, the launcher of worker
 //! processes, the engines, the bench and the run record all read it.
 //!
@@ -69,7 +70,7 @@ pub enum Processes {
     PerNumaNode,
 }
 
-/// How the threads of one process form groups (the synchronous groups of DESIGN §2.1).
+/// How the threads of one process form groups (the synchronous groups of docs/parallel-engine.md).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Grouping {
     /// One group of one thread: the single-threaded estimators.

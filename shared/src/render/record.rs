@@ -45,6 +45,36 @@ pub struct HistoryEntry {
     pub blur_unlit: f64,
 }
 
+impl HistoryEntry {
+    /// The entry of a step that ended `time_s` into the run with the error `e` and the counters `t`; `light`,
+    /// `depth` and `active_tiles` are what the step rendered with, where the run knows them. The true error is
+    /// the caller's to add, when it has a reference.
+    pub fn after_step(
+        time_s: f64,
+        e: &ErrorEstimate,
+        t: &RayTotals,
+        light: Option<f32>,
+        depth: Option<u32>,
+        active_tiles: Option<u32>,
+    ) -> Self {
+        HistoryEntry {
+            phase: t.phases,
+            time_s,
+            delta_all: e.delta_all,
+            delta_unlit: e.delta_unlit,
+            backward_rays: t.backward_rays,
+            forward_rays: t.forward_rays,
+            light_paths_per_pixel: light,
+            backward_diffuse_depth: depth,
+            true_all: None,
+            true_unlit: None,
+            active_tiles,
+            blur_all: e.blur_all,
+            blur_unlit: e.blur_unlit,
+        }
+    }
+}
+
 /// Error against a reference image.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TrueError {
@@ -192,6 +222,45 @@ fn first_session() -> u32 {
     1
 }
 
+/// Why a run ended, written in the record as the words "time", "phases", "target-error", "interrupted",
+/// "no-workers", or "running" in the records written while it renders.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum StopReason {
+    /// The `--time` rule.
+    Time,
+    /// The `--phases` rule.
+    Phases,
+    /// The `--target-error` rule.
+    TargetError,
+    /// Ctrl-C, or the live page's stop.
+    Interrupted,
+    /// Every worker of a distributed run was lost.
+    NoWorkers,
+    /// The run goes on: a record written on the way.
+    Running,
+}
+
+impl StopReason {
+    /// The word the record uses.
+    pub fn name(self) -> &'static str {
+        match self {
+            StopReason::Time => "time",
+            StopReason::Phases => "phases",
+            StopReason::TargetError => "target-error",
+            StopReason::Interrupted => "interrupted",
+            StopReason::NoWorkers => "no-workers",
+            StopReason::Running => "running",
+        }
+    }
+}
+
+impl fmt::Display for StopReason {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 /// The record written as `run.json`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RunRecord {
@@ -210,8 +279,8 @@ pub struct RunRecord {
     /// Photon radius of a phase-1 photon at 1 m camera-path length (m): the footprint-derived scale.
     pub radius_at_1m: f32,
     pub threads: u32,
-    /// Why the run stopped: "time", "phases", "target-error", "interrupted" or "running".
-    pub stop_reason: String,
+    /// Why the run stopped, or `running` in the records written while it renders.
+    pub stop_reason: StopReason,
     pub totals: RayTotals,
     /// Where the threads' time went (parallel engines only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -276,6 +345,24 @@ pub fn flags_of(totals: &RayTotals, non_finite_dropped: u64, workers: Option<&[W
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn stop_reasons_are_the_words_of_the_record() {
+        let reasons = [
+            (StopReason::Time, "time"),
+            (StopReason::Phases, "phases"),
+            (StopReason::TargetError, "target-error"),
+            (StopReason::Interrupted, "interrupted"),
+            (StopReason::NoWorkers, "no-workers"),
+            (StopReason::Running, "running"),
+        ];
+        for (reason, text) in reasons {
+            assert_eq!(serde_json::to_value(reason).unwrap(), serde_json::Value::String(text.into()));
+            assert_eq!(serde_json::from_value::<StopReason>(text.into()).unwrap(), reason);
+            assert_eq!(reason.to_string(), text);
+        }
+        assert!(serde_json::from_value::<StopReason>("timeout".into()).is_err());
+    }
 
     #[test]
     fn worker_states_are_the_words_of_the_record() {

@@ -5,6 +5,7 @@ use super::engine::Engine;
 use super::forecast::Forecast;
 use super::light_balance::LightBalance;
 use super::record::HistoryEntry;
+pub use super::record::StopReason;
 use super::settings::RenderSettings;
 use super::totals::RayTotals;
 pub use crate::accumulation::ErrorOver;
@@ -109,30 +110,6 @@ pub struct StopRule {
     pub error_over: ErrorOver,
 }
 
-/// Why a run ended.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum StopReason {
-    Time,
-    Phases,
-    TargetError,
-    Interrupted,
-    /// Every worker of a distributed run was lost.
-    NoWorkers,
-}
-
-impl StopReason {
-    /// The name used in the run record.
-    pub fn name(self) -> &'static str {
-        match self {
-            StopReason::Time => "time",
-            StopReason::Phases => "phases",
-            StopReason::TargetError => "target-error",
-            StopReason::Interrupted => "interrupted",
-            StopReason::NoWorkers => "no-workers",
-        }
-    }
-}
-
 /// What a run measures its error over and forecasts with, besides the stop rule.
 pub struct Tracking<'a> {
     /// The pixels that see a light, left out of δ unlit.
@@ -216,21 +193,8 @@ pub fn run<R: Progressive + ?Sized>(
             b.observe(engine.sums(), engine.totals());
         }
         let e = engine.sums().error(lit);
-        let t = engine.totals();
-        let entry = HistoryEntry {
-            phase: t.phases,
-            time_s: (elapsed_before + start.elapsed()).as_secs_f64(),
-            delta_all: e.delta_all,
-            delta_unlit: e.delta_unlit,
-            backward_rays: t.backward_rays,
-            forward_rays: t.forward_rays,
-            light_paths_per_pixel: light,
-            backward_diffuse_depth: depth,
-            active_tiles,
-            blur_all: e.blur_all,
-            blur_unlit: e.blur_unlit,
-            ..HistoryEntry::default()
-        };
+        let time_s = (elapsed_before + start.elapsed()).as_secs_f64();
+        let entry = HistoryEntry::after_step(time_s, &e, &engine.totals(), light, depth, active_tiles);
         history.push(entry);
         forecast.step(entry.time_s, engine.sums().image_phases(), stop.delta_of(&e));
         on_phase(engine, history, forecast);

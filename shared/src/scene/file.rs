@@ -62,19 +62,44 @@ fn up_y() -> Spanned<[f32; 3]> {
     Spanned::new(0..0, [0.0, 1.0, 0.0])
 }
 
-/// A material definition; `type` selects the kind.
+/// A material definition; `type` selects the family. Every family also takes `opacity` (a number or a texture:
+/// the probability that the surface is there, for cut-outs) and `back` ("same", the default, "black" for a
+/// one-sided surface, or the name of another material whose family scatters on the back).
 #[derive(Deserialize, Debug)]
 #[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
 pub enum MaterialSection {
     Diffuse {
-        /// Multiplies `albedo_texture` when both are given; required without a texture.
-        albedo: Option<[f32; 3]>,
-        /// A PNG (sRGB) path relative to the scene file.
+        /// A colour, a grey or a texture table (scenes/README.md, "Textures"); a constant one multiplies
+        /// `albedo_texture` when both are given; required without `albedo_texture`.
+        albedo: Option<toml::Value>,
+        /// An image file (sRGB where its samples are integers) relative to the scene file: the older spelling of
+        /// `albedo = { bitmap = "..." }`.
         albedo_texture: Option<String>,
+        opacity: Option<toml::Value>,
+        back: Option<String>,
     },
     Mirror {
         #[serde(default = "ones")]
         reflectance: [f32; 3],
+        opacity: Option<toml::Value>,
+        back: Option<String>,
+    },
+    /// A metal, smooth or (with a roughness) rough.
+    Conductor {
+        /// A named metal (Mitsuba 3's names, e.g. "Au"), or "none" for a perfect mirror; else `eta` and `k`.
+        material: Option<String>,
+        eta: Option<toml::Value>,
+        k: Option<toml::Value>,
+        specular_reflectance: Option<toml::Value>,
+        /// The microfacet roughness (a number or a texture); none: a smooth surface.
+        alpha: Option<toml::Value>,
+        /// Anisotropic roughness along the shading frame's two tangents, instead of `alpha`.
+        alpha_u: Option<toml::Value>,
+        alpha_v: Option<toml::Value>,
+        /// "beckmann" (the default) or "ggx".
+        distribution: Option<String>,
+        opacity: Option<toml::Value>,
+        back: Option<String>,
     },
     Dielectric {
         ior: f32,
@@ -86,10 +111,67 @@ pub enum MaterialSection {
         abbe: Option<f32>,
         /// Abbe number of the medium in front (a cemented surface between two glasses).
         ext_abbe: Option<f32>,
+        specular_reflectance: Option<toml::Value>,
+        specular_transmittance: Option<toml::Value>,
+        /// The microfacet roughness (a number or a texture); none: a smooth surface.
+        alpha: Option<toml::Value>,
+        /// Anisotropic roughness along the shading frame's two tangents, instead of `alpha`.
+        alpha_u: Option<toml::Value>,
+        alpha_v: Option<toml::Value>,
+        /// "beckmann" (the default) or "ggx".
+        distribution: Option<String>,
+        opacity: Option<toml::Value>,
+        back: Option<String>,
+    },
+    ThinDielectric {
+        ior: f32,
+        #[serde(default = "one")]
+        ext_ior: f32,
+        specular_reflectance: Option<toml::Value>,
+        specular_transmittance: Option<toml::Value>,
+        opacity: Option<toml::Value>,
+        back: Option<String>,
+    },
+    /// A diffuse base under a dielectric coat, smooth or (with a roughness) rough.
+    Plastic {
+        diffuse_reflectance: Option<toml::Value>,
+        specular_reflectance: Option<toml::Value>,
+        ior: Option<f32>,
+        ext_ior: Option<f32>,
+        #[serde(default)]
+        nonlinear: bool,
+        /// The microfacet roughness (a number or a texture); none: a smooth surface.
+        alpha: Option<toml::Value>,
+        /// Anisotropic roughness along the shading frame's two tangents, instead of `alpha`.
+        alpha_u: Option<toml::Value>,
+        alpha_v: Option<toml::Value>,
+        /// "beckmann" (the default) or "ggx".
+        distribution: Option<String>,
+        opacity: Option<toml::Value>,
+        back: Option<String>,
+    },
+    Principled {
+        base_color: Option<toml::Value>,
+        roughness: Option<toml::Value>,
+        anisotropic: Option<toml::Value>,
+        metallic: Option<toml::Value>,
+        spec_trans: Option<toml::Value>,
+        specular: Option<f32>,
+        eta: Option<f32>,
+        spec_tint: Option<toml::Value>,
+        sheen: Option<toml::Value>,
+        sheen_tint: Option<toml::Value>,
+        flatness: Option<toml::Value>,
+        clearcoat: Option<toml::Value>,
+        clearcoat_gloss: Option<toml::Value>,
+        opacity: Option<toml::Value>,
+        back: Option<String>,
     },
     Coating {
         reflectance: [f32; 3],
         transmittance: [f32; 3],
+        opacity: Option<toml::Value>,
+        back: Option<String>,
     },
 }
 
@@ -108,7 +190,8 @@ pub struct ObjectSection {
     pub name: Option<String>,
     pub material: Spanned<String>,
     pub emission: Option<Spanned<[f32; 3]>>,
-    /// A PNG (sRGB) path relative to the scene file that multiplies `emission` (default 1 with a texture).
+    /// An image file (sRGB where its samples are integers) relative to the scene file that multiplies `emission`
+    /// (default 1 with a texture).
     pub emission_texture: Option<Spanned<String>>,
     pub mesh: Option<Spanned<String>>,
     pub quad: Option<Spanned<QuadSection>>,

@@ -1,10 +1,11 @@
 //! Scenes: the loaded scene the renderer reads (objects, materials, geometry, lights, camera), and how it is
 //! built from a TOML file (`file` holds the format, `loader` the validation with precise errors, `error` the
-//! error that points at the file, line and field).
+//! error that points at the file, line and field); `mitsuba` reads Mitsuba 3 scene files into a typed document.
 
 pub mod error;
 pub mod file;
 mod loader;
+pub mod mitsuba;
 
 pub use error::SceneError;
 
@@ -14,7 +15,7 @@ use crate::color::Rgb;
 use crate::geometry::{SceneGeometry, SurfaceHit};
 use crate::light::Lights;
 use crate::material::Material;
-use crate::texture::{barycentric, interpolate_uv};
+use crate::texture::{barycentric, interpolate_uv, uv_tangent};
 use glam::{Vec2, Vec3};
 use std::path::PathBuf;
 
@@ -100,12 +101,42 @@ impl Scene {
     }
 
     /// The BSDF at `hit` for a path arriving from `wo` (pointing back along the path), with the material's
-    /// textures read at the hit's texture coordinates.
+    /// textures read at the hit's texture coordinates and, for an anisotropic material, its frame oriented by
+    /// the surface's tangent (`Scene::tangent_at`).
     #[inline]
     pub fn bsdf(&self, hit: &SurfaceHit, wo: Vec3) -> Bsdf {
         let material = self.material_at(hit);
+        if material.needs_tangent() {
+            return self.oriented_bsdf(material, hit, wo);
+        }
         let uv = if material.uses_uv() { self.uv_at(hit) } else { Vec2::ZERO };
         material.bsdf(hit, uv, wo)
+    }
+
+    /// `bsdf` for a material that reads the tangent, out of the common path's way.
+    #[inline(never)]
+    fn oriented_bsdf(&self, material: &Material, hit: &SurfaceHit, wo: Vec3) -> Bsdf {
+        let uv = if material.uses_uv() { self.uv_at(hit) } else { Vec2::ZERO };
+        match self.tangent_at(hit) {
+            Some(tangent) => material.bsdf_with_tangent(hit, uv, tangent, wo),
+            None => material.bsdf(hit, uv, wo),
+        }
+    }
+
+    /// ∂p/∂u at the hit, which orients anisotropic materials as Mitsuba 3 orients them: on a triangle with
+    /// texture coordinates, the derivative along u of their parametrisation; on one without, along its first
+    /// barycentric coordinate (the edge from its first vertex to its second), since Mitsuba then takes the
+    /// barycentrics as texture coordinates. None on a triangle whose coordinates lie on a line and on analytic
+    /// surfaces: the frame then follows the normal alone.
+    pub fn tangent_at(&self, hit: &SurfaceHit) -> Option<Vec3> {
+        if hit.triangle == u32::MAX {
+            return None;
+        }
+        let v = &self.geometry.triangle(hit.triangle).v;
+        match self.triangle_uvs.get(hit.triangle as usize) {
+            Some(Some(uv)) => uv_tangent(v, uv),
+            _ => Some(v[1] - v[0]),
+        }
     }
 
     /// The texture coordinates at the hit point ((0, 0) where the surface has none, which the loader does not

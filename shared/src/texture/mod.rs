@@ -1,21 +1,77 @@
-//! Textures: what a material parameter reads at a surface point. A constant, or a bitmap (`bitmap`) looked up
-//! at the point's texture coordinates; the helpers that find those coordinates on a triangle live here too.
+//! Textures: what a material parameter reads at a surface point, as Mitsuba 3's textures do. A constant, a
+//! bitmap (`bitmap` holds the image and its lookups, `decode` reads PNG, JPEG, OpenEXR, Radiance HDR and PFM
+//! files) or a checkerboard (`checkerboard`), the latter two read at the point's texture coordinates (`uv`:
+//! where those come from on a triangle, the `to_uv` transform, the tangent they define).
+//!
+//! A texture gives a colour ([`Texture::eval`]) or, where a parameter is a number (a roughness, an opacity), a
+//! scalar ([`Texture::eval_scalar`]) read as Mitsuba's `eval_1` reads it: a grey value as it is, a bitmap's
+//! colour by its luminance, a constant colour by the mean of its channels.
 
 pub mod bitmap;
+pub mod checkerboard;
+pub mod decode;
+mod pfm;
+pub mod uv;
 
-pub use bitmap::{srgb_to_linear, Bitmap};
+pub use bitmap::{Bitmap, Filter, Wrap};
+pub use checkerboard::Checkerboard;
+pub use decode::{srgb_to_linear, Encoding, ImageFormat, TextureError, MAX_TEXELS};
+pub use uv::{barycentric, interpolate_uv, quad_uvs, uv_tangent, UvTransform};
 
 use crate::color::{luminance, Rgb};
-use glam::{Vec2, Vec3};
+use glam::Vec2;
 use std::sync::Arc;
+
+/// A bitmap read as a texture: the image, a factor multiplying it, and how it is looked up (Mitsuba's
+/// `bitmap` with its `filter_type`, `wrap_mode` and `to_uv`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct BitmapTexture {
+    pub image: Arc<Bitmap>,
+    pub factor: Rgb,
+    pub filter: Filter,
+    pub wrap: Wrap,
+    pub to_uv: UvTransform,
+}
+
+impl BitmapTexture {
+    /// `image` with Mitsuba's defaults: bilinear, repeating, untransformed, times one.
+    pub fn new(image: Arc<Bitmap>) -> Self {
+        BitmapTexture {
+            image,
+            factor: Rgb::ONE,
+            filter: Filter::default(),
+            wrap: Wrap::default(),
+            to_uv: UvTransform::IDENTITY,
+        }
+    }
+
+    /// The colour at texture coordinates `uv`.
+    #[inline]
+    pub fn eval(&self, uv: Vec2) -> Rgb {
+        self.image.sample(self.to_uv.apply(uv), self.filter, self.wrap) * self.factor
+    }
+
+    /// The scalar at `uv`: the luminance of the colour (a grey image's value times a grey factor).
+    #[inline]
+    pub fn eval_scalar(&self, uv: Vec2) -> f32 {
+        let f = self.factor;
+        if f.x == f.y && f.y == f.z {
+            self.image.sample_scalar(self.to_uv.apply(uv), self.filter, self.wrap) * f.x
+        } else {
+            luminance(self.eval(uv))
+        }
+    }
+}
 
 /// A material parameter that may vary over a surface.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Texture {
     /// The same value everywhere.
     Constant(Rgb),
-    /// A bitmap times a constant factor.
-    Bitmap { image: Arc<Bitmap>, factor: Rgb },
+    /// A bitmap looked up at the point.
+    Bitmap(BitmapTexture),
+    /// Two textures in a checkerboard pattern.
+    Checkerboard(Box<Checkerboard>),
 }
 
 impl Texture {
@@ -24,22 +80,34 @@ impl Texture {
         Texture::Constant(Rgb::splat(v))
     }
 
+    /// `image` times `factor`, looked up as Mitsuba's `bitmap` does by default.
+    pub fn bitmap(image: Arc<Bitmap>, factor: Rgb) -> Self {
+        Texture::Bitmap(BitmapTexture { factor, ..BitmapTexture::new(image) })
+    }
+
     /// The value at texture coordinates `uv`.
     #[inline]
     pub fn eval(&self, uv: Vec2) -> Rgb {
         match self {
             Texture::Constant(c) => *c,
-            Texture::Bitmap { image, factor } => image.lookup(uv) * *factor,
+            Texture::Bitmap(b) => b.eval(uv),
+            Texture::Checkerboard(c) => c.eval(uv),
         }
     }
 
-    /// The value of a scalar parameter at `uv`: a colour's luminance, as Mitsuba reads a bitmap where a number
-    /// is wanted.
+    /// The value at `uv` where a number is wanted, as Mitsuba reads a texture there (see the module's doc).
     #[inline]
     pub fn eval_scalar(&self, uv: Vec2) -> f32 {
         match self {
-            Texture::Constant(c) => c.x,
-            t => luminance(t.eval(uv)),
+            Texture::Constant(c) => {
+                if c.x == c.y && c.y == c.z {
+                    c.x
+                } else {
+                    (c.x + c.y + c.z) / 3.0
+                }
+            }
+            Texture::Bitmap(b) => b.eval_scalar(uv),
+            Texture::Checkerboard(c) => c.eval_scalar(uv),
         }
     }
 
@@ -61,34 +129,10 @@ impl Texture {
     pub fn max_value(&self) -> f32 {
         match self {
             Texture::Constant(c) => c.max_element(),
-            Texture::Bitmap { image, factor } => image.max_texel().max_element() * factor.max_element(),
+            Texture::Bitmap(b) => b.image.max_texel().max_element() * b.factor.max_element(),
+            Texture::Checkerboard(c) => c.color0.max_value().max(c.color1.max_value()),
         }
     }
-}
-
-/// Barycentric coordinates (b1, b2) of `p` on the triangle `v` (p ≈ (1 − b1 − b2) v0 + b1 v1 + b2 v2), found by
-/// least squares so that a point slightly off the plane still gets the nearest answer.
-pub fn barycentric(v: &[Vec3; 3], p: Vec3) -> Vec2 {
-    let (e1, e2, d) = (v[1] - v[0], v[2] - v[0], p - v[0]);
-    let (a, b, c) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
-    let (r1, r2) = (d.dot(e1), d.dot(e2));
-    let det = a * c - b * b;
-    if det <= 0.0 || !det.is_finite() {
-        return Vec2::ZERO;
-    }
-    Vec2::new((c * r1 - b * r2) / det, (a * r2 - b * r1) / det)
-}
-
-/// Bitmap coordinates at barycentrics `b` of a triangle with vertex coordinates `uv`.
-#[inline]
-pub fn interpolate_uv(uv: &[Vec2; 3], b: Vec2) -> Vec2 {
-    uv[0] * (1.0 - b.x - b.y) + uv[1] * b.x + uv[2] * b.y
-}
-
-/// Bitmap coordinates of the two triangles `Mesh::quad` makes: u along edge1, v along edge2, (0, 0) at the
-/// corner.
-pub fn quad_uvs() -> [[Vec2; 3]; 2] {
-    [[Vec2::ZERO, Vec2::X, Vec2::ONE], [Vec2::ZERO, Vec2::ONE, Vec2::Y]]
 }
 
 #[cfg(test)]
@@ -96,20 +140,47 @@ mod tests {
     use super::*;
 
     #[test]
-    fn barycentrics_reproduce_the_point() {
-        let v = [Vec3::ZERO, Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 1.0, 1.0)];
-        let p = v[0] * 0.2 + v[1] * 0.5 + v[2] * 0.3;
-        let b = barycentric(&v, p);
-        assert!((b - Vec2::new(0.5, 0.3)).length() < 1e-6);
+    fn a_constant_reads_the_same_everywhere_and_its_scalar_is_the_channel_mean() {
+        let t = Texture::Constant(Rgb::new(0.2, 0.5, 0.9));
+        assert_eq!(t.eval(Vec2::new(7.0, -3.0)), Rgb::new(0.2, 0.5, 0.9));
+        assert!((t.eval_scalar(Vec2::ZERO) - 1.6 / 3.0).abs() < 1e-7);
+        // A grey constant is read exactly (no rounding through the mean: thresholds on roughness rely on it).
+        for v in [0.1f32, 0.3, 0.7] {
+            assert_eq!(Texture::grey(v).eval_scalar(Vec2::ZERO), v);
+        }
+        assert!(!t.varies() && t.constant().is_some());
     }
 
     #[test]
-    fn quad_uvs_follow_the_quad_triangles() {
-        let m = crate::geometry::Mesh::quad(Vec3::ZERO, Vec3::X * 2.0, Vec3::Y * 3.0);
-        for (t, uv) in m.triangles.iter().zip(quad_uvs()) {
-            for (v, uv) in t.v.iter().zip(uv) {
-                assert!((Vec2::new(v.x / 2.0, v.y / 3.0) - uv).length() < 1e-6);
-            }
-        }
+    fn a_bitmap_texture_applies_to_uv_filter_wrap_and_factor() {
+        let image = Arc::new(Bitmap::from_linear(2, 1, vec![Rgb::new(0.2, 0.4, 0.6), Rgb::ONE]).unwrap());
+        let mut t = BitmapTexture::new(image.clone());
+        assert_eq!(t.eval(Vec2::new(0.25, 0.5)), Rgb::new(0.2, 0.4, 0.6));
+        // Shifted by half a period, the same point reads the other texel.
+        t.to_uv = UvTransform::translate(Vec2::new(0.5, 0.0));
+        assert_eq!(t.eval(Vec2::new(0.25, 0.5)), Rgb::ONE);
+        t.factor = Rgb::new(0.5, 0.5, 0.5);
+        assert_eq!(t.eval(Vec2::new(0.25, 0.5)), Rgb::splat(0.5));
+        assert!((t.eval_scalar(Vec2::new(0.25, 0.5)) - 0.5).abs() < 1e-6);
+        // Clamped and nearest, far to the right reads the right texel whole.
+        t.to_uv = UvTransform::IDENTITY;
+        t.wrap = Wrap::Clamp;
+        t.filter = Filter::Nearest;
+        assert_eq!(t.eval(Vec2::new(5.0, 0.5)), Rgb::splat(0.5));
+        // A colour factor: the scalar is the luminance of the product.
+        t.factor = Rgb::new(1.0, 0.0, 0.0);
+        assert!((t.eval_scalar(Vec2::new(0.25, 0.5)) - 0.2126 * 0.2).abs() < 1e-6);
+        let textured = Texture::bitmap(image, Rgb::splat(2.0));
+        assert!(textured.varies() && textured.constant().is_none());
+        assert_eq!(textured.max_value(), 2.0);
+    }
+
+    #[test]
+    fn a_checkerboard_texture_reads_its_colours_and_their_maximum() {
+        let t = Texture::Checkerboard(Box::default());
+        assert_eq!(t.eval(Vec2::new(0.25, 0.75)), Rgb::splat(0.4));
+        assert_eq!(t.eval_scalar(Vec2::new(0.25, 0.25)), 0.2);
+        assert_eq!(t.max_value(), 0.4);
+        assert!(t.varies());
     }
 }

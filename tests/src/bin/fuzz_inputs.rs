@@ -14,7 +14,7 @@ use photonfarm::color::Rgb;
 use photonfarm::protocol::frame::{read_frame, write_frame};
 use photonfarm::protocol::message::{decode, encode};
 use photonfarm::protocol::{
-    EngineSpec, FileRef, Job, Message, RayMapPortion, RayMapRequest, Role, Snapshot, WorkerInfo,
+    EngineSpec, FileRef, Job, Message, RayMapPortion, RayMapRequest, Role, Share, Snapshot, WorkerInfo,
 };
 use photonfarm::render::checkpoint::Checkpoint;
 use photonfarm::render::method::ParallelMethod;
@@ -290,6 +290,7 @@ fn main() -> Result<()> {
             processes_per_pixel: 2,
             process_rank: 1,
             resumed_phases: 0,
+            memory_limit: Some(1 << 30),
         },
         snapshot_interval_ms: 1000,
         ray_map: Some(RayMapRequest { fraction: 0.01 }),
@@ -312,6 +313,7 @@ fn main() -> Result<()> {
         Message::Snapshot(Snapshot {
             seq: 1,
             totals: RayTotals::default(),
+            checksum: Snapshot::checksum_of(&delta),
             delta,
             interval_ms: 1000,
             previous_send_ms: 3,
@@ -324,6 +326,11 @@ fn main() -> Result<()> {
         Message::Finished,
         Message::Failed { reason: "x".into() },
         Message::ActiveTiles { tile: 32, flags: vec![true, false, true, true] },
+        Message::Share(Share {
+            processes: 3,
+            rank: 2,
+            merged_phases: Share::compress_phases(base.pixels.iter().map(|p| p.phases)),
+        }),
         Message::RayMapPortion(RayMapPortion { raw_bytes: 64, paths: 1, segments: 1, frame: vec![0x28, 0xb5, 0x2f] }),
     ];
     let runtime = tokio::runtime::Builder::new_current_thread().build()?;
@@ -366,7 +373,11 @@ fn main() -> Result<()> {
                         let mut r = &bytes[..];
                         let mut any_ok = false;
                         while let Ok(Some(body)) = runtime.block_on(read_frame(&mut r, 1 << 20)) {
-                            any_ok |= decode(&body).is_ok();
+                            any_ok |= match decode(&body) {
+                                // A worker decodes an announced share's phases for its image.
+                                Ok(Message::Share(s)) => s.merged_phases(base.pixels.len()).is_ok(),
+                                decoded => decoded.is_ok(),
+                            };
                         }
                         any_ok
                     }),
@@ -384,7 +395,14 @@ fn main() -> Result<()> {
                 deltas.record(i, catch_unwind(AssertUnwindSafe(|| apply_delta(&bytes, &mut target).is_ok())));
             }
             2 => {
-                let bytes = materialise(&next(&mut runner), &checkpoint_seeds);
+                let mut bytes = materialise(&next(&mut runner), &checkpoint_seeds);
+                // Every edit fails the checksum: every other input gets its checksum recomputed after the edit, to
+                // reach the checks behind it.
+                if i % 8 == 2 && bytes.len() >= 4 {
+                    let body = bytes.len() - 4;
+                    let sum = crc32fast::hash(&bytes[..body]).to_le_bytes();
+                    bytes[body..].copy_from_slice(&sum);
+                }
                 // The scene is only read (with the `embree` feature it holds cells, so the compiler cannot see that).
                 let decode = AssertUnwindSafe(|| Checkpoint::from_bytes(&bytes, &scene, "fuzz").is_ok());
                 checkpoints.record(i, catch_unwind(decode));

@@ -1,12 +1,12 @@
-//! The semi-synchronous level (paper §4.1, DESIGN §2.2) and the parallel methods as its configurations: the
+//! The semi-synchronous level (paper §4.1, docs/parallel-engine.md) and the parallel methods as its configurations: the
 //! main thread deals masks, runs the groups until one of them has finished K phases, stops them all, forms the
 //! whole image and deals again.
 
-use super::group::{Group, GroupMap, GroupStats, RoundContext};
+use super::group::{Group, GroupMap, GroupStats, PhasesBefore, RoundContext};
 use super::map_slot::MapSlot;
 use super::mask;
 use photonfarm::accumulation::{Accumulator, AuxLayout};
-use photonfarm::pbpm::PhaseNumbering;
+use photonfarm::pbpm::ProcessShare;
 use photonfarm::ray_map::Recorder;
 use photonfarm::render::record::StageSeconds;
 use photonfarm::render::session::Progressive;
@@ -20,7 +20,7 @@ use std::time::{Duration, Instant};
 
 pub use photonfarm::render::ParallelMethod;
 
-/// How the engine is laid out: DESIGN §2's table as data.
+/// How the engine is laid out: its method's row of the methods' table (`photonfarm::render::method`) as data.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EngineConfig {
     pub method: ParallelMethod,
@@ -108,19 +108,21 @@ impl EngineConfig {
         let gather_buffers = self.threads_per_group + self.shared_maps as usize;
         let gathered = gather_buffers * (6 * 4 + aux.phase_bytes_per_pixel() + if sensor { 12 } else { 0 });
         let sensor_tables = if sensor && self.masks { self.groups * 4 } else { 0 };
-        // The camera pass's values and replicate, and the sums; the mask and the phases before the deal take 8
-        // bytes.
+        // The camera pass's values and replicate, and the sums; the mask and the phases before the deal (over
+        // every process and this one's own) take 12 bytes.
         let per_pixel = std::mem::size_of::<LayerValues>()
             + 1
             + std::mem::size_of::<PixelSums>()
-            + 8
+            + 12
             + gathered
             + backward_diffuse_depth as usize * photon
             + aux.phase_bytes_per_pixel()
             + aux.sum_bytes_per_pixel();
         // The light vertices held back for sorted gathers: bounded over the whole engine, not per group.
         let held_back = super::thread_gathers::held_back_bytes_per_pixel(pixels);
-        (Accumulator::bytes_per_pixel(aux) + sensor_tables + coverage * per_pixel) as f64 + held_back
+        // A worker process also holds the share of the pixels' phases the coordinator announces to it.
+        let share = ProcessShare::BYTES_PER_PIXEL;
+        (Accumulator::bytes_per_pixel(aux) + sensor_tables + share + coverage * per_pixel) as f64 + held_back
     }
 
     /// The layout in words, e.g. "2 groups × 1 thread, 32-pixel tile masks, shared maps".
@@ -148,6 +150,8 @@ pub struct ParallelEngine<'s> {
     deals: u64,
     /// The tiles rounds render (adaptive tiles); None renders every tile.
     tiles: Option<ActiveTiles>,
+    /// How this process counts a pixel's phases over every process rendering the image (the radius schedule).
+    share: ProcessShare,
     /// Thread-nanoseconds idle at round ends and between rounds.
     waiting_nanos: u64,
     between_nanos: u64,
@@ -183,6 +187,7 @@ impl<'s> ParallelEngine<'s> {
                 .collect();
             groups.push(Group::new(k, cores, slot.take_owner(), aux.clone())?);
         }
+        let share = ProcessShare::planned(config.processes_per_pixel, config.process_rank, config.resumed_phases);
         Ok(ParallelEngine {
             scene,
             settings,
@@ -192,6 +197,7 @@ impl<'s> ParallelEngine<'s> {
             slots,
             deals: 0,
             tiles: None,
+            share,
             waiting_nanos: 0,
             between_nanos: 0,
             last_round_end: None,
@@ -221,6 +227,12 @@ impl<'s> ParallelEngine<'s> {
             "tiles of another image"
         );
         self.tiles = (!tiles.all_active()).then(|| tiles.clone());
+    }
+
+    /// Counts the pixels' phases with `share` from the next round on: the coordinator announced a change of
+    /// the processes rendering the image.
+    pub fn set_share(&mut self, share: ProcessShare) {
+        self.share = share;
     }
 
     /// Per-group counters.
@@ -261,7 +273,14 @@ impl<'s> ParallelEngine<'s> {
         // The pixels of the round: the light-path quota is L per pixel rendered.
         let rendered_pixels = if self.config.masks { masks.iter().map(Vec::len).sum() } else { masks[0].len() };
         for (g, m) in self.groups.iter_mut().zip(masks) {
-            let before = m.iter().map(|&p| self.sums.pixels[p as usize].phases).collect();
+            let (share, pixels) = (&self.share, &self.sums.pixels);
+            let before = m
+                .iter()
+                .map(|&p| {
+                    let own = pixels[p as usize].phases;
+                    PhasesBefore { all: share.phases_before(p as usize, own).min(u32::MAX as u64) as u32, own }
+                })
+                .collect();
             g.start_deal(m, before, if self.config.masks { 1 } else { self.config.groups as u32 });
         }
         let (stop, cut) = (AtomicBool::new(false), AtomicBool::new(false));
@@ -275,13 +294,8 @@ impl<'s> ParallelEngine<'s> {
             cut: &cut,
             deal: self.deals,
             rendered_pixels,
+            numbering: self.share.numbering(1, 0),
             recorder: self.recorder.as_deref(),
-            numbering: PhaseNumbering {
-                processes: self.config.processes_per_pixel.max(1) as u64,
-                process: self.config.process_rank as u64,
-                resumed: self.config.resumed_phases as u64,
-                ..PhaseNumbering::ALONE
-            },
         };
         let k = self.config.phases_per_deal as u64;
         let (tx, rx) = mpsc::channel();

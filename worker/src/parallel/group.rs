@@ -1,4 +1,4 @@
-//! A synchronous group (level 1, DESIGN §2.1): g threads pinned to cores of one node, cooperating on every stage
+//! A synchronous group (level 1, docs/parallel-engine.md): g threads pinned to cores of one node, cooperating on every stage
 //! of a phase over the group's mask, with rayon's joins as the barriers between stages.
 
 use super::map_slot::{Guard, MapSlot, OwnerToken};
@@ -144,11 +144,20 @@ pub struct RoundContext<'a> {
     /// Pixels the round renders over all groups (every pixel unless tiles retired): the light-path quota is
     /// L per rendered pixel.
     pub rendered_pixels: usize,
-    /// The processes rendering the same pixels and the phases before this run, for the radius schedule (each
-    /// group adds the groups of its deal).
+    /// The processes rendering the same pixels, for the radius schedule (each group adds the groups of its
+    /// deal).
     pub numbering: PhaseNumbering,
     /// Records the light paths it keeps into a ray map (the camera paths are recorded by each group's buffers).
     pub recorder: Option<&'a Recorder>,
+}
+
+/// A mask pixel's phases before a deal.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PhasesBefore {
+    /// Over every process rendering the image (`ProcessShare::phases_before`).
+    pub all: u32,
+    /// This process's own.
+    pub own: u32,
 }
 
 /// One synchronous group and its buffers over its current mask.
@@ -158,8 +167,9 @@ pub struct Group {
     pinned: Arc<AtomicUsize>,
     token: OwnerToken,
     mask: Vec<u32>,
-    /// Phases each pixel of the mask had before this deal (the radius schedule's j).
-    phases_before: Vec<u32>,
+    /// Phases each pixel of the mask had before this deal: over every process (the radius schedule's j), and
+    /// this process's own (the point of its quasi-random sequences).
+    phases_before: Vec<PhasesBefore>,
     buffers: PhaseBuffers,
     /// Each thread's plain buffer for the group's own paths and its held-back vertices, by the thread's index
     /// in the pool; the phase closes from thread 0's buffer once the others and the map's shared buffer are
@@ -245,7 +255,7 @@ impl Group {
     /// Bytes of the group's buffers, including its map slot.
     pub fn capacity_bytes(&mut self, slot: &MapSlot<GroupMap>) -> usize {
         let own = self.mask.capacity() * 4
-            + self.phases_before.capacity() * 4
+            + self.phases_before.capacity() * std::mem::size_of::<PhasesBefore>()
             + self.buffers.capacity_bytes()
             + self.threads.iter_mut().map(|t| thread_mut(t).capacity_bytes()).sum::<usize>()
             + self.sums.capacity() * std::mem::size_of::<PixelSums>()
@@ -256,7 +266,7 @@ impl Group {
     }
 
     /// Takes a new mask for the next deal; `phases_before[i]` is how many phases mask pixel i already had.
-    pub fn start_deal(&mut self, mask: Vec<u32>, phases_before: Vec<u32>, groups_per_pixel: u32) {
+    pub fn start_deal(&mut self, mask: Vec<u32>, phases_before: Vec<PhasesBefore>, groups_per_pixel: u32) {
         self.groups_per_pixel = groups_per_pixel.max(1);
         self.buffers.resize(mask.len());
         for t in &mut self.threads {
@@ -314,10 +324,13 @@ impl Group {
         let t0 = Instant::now();
         let slot = &ctx.slots[self.index];
         let (phases_before, sums) = (&self.phases_before, &self.sums);
-        let next_phase = |local: usize| numbering.next_phase(phases_before[local] as u64, sums[local].phases as u64);
+        let next_phase = |local: usize| {
+            let before = phases_before[local];
+            numbering.next_phase(before.all as u64, before.own as u64, sums[local].phases as u64)
+        };
         // The phase's j for its ghost chains, and the phase number its recorded light paths carry (a camera
-        // path carries its own pixel's j).
-        let number = mean_phase(self.mask.len(), next_phase);
+        // path carries its own pixel's radius j).
+        let number = mean_phase(self.mask.len(), |i| next_phase(i).radius);
         let phase = phase.at_pixel_phase(number);
         let map = &mut slot.data_mut(&mut self.token).photons;
         let backward = self.buffers.camera_pass(exec, &phase, Some(&self.mask), next_phase, map);

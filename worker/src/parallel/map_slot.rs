@@ -1,5 +1,5 @@
 //! A group's backward photon map shared with other groups through one atomic counter (paper §4.2, Figs. 8–10;
-//! DESIGN §2.3). 0 means closed. The owner opens it (0 → 1) before its forward pass, traces its light paths,
+//! docs/parallel-engine.md, "Shared maps"). 0 means closed. The owner opens it (0 → 1) before its forward pass, traces its light paths,
 //! then keeps tracing until a compare-and-swap 1 → 0 succeeds, i.e. until no other group is inside. Another
 //! group acquires an open map by a compare-and-swap increment (moving on when it fails), gathers into it, counts
 //! its light path in the map's statistics and releases by a decrement. No locks on this path.

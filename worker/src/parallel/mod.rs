@@ -1,4 +1,4 @@
-//! The parallel scheme of one process (paper §4, DESIGN §2.1–2.3): synchronous groups of pinned threads
+//! The parallel scheme of one process (paper §4, docs/parallel-engine.md): synchronous groups of pinned threads
 //! (`group`), the semi-synchronous level that deals them random tile masks and forms the whole image (`engine`,
 //! `mask`), and the slots through which groups open their photon maps to each other with atomic counters
 //! (`map_slot`, model-checked with loom through `sync_primitives`), with each thread's plain buffer and

@@ -1,5 +1,5 @@
 //! One thread's share of a group's forward pass: the light of its group's own light paths in a plain buffer of
-//! its own (DESIGN §7: atomics only where other groups add), and the light vertices it holds back per map it
+//! its own (atomic adds, which contend and cost, only where other groups add), and the light vertices it holds back per map it
 //! gathers into, its group's and each other group's open map it holds, to gather them in that map's bucket
 //! order (`SortedGathers`). The vertices held back for another group's map must be gathered before the thread
 //! releases that map, or the map could close without them: `flush_foreign` comes before every release.

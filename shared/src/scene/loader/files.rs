@@ -1,10 +1,11 @@
-//! The files a scene references, meshes (OBJ) and textures (PNG): read from the scene's folder or from what a
-//! job sent, added to the scene's hash and file list, and decoded.
+//! The files a scene references, meshes (OBJ) and textures (PNG, JPEG, OpenEXR, Radiance HDR, PFM, told apart by
+//! their first bytes): read from the scene's folder or from what a job sent, added to the scene's hash and file
+//! list, and decoded.
 
 use super::state::{Loader, MeshSource};
 use crate::geometry::{Mesh, MeshTriangle};
 use crate::scene::SceneError;
-use crate::texture::Bitmap;
+use crate::texture::{Bitmap, Encoding};
 use glam::{Vec2, Vec3};
 use sha2::{Digest, Sha256};
 use std::borrow::Cow;
@@ -47,21 +48,33 @@ impl<'a> Loader<'a> {
         Ok((path, bytes))
     }
 
-    /// Reads and decodes a PNG texture once per path.
-    pub(super) fn texture(
+    /// Reads a texture file once per path and decodes it once per encoding of its integer samples (Mitsuba's
+    /// `raw` is `Encoding::Linear`).
+    pub(super) fn bitmap(
         &mut self,
         name: &str,
         span: Option<std::ops::Range<usize>>,
         field: &str,
+        encoding: Encoding,
     ) -> Result<Arc<Bitmap>, SceneError> {
-        if let Some(t) = self.textures.get(name) {
+        let key = (name.to_string(), encoding);
+        if let Some(t) = self.textures.get(&key) {
             return Ok(t.clone());
         }
-        let (path, bytes) = self.external_file(name, span.clone(), field, "texture")?;
-        let texture =
-            Bitmap::from_png(&bytes).map_err(|e| self.error(span, field, format!("{}: {e}", path.display())))?;
+        let bytes = match self.texture_bytes.get(name) {
+            Some((path, bytes)) => (path.clone(), bytes.clone()),
+            None => {
+                let (path, bytes) = self.external_file(name, span.clone(), field, "texture")?;
+                let file = (path, Arc::new(bytes.into_owned()));
+                self.texture_bytes.insert(name.to_string(), file.clone());
+                file
+            }
+        };
+        let (path, bytes) = bytes;
+        let texture = Bitmap::decode(&bytes, name, encoding)
+            .map_err(|e| self.error(span, field, format!("{}: {e}", path.display())))?;
         let texture = Arc::new(texture);
-        self.textures.insert(name.to_string(), texture.clone());
+        self.textures.insert(key, texture.clone());
         Ok(texture)
     }
 

@@ -1,7 +1,8 @@
 //! Building a `Scene` from its TOML file: parsing, checking every field with an error that names the file, line
 //! and field, reading the meshes and textures the scene references, and hashing all of it. The scene is built
 //! in steps, one file each: `materials`, `objects` (with their shapes), `lights` and `camera`; `files` reads the
-//! files a scene references, `values` checks single numbers, vectors and colours, and `state` holds what
+//! files a scene references, `values` checks single numbers, vectors and colours, `textures` reads texture
+//! values (constants, bitmaps, checkerboards), and `state` holds what
 //! every step reads and gathers.
 
 mod camera;
@@ -10,6 +11,7 @@ mod lights;
 mod materials;
 mod objects;
 mod state;
+mod textures;
 mod values;
 
 use super::error::line_of;

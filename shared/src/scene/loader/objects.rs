@@ -9,7 +9,7 @@ use crate::geometry::{Analytic, Annulus, LensSurface, Mesh, MeshTriangle, Sphere
 use crate::light::{EmissionTexture, Light};
 use crate::scene::file::{AnnulusSection, LensSurfaceSection, ObjectSection, SphereSection};
 use crate::scene::{SceneError, SceneObject};
-use crate::texture::{quad_uvs, Bitmap};
+use crate::texture::{quad_uvs, Bitmap, Encoding};
 use glam::Vec2;
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -146,7 +146,7 @@ impl Loader<'_> {
             None => None,
         };
         let emission_texture = match &obj.emission_texture {
-            Some(t) => Some(self.texture(t.get_ref(), Some(t.span()), &field("emission_texture"))?),
+            Some(t) => Some(self.bitmap(t.get_ref(), Some(t.span()), &field("emission_texture"), Encoding::Srgb)?),
             None => None,
         };
         Ok((emission, emission_texture))
@@ -211,7 +211,7 @@ impl Loader<'_> {
     }
 
     /// Refuses a texture on a shape without texture coordinates (only quads and OBJ meshes with `vt` have them):
-    /// an emission texture, or an albedo texture of the object's material (`textured_material`).
+    /// an emission texture, or a texture of the object's material (`textured_material`).
     fn check_no_texture_needed(
         &self,
         obj: &ObjectSection,
@@ -239,8 +239,8 @@ impl Loader<'_> {
                 Some(obj.material.span()),
                 field("material"),
                 format!(
-                    "material '{}' has an albedo_texture but {shape} has no texture coordinates; use a quad or an \
-                     OBJ mesh with vt",
+                    "material '{}' is textured (an albedo_texture or a texture table) but {shape} has no texture \
+                     coordinates; use a quad or an OBJ mesh with vt",
                     obj.material.get_ref()
                 ),
             ));

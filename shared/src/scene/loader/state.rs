@@ -3,10 +3,10 @@
 
 use crate::scene::error::line_of;
 use crate::scene::SceneError;
-use crate::texture::Bitmap;
+use crate::texture::{Bitmap, Encoding};
 use sha2::{Digest, Sha256};
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 /// Where mesh and texture files come from.
@@ -25,14 +25,26 @@ pub(super) struct Loader<'a> {
     pub(super) source: MeshSource<'a>,
     pub(super) hasher: Sha256,
     pub(super) mesh_files: Vec<(String, String)>,
-    /// Textures decoded so far, by the path the scene writes: a texture used twice is read once.
-    pub(super) textures: BTreeMap<String, Arc<Bitmap>>,
+    /// Textures decoded so far, by the path the scene writes and the encoding they were decoded with: a texture
+    /// used twice is decoded once.
+    pub(super) textures: BTreeMap<(String, Encoding), Arc<Bitmap>>,
+    /// The bytes of the texture files read so far, by the path the scene writes, and where they were read: a file
+    /// decoded in two encodings is read and hashed once.
+    pub(super) texture_bytes: BTreeMap<String, (PathBuf, Arc<Vec<u8>>)>,
 }
 
 impl<'a> Loader<'a> {
     /// A loader of `text`, read from `file`, whose referenced files come from `source`.
     pub(super) fn new(text: &'a str, file: &'a Path, source: MeshSource<'a>) -> Self {
-        Loader { text, file, source, hasher: Sha256::new(), mesh_files: Vec::new(), textures: BTreeMap::new() }
+        Loader {
+            text,
+            file,
+            source,
+            hasher: Sha256::new(),
+            mesh_files: Vec::new(),
+            textures: BTreeMap::new(),
+            texture_bytes: BTreeMap::new(),
+        }
     }
 
     /// An error at `span` of the text (no line for a span the file does not have, such as a default's).

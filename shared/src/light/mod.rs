@@ -1,5 +1,12 @@
 //! Light sources: emissive triangles (one-sided, front = CCW winding), point lights and spot lights, chosen by
-//! power both for next-event estimation and for emitting light paths.
+//! power both for next-event estimation and for emitting light paths. Its submodules hold the infinite lights
+//! (`environment`: constant and image-based; `directional`: the sun; `infinite`: the start of their light paths
+//! and their power over the scene) and the sampling of spherical and disc emitters (`shape_sampling`).
+
+pub mod directional;
+pub mod environment;
+pub mod infinite;
+pub mod shape_sampling;
 
 use crate::camera::RearElement;
 use crate::color::{luminance, Rgb};

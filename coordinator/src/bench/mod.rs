@@ -3,7 +3,9 @@
 //! speedup, accuracy, memory) in the terminal, `report.md`, `results.csv` (one row per run) and `series.csv`
 //! (error against time and rays, for the charts).
 
-use crate::bench_tables::{write_table, ResultsRow, SeriesRow};
+pub mod charts;
+pub mod tables;
+
 use crate::cli::BenchArgs;
 use crate::live::bench_page::BenchLive;
 use crate::output_folder;
@@ -13,6 +15,7 @@ use photonfarm::render::method::Processes;
 use photonfarm::render::{Estimator, Method};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+use tables::{write_table, ResultsRow, SeriesRow};
 use worker::machine;
 
 /// Seconds per run and the methods of `--quick`: every method once on both scenes in under five minutes.
@@ -186,6 +189,9 @@ fn render(e: &Entry, args: &BenchArgs, out: &Path) -> Result<()> {
         .arg("--out")
         .arg(out)
         .stdout(std::process::Stdio::null());
+    if let Some(n) = args.phases {
+        cmd.args(["--phases", &n.to_string()]);
+    }
     if let Some((tiles, d)) = e.target {
         cmd.args(["--target-error", &d.to_string()]);
         if tiles == "uniform" {
@@ -310,6 +316,9 @@ pub fn run(mut args: BenchArgs) -> Result<()> {
     if args.repeats == 0 {
         bail!("--repeats must be at least 1");
     }
+    if args.phases == Some(0) {
+        bail!("--phases must be at least 1");
+    }
     let all = match &args.cores {
         Some(list) => machine::parse_cores(list).map_err(|e| anyhow::anyhow!("--cores: {e}"))?.len(),
         None => machine::all_cores().len(),
@@ -355,13 +364,21 @@ pub fn run(mut args: BenchArgs) -> Result<()> {
             }
         }
     }
-    eprintln!(
-        "{} runs of {} s each, about {:.0} minutes; results in {}",
-        plan.len(),
-        args.time,
-        plan.len() as f64 * (args.time + 0.7) / 60.0,
-        dir.display()
-    );
+    match args.phases {
+        None => eprintln!(
+            "{} runs of {} s each, about {:.0} minutes; results in {}",
+            plan.len(),
+            args.time,
+            plan.len() as f64 * (args.time + 0.7) / 60.0,
+            dir.display()
+        ),
+        Some(n) => eprintln!(
+            "{} runs of {n} phases each (at most {} s each); results in {}",
+            plan.len(),
+            args.time,
+            dir.display()
+        ),
+    }
     let page = match args.serve {
         Some(addr) => {
             let secret = match &args.secret_file {
@@ -384,7 +401,7 @@ pub fn run(mut args: BenchArgs) -> Result<()> {
     say!("{report}");
     let path = dir.join("report.md");
     std::fs::write(&path, &report).with_context(|| format!("cannot write {}", path.display()))?;
-    let charts = crate::charts::write_charts(&dir)?;
+    let charts = charts::write_charts(&dir)?;
     say!("{} charts in {}", charts.len(), dir.join("charts").display());
     say!("wrote {}", dir.display());
     if page.is_some() {
@@ -411,7 +428,7 @@ fn run_plan(plan: &[Entry], args: &BenchArgs, dir: &Path, page: Option<&BenchLiv
         let steps: Vec<&SeriesRow> = runs.iter().flat_map(|r| &r.series).collect();
         write_table(&dir.join("series.csv"), &steps)?;
         if let Some(p) = page {
-            let charts = crate::charts::write_charts(dir)?;
+            let charts = charts::write_charts(dir)?;
             let pngs = charts
                 .iter()
                 .filter(|c| c.extension().is_some_and(|e| e == "png"))
@@ -457,12 +474,16 @@ fn scenes_of(runs: &[Run]) -> std::collections::BTreeSet<&str> {
 /// the calibration of δ, and two-level against sync and async.
 fn report(runs: &[Run], args: &BenchArgs, threads: &[usize]) -> String {
     let mut s = String::new();
+    let budget = match args.phases {
+        Some(n) => format!("{n} phases (at most {} s)", args.time),
+        None => format!("{} s", args.time),
+    };
     let _ = writeln!(
         s,
-        "{} run(s) of {} s per configuration. Tracing speedup = rays per second / (rays per second of the same \
+        "{} run(s) of {budget} per configuration. Tracing speedup = rays per second / (rays per second of the same \
          method at {} thread(s)) × {}; δ range over runs in brackets; \"unlit\" = pixels that do not see a light \
          directly.\n",
-        args.repeats, args.time, threads[0], threads[0]
+        args.repeats, threads[0], threads[0]
     );
     let _ = writeln!(s, "| scene | method | threads | processes × groups × threads | forward rays | backward rays | tracing speedup | δ unlit / all | true error unlit / all | mean against the reference unlit / all | peak memory | bytes/pixel | idle | maps per light path |");
     let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
@@ -791,6 +812,7 @@ mod tests {
         let runs = vec![run(Method::TwoLevel, 1, 0, 0.06, 100), run(Method::TwoLevel, 2, 0, 0.044, 190)];
         let args = BenchArgs {
             time: 1.0,
+            phases: None,
             quick: false,
             scenes: vec!["cornell".into()],
             methods: vec![Method::TwoLevel],
