@@ -69,14 +69,20 @@ pub struct RaysSelectArgs {
     /// The selection, e.g. "reflect(s3) >= 1 and reflect(s5) and not hits(mount2)" (docs/ray-maps.md).
     #[arg(long = "where", value_name = "EXPR")]
     pub expr: String,
-    /// Keep at most N selected paths for the overlay, the OBJ file and the report (all are counted).
+    /// Keep at most N selected paths for the overlay, the glTF and OBJ files and the report (all are counted).
     #[arg(long, default_value_t = 1000, value_name = "N")]
     pub limit: usize,
+    /// Draw at most N of the kept paths in the overlay: the heaviest.
+    #[arg(long, default_value_t = 200, value_name = "N")]
+    pub draw: usize,
+    /// Do not write selection.glb (the scene's geometry with the paths).
+    #[arg(long)]
+    pub no_glb: bool,
     /// Output folder (default: selection/ next to the map's raymap/ folder).
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// How the overlay colours the paths.
-    #[arg(long, value_enum, default_value = "natural")]
+    #[arg(long, value_enum, default_value = "event")]
     pub colour: PathColour,
     /// Threads that decompress and test portions (default: every core).
     #[arg(long)]

@@ -64,7 +64,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
     if stop.target_error.is_some() && !args.uniform && sensor_ghosts_keep_tiles(&args, &scene) {
         notes.push(TILES_OFF_FOR_SENSOR_GHOSTS.to_string());
     }
-    let recorder = start_ray_map(&args, &scene, &settings, &dir)?;
+    let session = checkpoint.as_ref().map_or(1, |c| c.session + 1);
+    let recorder = start_ray_map(&args, &scene, &settings, &dir, session)?;
     let (mut engine, layout) =
         start_engine(&args, &scene, settings, &dir, checkpoint.as_ref(), recorder.clone(), &mut notes)?;
     let mut live =
@@ -82,7 +83,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         lit_seconds,
         stop: &stop,
         notes,
-        session: checkpoint.as_ref().map_or(1, |c| c.session + 1),
+        session,
         elapsed_before: Duration::from_secs_f64(checkpoint.as_ref().map_or(0.0, |c| c.elapsed_s)),
         start: Instant::now(),
     };
@@ -105,7 +106,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
     }
     finish(engine.as_mut(), &outputs, &mut history, &mut forecast);
     bar.finish_and_clear();
-    let ray_map = recorder.map(|r| r.finish().map(|s| (r.path().to_path_buf(), s)));
+    // After the engine's finish: every worker has sent its last portions.
+    let ray_map = recorder.map(|r| r.finish().map(|s| (r.path().map(Path::to_path_buf), s)));
     let reason = run.context("writing the periodic results failed; the run was stopped")?;
     if reason == StopReason::NoWorkers && engine.sums().pixels.iter().all(|p| p.phases == 0) {
         let why: Vec<String> =
@@ -126,8 +128,14 @@ pub fn run(args: RenderArgs) -> Result<()> {
             s.file_bytes as f64 / 1e6,
             s.raw_bytes as f64 / s.segments.max(1) as f64,
             s.file_bytes as f64 / s.segments.max(1) as f64,
-            file.display()
+            file.map_or_else(|| "the map".to_string(), |f| f.display().to_string())
         );
+        if s.dropped_portions > 0 {
+            eprintln!(
+                "note: the ray map lacks {} of the workers' portions ({} paths): the disk fell too far behind them",
+                s.dropped_portions, s.dropped_paths
+            );
+        }
     }
     if live.as_ref().is_some_and(|l| l.url.is_some()) {
         std::thread::sleep(Duration::from_secs_f64(args.serve_linger));
@@ -373,13 +381,14 @@ fn progress_bar(quiet: bool) -> ProgressBar {
     bar
 }
 
-/// The ray map recorder `--ray-map` asks for, writing into raymap/ of the output folder; refused for the
-/// methods whose paths it cannot reach yet.
+/// The ray map recorder `--ray-map` asks for, writing into raymap/ of the output folder: stream 0, or for a
+/// resumed run stream `session − 1`, so that every session's paths stay in the map.
 fn start_ray_map(
     args: &RenderArgs,
     scene: &Scene,
     settings: &RenderSettings,
     dir: &Path,
+    session: u32,
 ) -> Result<Option<Arc<Recorder>>> {
     if !args.ray_map {
         return Ok(None);
@@ -392,14 +401,8 @@ fn start_ray_map(
             settings.max_depth
         );
     }
-    if args.method != Method::Pbpm && args.method != Method::Path {
-        bail!(
-            "--ray-map records the single-threaded methods (--method pbpm or path) so far; --method {} traces its \
-             paths on worker threads or processes it does not reach yet",
-            args.method
-        );
-    }
-    let header = ray_map::header_for(scene, args.method.name(), args.seed, args.ray_map_fraction, 0);
+    let header =
+        ray_map::header_for(scene, args.method.name(), args.seed, args.ray_map_fraction, session.saturating_sub(1));
     let recorder = Recorder::create(&dir.join("raymap"), &header)?;
     Ok(Some(Arc::new(recorder)))
 }
@@ -426,7 +429,7 @@ fn start_engine<'s>(
                 }),
                 None => None,
             };
-            let (cluster, layout) = launch::launch(&launch_options(args), scene, settings, dir, resume)?;
+            let (cluster, layout) = launch::launch(&launch_options(args), scene, settings, dir, resume, recorder)?;
             Ok((Box::new(cluster), layout))
         }
         (Processes::One, None) => {
@@ -466,7 +469,9 @@ fn start_engine<'s>(
             }
             config.phases_per_deal = args.phases_per_deal;
             let layout = config.layout();
-            Ok((Box::new(ParallelEngine::new(scene, settings, config)?), layout))
+            let mut engine = ParallelEngine::new(scene, settings, config)?;
+            engine.set_recorder(recorder);
+            Ok((Box::new(engine), layout))
         }
     }
 }
@@ -519,6 +524,7 @@ fn launch_options(args: &RenderArgs) -> LaunchOptions {
         group_size: args.group_size,
         tile_size: args.tile_size,
         phases_per_deal: args.phases_per_deal,
+        ray_map_fraction: args.ray_map.then_some(args.ray_map_fraction),
         memory_limit: args.memory_limit,
     }
 }

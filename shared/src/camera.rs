@@ -95,6 +95,16 @@ impl Camera {
         self.forward
     }
 
+    /// Unit direction of the image's up (rows decrease along it).
+    pub fn up(&self) -> Vec3 {
+        self.up
+    }
+
+    /// Unit direction of the image's right.
+    pub fn right(&self) -> Vec3 {
+        self.right
+    }
+
     /// Number of pixels.
     pub fn pixel_count(&self) -> usize {
         self.width as usize * self.height as usize

@@ -339,6 +339,7 @@ enum Tree {
     Pixel(u32, u32, u32, u32),
     Camera,
     Escaped,
+    Sensor,
     Not(Box<Tree>),
     And(Box<Tree>, Box<Tree>),
     Or(Box<Tree>, Box<Tree>),
@@ -367,6 +368,7 @@ fn tree() -> impl Strategy<Value = Tree> {
         (0..8u32, 0..8u32, 0..9u32, 0..9u32).prop_map(|(a, b, c, d)| Tree::Pixel(a, b, c, d)),
         Just(Tree::Camera),
         Just(Tree::Escaped),
+        Just(Tree::Sensor),
     ];
     leaf.prop_recursive(4, 24, 2, |inner| {
         prop_oneof![
@@ -385,6 +387,7 @@ fn text(t: &Tree) -> String {
         Tree::Pixel(a, b, c, d) => format!("pixel({a}, {b}, {c}, {d})"),
         Tree::Camera => "camera".into(),
         Tree::Escaped => "escaped".into(),
+        Tree::Sensor => "sensor".into(),
         Tree::Not(a) => format!("not ({})", text(a)),
         Tree::And(a, b) => format!("({}) and ({})", text(a), text(b)),
         Tree::Or(a, b) => format!("({}) OR ({})", text(a), text(b)),
@@ -422,6 +425,7 @@ fn brute(t: &Tree, p: &RecordedPath) -> bool {
         }
         Tree::Camera => p.kind == PathKind::Camera,
         Tree::Escaped => p.vertices.last().is_some_and(|v| v.events.0 & Events::ESCAPED.0 != 0),
+        Tree::Sensor => p.kind == PathKind::Light && p.vertices[1..].iter().any(|v| v.events.0 & Events::SENSOR.0 != 0),
         Tree::Not(a) => !brute(a, p),
         Tree::And(a, b) => brute(a, p) && brute(b, p),
         Tree::Or(a, b) => brute(a, p) || brute(b, p),

@@ -1,6 +1,7 @@
-//! Ray maps through the real program: `render --ray-map` writes a map that `rays select` reads, selects from
-//! and shows (overlay, OBJ polylines, report); bad expressions and methods the recorder cannot reach are
-//! refused with clear errors; the thread count changes neither a selection nor what a damaged map reports.
+//! Ray maps through the real program: `render --ray-map` writes a map in every method (a three-level run's
+//! workers send theirs to the coordinator, which writes one map) that `rays select` reads, selects from and
+//! shows (overlay, side view, glTF scene, OBJ polylines, report); bad expressions and fractions are refused
+//! with clear errors; the thread count changes neither a selection nor what a damaged map reports.
 
 use end_to_end::{binary, cornell_at, render_output, repo_root, scratch_dir};
 use std::path::Path;
@@ -30,7 +31,7 @@ fn a_recorded_render_is_selected_by_events_and_shown_as_overlay_polylines_and_re
         rays(&["select", map, "--where", "lightpath and light(light) and diffuse(*) >= 2", "--limit", "50", "--quiet"]);
     assert!(o.status.success(), "{}", text(&o));
     let sel = run.join("selection");
-    for f in ["overlay.png", "paths.obj", "report.json", "report.txt"] {
+    for f in ["overlay.png", "section.png", "selection.glb", "paths.obj", "report.json", "report.txt"] {
         assert!(sel.join(f).is_file(), "{f} missing: {}", text(&o));
     }
     let report: serde_json::Value =
@@ -49,7 +50,9 @@ fn a_recorded_render_is_selected_by_events_and_shown_as_overlay_polylines_and_re
     assert_eq!(obj.lines().filter(|l| l.starts_with("l ")).count(), 50);
     let overlay = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(sel.join("overlay.png")).unwrap()));
     let info = overlay.read_info().unwrap();
-    assert_eq!((info.info().width, info.info().height), (32, 32));
+    // Enlarged 8 times for legible lines, with the legend below the image.
+    assert_eq!(info.info().width, 256);
+    assert!(info.info().height > 256, "no legend strip");
 
     // A name the scene does not have is pointed at.
     let o = rays(&["select", map, "--where", "reflect(tallbox) and hits(lamp)", "--quiet"]);
@@ -58,12 +61,9 @@ fn a_recorded_render_is_selected_by_events_and_shown_as_overlay_polylines_and_re
 }
 
 #[test]
-fn ray_maps_are_refused_for_methods_the_recorder_does_not_reach_and_for_bad_fractions() {
+fn bad_fractions_and_missing_maps_are_refused_with_clear_errors() {
     let dir = scratch_dir("ray-maps-refused");
     let scene = cornell_at(&dir, 16);
-    let o = render_output(&scene, &dir.join("sync"), &["--method", "sync", "--phases", "1", "--ray-map"]);
-    assert!(!o.status.success());
-    assert!(text(&o).contains("--method pbpm or path"), "{}", text(&o));
     let o = render_output(
         &scene,
         &dir.join("zero"),
@@ -73,6 +73,120 @@ fn ray_maps_are_refused_for_methods_the_recorder_does_not_reach_and_for_bad_frac
     assert!(text(&o).contains("--ray-map-fraction must be in (0, 1]"), "{}", text(&o));
     let o = rays(&["select", Path::new(&dir).join("nothing").to_str().unwrap(), "--where", "camera"]);
     assert!(!o.status.success(), "{}", text(&o));
+}
+
+/// The paths of a selection's report.json.
+fn report(dir: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap()
+}
+
+/// The number after "ray map: " in a render's output: the paths its map holds.
+fn recorded_paths(o: &Output) -> u64 {
+    let t = text(o);
+    let at = t.find("ray map: ").unwrap_or_else(|| panic!("no ray map summary: {t}")) + "ray map: ".len();
+    t[at..].split_whitespace().next().unwrap().parse().unwrap()
+}
+
+#[test]
+fn the_in_process_parallel_methods_record_from_every_thread() {
+    let dir = scratch_dir("ray-maps-parallel");
+    let scene = cornell_at(&dir, 16);
+    for method in ["sync", "async", "two-level"] {
+        let run = dir.join(method);
+        let o = render_output(
+            &scene,
+            &run,
+            &["--method", method, "--threads", "2", "--phases", "2", "--ray-map", "--ray-map-fraction", "0.5"],
+        );
+        assert!(o.status.success(), "{method}: {}", text(&o));
+        let paths = recorded_paths(&o);
+        let o = rays(&["select", run.to_str().unwrap(), "--where", "camera or lightpath", "--limit", "1", "--quiet"]);
+        assert!(o.status.success(), "{method}: {}", text(&o));
+        let r = report(&run.join("selection"));
+        assert!(paths > 0 && r["total_paths"] == paths, "{method}: {paths} recorded, {} read", r["total_paths"]);
+    }
+}
+
+#[test]
+fn a_three_level_run_on_two_synthetic_nodes_records_one_map_with_both_workers_paths() {
+    let dir = scratch_dir("ray-maps-three-level");
+    let scene = cornell_at(&dir, 32);
+    let run = dir.join("run");
+    let o = render_output(
+        &scene,
+        &run,
+        &[
+            "--method",
+            "three-level",
+            "--topology",
+            "pack:1 numa:2 core:1 pu:1",
+            "--group-size",
+            "1",
+            "--phases",
+            "6",
+            "--ray-map",
+            "--ray-map-fraction",
+            "0.25",
+        ],
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let recorded = recorded_paths(&o);
+    let streams: Vec<_> = std::fs::read_dir(run.join("raymap")).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(streams, ["stream-0.pfrm"], "the run's one map file");
+
+    // Read whole: every path the coordinator counted, no portion damaged or cut.
+    let o = rays(&["select", run.to_str().unwrap(), "--where", "camera", "--limit", "100000", "--quiet"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let sel = run.join("selection");
+    let r = report(&sel);
+    assert_eq!(r["total_paths"].as_u64().unwrap(), recorded);
+    assert!(r["damaged"].as_array().unwrap().is_empty() && r["truncated"].as_array().unwrap().is_empty(), "{r}");
+    // A camera path's phase is its pixel's j, which two processes interleave: worker 0's are odd, worker 1's even.
+    let phases: Vec<u64> = r["paths"].as_array().unwrap().iter().map(|p| p["phase"].as_u64().unwrap()).collect();
+    assert_eq!(phases.len() as u64, r["matched_paths"].as_u64().unwrap(), "every camera path listed");
+    let odd = phases.iter().filter(|&&j| j % 2 == 1).count();
+    assert!(odd > 0 && odd < phases.len(), "paths from one worker only: {odd} of {} odd phases", phases.len());
+    let light = rays(&["select", run.to_str().unwrap(), "--where", "lightpath", "--limit", "1", "--quiet"]);
+    assert!(light.status.success(), "{}", text(&light));
+    assert!(report(&sel)["matched_paths"].as_u64().unwrap() > 0, "no light paths recorded");
+
+    // The pictures and the glTF file of a selection with every path kept.
+    let o = rays(&[
+        "select",
+        run.to_str().unwrap(),
+        "--where",
+        "lightpath and diffuse(*) >= 2",
+        "--limit",
+        "300",
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    for f in ["overlay.png", "section.png", "selection.glb"] {
+        assert!(sel.join(f).is_file(), "{f} missing: {}", text(&o));
+    }
+    let listed = report(&sel)["paths"].as_array().unwrap().clone();
+    assert!(!listed.is_empty());
+    let bytes = std::fs::read(sel.join("selection.glb")).unwrap();
+    let gltf = gltf::Gltf::from_slice(&bytes).expect("selection.glb is valid glTF");
+    let blob = gltf.blob.as_deref().expect("a binary chunk");
+    let paths_node = gltf.nodes().find(|n| n.name() == Some("paths")).expect("a node of the paths");
+    let lines: Vec<Vec<[f32; 3]>> = paths_node
+        .children()
+        .map(|n| {
+            let primitive = n.mesh().unwrap().primitives().next().unwrap();
+            assert_eq!(primitive.mode(), gltf::mesh::Mode::Lines);
+            primitive.reader(|_| Some(blob)).read_positions().unwrap().collect()
+        })
+        .collect();
+    assert_eq!(lines.len(), listed.len(), "one line node per selected path");
+    assert!(gltf.nodes().any(|n| n.name() == Some("floor")), "the scene's objects are in the file");
+    for (p, points) in listed.iter().zip(&lines) {
+        let vertices = p["vertices"].as_array().unwrap();
+        for v in vertices.iter().filter(|v| !v["events"].as_str().unwrap().contains("escaped")) {
+            let v: Vec<f32> = v["point"].as_array().unwrap().iter().map(|c| c.as_f64().unwrap() as f32).collect();
+            assert!(points.iter().any(|q| q[..] == v[..]), "vertex {v:?} of {p} is not in its line");
+        }
+    }
 }
 
 /// The shipped lens scene at 72 × 48 pixels in `dir`, its last surface (s10) coated against reflection when

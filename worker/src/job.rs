@@ -8,6 +8,7 @@ use crate::parallel::{EngineConfig, ParallelEngine};
 use photonfarm::accumulation::delta::{encode_delta, Compression};
 use photonfarm::pbpm::ProcessShare;
 use photonfarm::protocol::{Job, Share, Snapshot, WorkerInfo};
+use photonfarm::ray_map::{self, PortionSink, Recorder};
 use photonfarm::render::light_balance::LightBalance;
 use photonfarm::render::session::{self, Progressive};
 use photonfarm::render::ActiveTiles;
@@ -109,6 +110,8 @@ pub struct Control<'a> {
     pub tiles: &'a PendingTiles,
     /// The processes rendering the image, announced since the last round.
     pub share: &'a PendingShare,
+    /// Where the portions of the job's ray map go (the link), when the job asks for one.
+    pub ray_map: Option<Box<dyn PortionSink>>,
 }
 
 /// Renders `job` until `control.stop` is set, calling `emit` with its events (it returns false when nobody
@@ -155,6 +158,25 @@ pub fn run(
             return;
         }
     };
+    let recorder = match (job.ray_map, control.ray_map) {
+        (Some(request), Some(sink)) => {
+            // The worker's own seed: its paths and its choice of them are its own.
+            let header = ray_map::header_for(scene, job.engine.method.name(), settings.seed, request.fraction, 0);
+            match Recorder::with_sink(sink, &header) {
+                Ok(r) => Some(std::sync::Arc::new(r)),
+                Err(e) => {
+                    emit(JobEvent::Failed(format!("cannot record the ray map: {e}")));
+                    return;
+                }
+            }
+        }
+        (Some(_), None) => {
+            emit(JobEvent::Failed("the job asks for a ray map, but its portions have nowhere to go".into()));
+            return;
+        }
+        _ => None,
+    };
+    engine.set_recorder(recorder.clone());
     let pinned = engine.pinned_threads();
     let info = WorkerInfo {
         hostname: machine::hostname(),
@@ -179,7 +201,7 @@ pub fn run(
     let mut base = engine.sums().clone();
     let mut seq = 0;
     let mut last = Instant::now();
-    let Control { stop, interval_ms, tiles, share } = control;
+    let Control { stop, interval_ms, tiles, share, .. } = control;
     loop {
         let announced = share.lock().unwrap_or_else(|e| e.into_inner()).take();
         if let Some(announced) = announced {
@@ -257,6 +279,13 @@ pub fn run(
             }
         }
         if stopping {
+            // The map's last portions go to the link before `Finished`, which the coordinator reads after them.
+            if let Some(r) = &recorder {
+                match r.finish() {
+                    Ok(s) => tracing::info!("ray map: {} paths, {} segments sent", s.paths, s.segments),
+                    Err(e) => tracing::warn!("the ray map is incomplete: {e}"),
+                }
+            }
             emit(JobEvent::Finished);
             return;
         }

@@ -4,7 +4,8 @@
 use crate::job::{self, JobEvent};
 use photonfarm::accumulation::delta::Compression;
 use photonfarm::protocol::auth::{handshake, Peer};
-use photonfarm::protocol::{Connection, Job, Message, ProtocolError, Role, Secret};
+use photonfarm::protocol::{Connection, Job, Message, ProtocolError, RayMapPortion, Role, Secret};
+use photonfarm::ray_map::{Portion, PortionSink};
 use sha2::{Digest, Sha256};
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -112,6 +113,15 @@ pub async fn serve_job(
     let interval_ms = Arc::new(AtomicU64::new(floor_ms));
     let mut previous_send_ms = 0u64;
     let (events_tx, mut events) = mpsc::unbounded_channel();
+    // The ray map's portions, from the recorder's writer thread: a bounded channel, so that a slow link makes
+    // the recorder wait rather than the worker's memory grow.
+    let (ray_map, mut portions) = match job.ray_map {
+        Some(_) => {
+            let (tx, rx) = mpsc::channel(PORTIONS_IN_FLIGHT);
+            (Some(Box::new(LinkSink { portions: tx, peer: conn.peer.to_string() }) as Box<dyn PortionSink>), Some(rx))
+        }
+        None => (None, None),
+    };
     let engine = {
         let (job, stop, interval_ms, slowdown) = (job.clone(), stop.clone(), interval_ms.clone(), opts.slowdown);
         let (tiles, share) = (tiles.clone(), share.clone());
@@ -123,7 +133,8 @@ pub async fn serve_job(
             .name("job".into())
             .spawn(move || {
                 let _span = span.enter();
-                let control = job::Control { stop: &stop, interval_ms: &interval_ms, tiles: &tiles, share: &share };
+                let control =
+                    job::Control { stop: &stop, interval_ms: &interval_ms, tiles: &tiles, share: &share, ray_map };
                 job::run(&scene, &job, control, slowdown, compression, |e| events_tx.send(e).is_ok())
             })
             .map_err(|e| LinkError::Job(format!("cannot start the engine thread: {e}")))?
@@ -166,6 +177,12 @@ pub async fn serve_job(
                         continue;
                     }
                     Some(JobEvent::Finished) => {
+                        // The recorder finished before the engine said so: its last portions are all waiting.
+                        if let Some(rx) = &mut portions {
+                            while let Some(p) = rx.recv().await {
+                                writer.write(&portion_message(p)).await?;
+                            }
+                        }
                         finished = true;
                         Message::Finished
                     }
@@ -176,6 +193,10 @@ pub async fn serve_job(
                     None => break Err(LinkError::Job("the engine thread ended without finishing".into())),
                 };
                 writer.write(&message).await?;
+                last_sent = Instant::now();
+            }
+            Some(p) = next_portion(&mut portions), if !finished => {
+                writer.write(&portion_message(p)).await?;
                 last_sent = Instant::now();
             }
             message = incoming.recv() => {
@@ -218,6 +239,8 @@ pub async fn serve_job(
         }
     };
     stop.store(true, Ordering::Release);
+    // Nobody takes portions any more: a recorder still sending one gets an error rather than waiting forever.
+    drop(portions);
     reader_task.abort();
     if result.is_ok() {
         let _ = writer.shutdown().await;
@@ -231,6 +254,49 @@ pub async fn serve_job(
         snapshots_sent: sent,
         snapshots_acked: acked,
     })
+}
+
+/// Portions of the ray map that may wait for the link before the recorder's writer waits.
+const PORTIONS_IN_FLIGHT: usize = 4;
+
+/// The recorder's sink in a worker: its writer thread hands each compressed portion to the link.
+struct LinkSink {
+    portions: mpsc::Sender<Portion>,
+    /// The coordinator's address, for messages.
+    peer: String,
+}
+
+impl PortionSink for LinkSink {
+    fn append(&mut self, portion: Portion) -> std::io::Result<()> {
+        self.portions
+            .blocking_send(portion)
+            .map_err(|_| std::io::Error::new(std::io::ErrorKind::BrokenPipe, "the link to the coordinator has ended"))
+    }
+
+    fn name(&self) -> String {
+        format!("the link to the coordinator at {}", self.peer)
+    }
+}
+
+/// The next portion of the ray map; pending forever without a map or once its channel is closed, so that a
+/// `select!` branch on it stays quiet.
+async fn next_portion(portions: &mut Option<mpsc::Receiver<Portion>>) -> Option<Portion> {
+    match portions {
+        Some(rx) => match rx.recv().await {
+            Some(p) => Some(p),
+            None => {
+                *portions = None;
+                std::future::pending().await
+            }
+        },
+        None => std::future::pending().await,
+    }
+}
+
+/// The message that carries a portion.
+fn portion_message(p: Portion) -> Message {
+    let h = p.header;
+    Message::RayMapPortion(RayMapPortion { raw_bytes: h.raw, paths: h.paths, segments: h.segments, frame: p.frame })
 }
 
 /// Whether the job's files all arrived, or the coordinator stopped the run first.
@@ -329,6 +395,7 @@ mod tests {
                 memory_limit: None,
             },
             snapshot_interval_ms: 1000,
+            ray_map: None,
         };
         (job, store)
     }

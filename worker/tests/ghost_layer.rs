@@ -150,23 +150,26 @@ fn gather_buffers(config: &EngineConfig) -> usize {
     config.threads_per_group + config.shared_maps as usize
 }
 
-/// `EngineConfig::bytes_per_pixel` as it was before auxiliary layers: the merged sums, the held-back light
-/// vertices, and per pixel a group
+/// `EngineConfig::bytes_per_pixel` as it was before auxiliary layers: the merged sums, the announced share of
+/// the phases, the held-back light vertices, and per pixel a group
 /// covers its phase values, sums, mask and phase count entries, gathered light, and its photons (held twice,
 /// eight grid entries each in buffers with room to double, half a hash bucket, a u32 of its place in grid order).
 fn estimate_without_auxiliary_layers(config: &EngineConfig, pixels: usize, backward_diffuse_depth: u32) -> f64 {
     let coverage = if config.masks { 1 } else { config.groups };
     let photon = 2 * std::mem::size_of::<photonfarm::pbpm::BackwardPhoton>() + 2 * 8 * (4 + 8) + 2 + 4;
-    // The camera pass's values and replicate, the sums, the mask and the phases before the deal.
+    // The camera pass's values and replicate, the sums, the mask and the phases before the deal (over every
+    // process and this one's own).
     let per_pixel = std::mem::size_of::<photonfarm::integrator::LayerValues>()
         + 1
         + std::mem::size_of::<PixelSums>()
-        + 8
+        + 12
         + 24 * gather_buffers(config)
         + backward_diffuse_depth as usize * photon;
     // The light vertices held back for sorted gathers, at most one per image pixel.
     let held_back = worker::parallel::thread_gathers::held_back_bytes_per_pixel(pixels);
-    (std::mem::size_of::<PixelSums>() + coverage * per_pixel) as f64 + held_back
+    // The share of the pixels' phases the coordinator announces to a worker process.
+    let share = photonfarm::pbpm::ProcessShare::BYTES_PER_PIXEL;
+    (std::mem::size_of::<PixelSums>() + share + coverage * per_pixel) as f64 + held_back
 }
 
 #[test]

@@ -7,7 +7,8 @@ use super::{Cluster, Member};
 use anyhow::{bail, Context, Result};
 use photonfarm::protocol::auth::SECRET_ENV;
 use photonfarm::protocol::tls::{Tls, Transport};
-use photonfarm::protocol::{EngineSpec, FileRef, Job, Role, Secret};
+use photonfarm::protocol::{EngineSpec, FileRef, Job, RayMapRequest, Role, Secret};
+use photonfarm::ray_map::Recorder;
 use photonfarm::render::method::Grouping;
 use photonfarm::render::{Method, RenderSettings};
 use photonfarm::scene::Scene;
@@ -47,6 +48,8 @@ pub struct LaunchOptions {
     pub group_size: usize,
     pub tile_size: Option<u32>,
     pub phases_per_deal: u32,
+    /// The fraction of paths each worker records into the run's ray map (`--ray-map`).
+    pub ray_map_fraction: Option<f64>,
     /// `--memory-limit`: what each worker process may use.
     pub memory_limit: Option<u64>,
 }
@@ -78,12 +81,14 @@ pub fn launch(
     settings: RenderSettings,
     dir: &Path,
     resume: Option<Resume>,
+    ray_map: Option<Arc<Recorder>>,
 ) -> Result<(Cluster, String)> {
     let timing = check(options)?;
     let nodes = numa_nodes::detect(options.topology.as_deref(), &worker::machine::all_cores())?;
     let remote_secret = remote_secret(options)?;
     let remote_transport = remote_transport(options)?;
-    let template = JobTemplate::new(options, scene, settings, &nodes, resume.as_ref())?;
+    let request = options.ray_map_fraction.filter(|_| ray_map.is_some()).map(|fraction| RayMapRequest { fraction });
+    let template = JobTemplate::new(options, scene, settings, &nodes, resume.as_ref(), request)?;
     let (members, jobs) = plan_workers(options, &nodes, &template);
     if members.is_empty() && options.listen.is_none() {
         bail!("--remote-only needs --worker HOST:PORT or --listen ADDR");
@@ -108,6 +113,7 @@ pub fn launch(
         remote_transport,
         timing,
         blocklist: Arc::new(Blocklist::new(options.max_worker_failures)),
+        ray_map,
     };
     let initial = resume.map(|r| (r.sums, r.totals));
     let aux = photonfarm::accumulation::AuxLayout::for_scene(scene, settings.spectral_bands);
@@ -181,6 +187,7 @@ struct JobTemplate {
     local_interval: Duration,
     /// Remote workers start at the local interval and lengthen it on slow links (see worker::link).
     remote_interval: Duration,
+    ray_map: Option<RayMapRequest>,
 }
 
 impl JobTemplate {
@@ -190,6 +197,7 @@ impl JobTemplate {
         settings: RenderSettings,
         nodes: &NumaNodes,
         resume: Option<&Resume>,
+        ray_map: Option<RayMapRequest>,
     ) -> Result<Self> {
         let path = &options.scene_path;
         let scene_text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
@@ -226,6 +234,7 @@ impl JobTemplate {
             synthetic_nodes: nodes.synthetic,
             local_interval: interval,
             remote_interval: interval,
+            ray_map,
         })
     }
 
@@ -246,6 +255,7 @@ impl JobTemplate {
                 ..self.engine.clone()
             },
             snapshot_interval_ms: interval.as_millis() as u64,
+            ray_map: self.ray_map,
         }
     }
 }

@@ -4,7 +4,11 @@
 
 use photonfarm::protocol::auth::{handshake, Peer};
 use photonfarm::protocol::tls::Transport;
-use photonfarm::protocol::{Connection, Job, Message, ProtocolError, Role, Secret, Share, Snapshot, WorkerInfo};
+use photonfarm::protocol::{
+    Connection, Job, Message, ProtocolError, RayMapPortion, Role, Secret, Share, Snapshot, WorkerInfo,
+};
+use photonfarm::ray_map::format::PortionHeader;
+use photonfarm::ray_map::{Portion, Recorder};
 use std::collections::BTreeMap;
 use std::net::{IpAddr, SocketAddr};
 use std::path::PathBuf;
@@ -161,6 +165,8 @@ pub struct NetworkPlan {
     pub timing: Timing,
     /// Addresses refused after repeated failures (shared with the main thread, which counts them).
     pub blocklist: Arc<Blocklist>,
+    /// The run's ray map, which the workers' portions are appended to (`--ray-map`).
+    pub ray_map: Option<Arc<Recorder>>,
 }
 
 type Links = BTreeMap<usize, mpsc::UnboundedSender<Control>>;
@@ -372,6 +378,15 @@ async fn send_files(
     Ok(())
 }
 
+/// A worker's ray map portion as its map's stream holds it, or why it cannot be one.
+fn received_portion(p: RayMapPortion) -> Result<Portion, String> {
+    let compressed = u32::try_from(p.frame.len()).map_err(|_| "a ray map portion beyond 4 GiB".to_string())?;
+    let header = PortionHeader { compressed, raw: p.raw_bytes, paths: p.paths, segments: p.segments };
+    // The checks a reader makes of a portion's header, so that the map holds none it would refuse.
+    PortionHeader::from_bytes(&header.to_bytes()).map_err(|e| format!("the worker sent a bad ray map portion: {e}"))?;
+    Ok(Portion { header, frame: p.frame })
+}
+
 /// Serves one worker link: job, files, then its messages until it finishes, fails or goes silent.
 async fn drive(
     worker: usize,
@@ -407,6 +422,14 @@ async fn drive(
                         }
                         Ok(Message::Started(info)) => { let _ = events.send(Event::Started { worker, info }); }
                         Ok(Message::Snapshot(snapshot)) => { let _ = events.send(Event::Snapshot { worker, snapshot, frame_bytes }); }
+                        Ok(Message::RayMapPortion(p)) => {
+                            let Some(map) = &plan.ray_map else {
+                                break Err("the worker sent a ray map portion, but the run records none".into());
+                            };
+                            // Queued for the map's writer thread without waiting: a slow disk never holds up the
+                            // link (the recorder counts what it has to drop).
+                            map.append_portion(received_portion(p)?);
+                        }
                         Ok(Message::Finished) => break Ok(()),
                         Ok(Message::Failed { reason }) => break Err(format!("the worker failed: {reason}")),
                         Ok(Message::Heartbeat) => {}

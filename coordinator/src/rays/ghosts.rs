@@ -8,6 +8,7 @@ use anyhow::{bail, Context, Result};
 use photonfarm::color::luminance;
 use photonfarm::ray_map::reader::open_streams;
 use photonfarm::ray_map::{Events, PathKind};
+use photonfarm::render::Method;
 use photonfarm::scene::Scene;
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -117,7 +118,9 @@ pub fn ghosts(args: RaysGhostsArgs) -> Result<()> {
                 .map(|(pair, energy, pixel, kind, phase)| match kind {
                     PathKind::Camera => Ok((pair, energy, pixel)),
                     PathKind::Light => {
-                        match light_paths_per_phase.get_or_init(|| light_paths_per_phase_of(&args.map, pixels)) {
+                        match light_paths_per_phase
+                            .get_or_init(|| light_paths_per_phase_of(&args.map, pixels, &header.method))
+                        {
                             Ok(n) => Ok((pair, energy / n.of(phase), pixel)),
                             Err(e) => Err(anyhow::anyhow!("{e}")),
                         }
@@ -166,10 +169,24 @@ pub fn ghosts(args: RaysGhostsArgs) -> Result<()> {
         }));
     }
     say!("{}", table.trim_end_matches('\n'));
-    let layer = ghost_layer_total(&args.map);
+    // With tile masks a group's phase takes the sensor registrations of its own pixels only, while the map holds
+    // every registration of the paths it recorded: the recorded light then overstates the layer's, and only the
+    // shares are comparable (the masks are dealt at random, whatever the ghost).
+    let masked = header.method.parse::<Method>().is_ok_and(|m| m.layout().masks);
+    let layer = if masked {
+        Err(anyhow::anyhow!(
+            "--method {} renders tile masks, whose groups register light on their own pixels only, while the map \
+             holds every registration; render with a method without masks (pbpm, path, sync, async, combination) \
+             to compare",
+            header.method
+        ))
+    } else {
+        ghost_layer_total(&args.map)
+    };
     match &layer {
         Ok((image_total, phases)) => say!(
-            "recorded ghost light / fraction: {:.4e}; the ghost layer of image.exr over {phases} phases: {:.4e} ({:.1}%)",
+            "recorded ghost light / fraction: {:.4e}; the ghost layer of image.exr over its pixels' phases (about \
+             {phases} each): {:.4e} ({:.1}%)",
             total / header.fraction,
             image_total,
             100.0 * total / header.fraction / image_total.max(f64::MIN_POSITIVE)
@@ -187,19 +204,23 @@ pub fn ghosts(args: RaysGhostsArgs) -> Result<()> {
     Ok(())
 }
 
-/// The render's ghost layer summed over pixels and phases (luminance): what the recorded ghost light, over
-/// the recorded fraction, estimates. Needs a single-process render (every pixel with the record's phases).
+/// The render's ghost layer summed over pixels and each pixel's phases (luminance): what the recorded ghost
+/// light, over the recorded fraction, estimates. Returns it with the image's mean phases per pixel.
 fn ghost_layer_total(map: &Path) -> Result<(f64, u64)> {
     let dir = render_folder(map);
-    let record: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(dir.join("run.json")).with_context(|| format!("no run.json in {}", dir.display()))?,
-    )?;
-    let phases = record["totals"]["phases"].as_u64().context("run.json has no totals.phases")?;
     let exr = dir.join("image.exr");
     let layers = photonfarm::image_io::exr_file::read_exr(&exr)?;
     let ghost = photonfarm::image_io::exr_file::find_layer(&layers, &exr, photonfarm::ghost::GHOST_LAYER)?;
-    let sum: f64 = ghost.rgb.iter().map(|p| luminance(glam::Vec3::from_array(*p)) as f64).sum();
-    Ok((sum * phases as f64, phases))
+    // Each pixel is its phases' mean: in a parallel or distributed run the pixels have different phase counts.
+    let phases = photonfarm::image_io::exr_file::find_layer(&layers, &exr, photonfarm::render::images::PHASES_LAYER)?;
+    let sum: f64 = ghost
+        .rgb
+        .iter()
+        .zip(&phases.rgb)
+        .map(|(g, n)| luminance(glam::Vec3::from_array(*g)) as f64 * n[0] as f64)
+        .sum();
+    let mean_phases = phases.rgb.iter().map(|n| n[0] as f64).sum::<f64>() / phases.rgb.len().max(1) as f64;
+    Ok((sum, mean_phases.round() as u64))
 }
 
 /// The light paths each phase of a render traced: what a light path's registered value is divided by in the
@@ -218,9 +239,17 @@ impl LightPathsPerPhase {
     }
 }
 
-/// The light paths each phase of the map's render traced, from its run.json (the recorded methods render one
-/// phase per history step). Errors are kept as text so that every thread can report the one error.
-fn light_paths_per_phase_of(map: &Path, pixels: usize) -> std::result::Result<LightPathsPerPhase, String> {
+/// The light paths each phase of the map's render counted, from its run.json: per phase for the single-threaded
+/// methods, which render one phase per history step, and the run's mean for the others, whose group phases
+/// overlap. A phase divides its light by the light paths counted against its map, which with shared maps
+/// (two-level, three-level) include other groups' paths; a path registers on the sensor into the one map
+/// whose mask holds its pixel, so that is the divisor of its recorded light too. Errors are kept as text so
+/// that every thread can report the one error.
+fn light_paths_per_phase_of(
+    map: &Path,
+    pixels: usize,
+    method: &str,
+) -> std::result::Result<LightPathsPerPhase, String> {
     let dir = render_folder(map);
     let read = || -> Result<LightPathsPerPhase> {
         let record: serde_json::Value = serde_json::from_str(
@@ -228,12 +257,17 @@ fn light_paths_per_phase_of(map: &Path, pixels: usize) -> std::result::Result<Li
                 .with_context(|| format!("no run.json in {}", dir.display()))?,
         )?;
         let phases = record["totals"]["phases"].as_u64().context("run.json has no totals.phases")?;
-        let light_paths = record["totals"]["light_paths"].as_u64().context("run.json has no totals.light_paths")?;
+        // Records from before maps counted their paths have only the paths traced.
+        let light_paths = record["totals"]["map_light_paths"]
+            .as_u64()
+            .or_else(|| record["totals"]["light_paths"].as_u64())
+            .context("run.json has no totals.map_light_paths")?;
         if phases == 0 || light_paths == 0 {
             bail!("run.json records {light_paths} light paths over {phases} phases");
         }
         let mut by_phase = Vec::new();
-        for step in record["history"].as_array().into_iter().flatten() {
+        let one_phase_per_step = method == Method::Pbpm.name() || method == Method::Path.name();
+        for step in record["history"].as_array().into_iter().flatten().take_while(|_| one_phase_per_step) {
             let (Some(phase), Some(l)) = (step["phase"].as_u64(), step["light_paths_per_pixel"].as_f64()) else {
                 break;
             };

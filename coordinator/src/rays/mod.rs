@@ -1,9 +1,17 @@
-//! `coordinator rays`: reading the ray maps a render recorded. `select` lists the paths that satisfy an
-//! expression and `outputs` writes what it found; `ghosts` ranks a lens's ghost paths by surface pair.
+//! `coordinator rays`: reading the ray maps `render --ray-map` records. `select` is the `rays select` command:
+//! it runs a selection expression over a map's portions in parallel and writes what `outputs` makes of the
+//! selection (the overlay of `overlay` and the side view of `section`, drawn on a `canvas`; the glTF scene of
+//! `gltf_export`; both of the latter with the scene's `surfaces` as triangles; OBJ polylines and reports);
+//! `ghosts` is `rays ghosts`, which ranks a lens's ghost pairs. docs/ray-maps.md describes them.
 
+pub mod canvas;
 pub mod ghosts;
-mod outputs;
+pub mod gltf_export;
+pub mod outputs;
+pub mod overlay;
+pub mod section;
 pub mod select;
+pub mod surfaces;
 
 use photonfarm::ray_map::RecordedPath;
 use std::path::{Path, PathBuf};

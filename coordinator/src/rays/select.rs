@@ -3,6 +3,7 @@
 //! path read in place; the portions' results are combined in map order, and the first `--limit` matches go to
 //! `outputs`.
 
+use super::overlay::OverlayStyle;
 use super::{outputs, render_folder, Selection};
 use crate::cli::RaysSelectArgs;
 use anyhow::{bail, Context, Result};
@@ -55,7 +56,9 @@ pub fn select(args: RaysSelectArgs) -> Result<()> {
         None => default_out(&args.map),
     };
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
-    let written = outputs::write_all(&out, &args.map, &header, &selection, &args.expr, args.colour)?;
+    let pictures =
+        outputs::Pictures { overlay: OverlayStyle { colour: args.colour, max_paths: args.draw }, glb: !args.no_glb };
+    let written = outputs::write_all(&out, &args.map, &header, &selection, &args.expr, pictures)?;
     for (what, file) in written {
         say!("{what}: {}", file.display());
     }

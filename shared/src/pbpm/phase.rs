@@ -396,9 +396,11 @@ impl PhaseBuffers {
                     let (x, y) = (pixel % cam.width, pixel / cam.width);
                     let mut s = Sampler::camera(phase.seed, phase.key, pixel as u64, j);
                     let ray = cam.generate_ray(x, y, s.next_2d(), s.next_2d());
-                    let kept = recorder.filter(|r| r.keeps(PathKind::Camera, j, pixel as u64));
+                    // A recorded camera path carries its pixel's radius j, which counts every process's phases of the
+                    // pixel (docs/ray-maps.md, "Phase numbers"): two processes never give one pixel the same number.
+                    let kept = recorder.filter(|r| r.keeps(PathKind::Camera, radius_j, pixel as u64));
                     if kept.is_some() {
-                        (log.phase, log.item, log.source) = (j as u32, pixel, pixel);
+                        (log.phase, log.item, log.source) = (radius_j as u32, pixel, pixel);
                     }
                     let store = &mut PhotonLists { photons, vertices };
                     let (v, ghost) = match kept {

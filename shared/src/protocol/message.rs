@@ -14,7 +14,8 @@ use serde::{Deserialize, Serialize};
 /// 9: and whether it chooses the camera paths' diffuse depth (`RenderSettings::adaptive_depth`).
 /// 10: the coordinator announces the processes rendering the image when they change (`Share`), jobs carry
 /// `--memory-limit`, and snapshots a CRC-32 of their delta.
-pub const PROTOCOL_VERSION: u32 = 10;
+/// 11: jobs may ask for a ray map (`Job::ray_map`), whose portions workers send (`RayMapPortion`).
+pub const PROTOCOL_VERSION: u32 = 11;
 
 /// Which end of a link a peer is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -74,6 +75,27 @@ pub struct Job {
     pub engine: EngineSpec,
     /// Time between snapshots, in milliseconds.
     pub snapshot_interval_ms: u64,
+    /// Record a ray map (`render --ray-map`) and send its portions to the coordinator.
+    pub ray_map: Option<RayMapRequest>,
+}
+
+/// What a job's ray map records.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RayMapRequest {
+    /// The fraction of paths recorded, in (0, 1].
+    pub fraction: f64,
+}
+
+/// One compressed portion of a worker's ray map, as the map's stream file holds it after its portion header
+/// (docs/ray-maps.md describes the format): the coordinator appends it to the run's map.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RayMapPortion {
+    /// Bytes of the paths before compression.
+    pub raw_bytes: u32,
+    pub paths: u32,
+    pub segments: u32,
+    /// One zstd frame with a content checksum.
+    pub frame: Vec<u8>,
 }
 
 /// What a worker reports once its engine runs.
@@ -180,6 +202,9 @@ pub enum Message {
     /// Coordinator → worker: the processes rendering the image changed; number the phases accordingly from the
     /// next round on.
     Share(Share),
+    /// Worker → coordinator: a portion of the worker's ray map. A worker sends its last portions before
+    /// `Finished`.
+    RayMapPortion(RayMapPortion),
 }
 
 impl Snapshot {
@@ -208,6 +233,7 @@ impl Message {
             Message::Failed { .. } => "Failed",
             Message::ActiveTiles { .. } => "ActiveTiles",
             Message::Share(_) => "Share",
+            Message::RayMapPortion(_) => "RayMapPortion",
         }
     }
 }
@@ -246,6 +272,8 @@ mod tests {
         let m = Message::Ack { seq: 42 };
         assert_eq!(decode(&encode(&m).unwrap()).unwrap(), m);
         let m = Message::ActiveTiles { tile: 32, flags: vec![true, false, true] };
+        assert_eq!(decode(&encode(&m).unwrap()).unwrap(), m);
+        let m = Message::RayMapPortion(RayMapPortion { raw_bytes: 9, paths: 1, segments: 2, frame: vec![1, 2, 3] });
         assert_eq!(decode(&encode(&m).unwrap()).unwrap(), m);
     }
 

@@ -13,4 +13,7 @@ pub mod tls;
 pub use auth::Secret;
 pub use connection::{Connection, MessageReader, MessageWriter};
 pub use error::ProtocolError;
-pub use message::{EngineSpec, FileRef, Job, Message, Role, Share, Snapshot, WorkerInfo, PROTOCOL_VERSION};
+pub use message::{
+    EngineSpec, FileRef, Job, Message, RayMapPortion, RayMapRequest, Role, Share, Snapshot, WorkerInfo,
+    PROTOCOL_VERSION,
+};

@@ -13,7 +13,7 @@ pub mod writer;
 pub use events::Events;
 pub use format::MapHeader;
 pub use path::{PathKind, PathLog, RecordedPath, Unrecorded, Vertex};
-pub use writer::{Recorder, StreamStats};
+pub use writer::{Portion, PortionSink, Recorder, StreamStats};
 
 use crate::light::Light;
 use crate::scene::Scene;

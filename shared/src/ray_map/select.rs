@@ -11,6 +11,7 @@
 //!         | "pixel" "(" X0 "," Y0 "," X1 "," Y1 ")" a camera path whose pixel lies in the rectangle
 //!         | "ellipse" "(" CX "," CY "," RX "," RY ")"  … in the ellipse
 //!         | "camera" | "lightpath" | "escaped"
+//!         | "sensor"                              a light path that registered on the sensor
 //! EVENT  := reflect | refract | diffuse | absorb | tir | emission
 //! CMP    := ">=" | "<=" | "=" | ">" | "<"
 //! ```
@@ -288,7 +289,7 @@ struct Parser<'a> {
 }
 
 const EXPECTED_ATOM: &str = "expected an event (light, hits, reflect, refract, diffuse, absorb, tir, emission, \
-                             pixel, ellipse, camera, lightpath, escaped), `not` or `(`";
+                             pixel, ellipse, camera, lightpath, escaped, sensor), `not` or `(`";
 
 const EVENT_WORDS: [(&str, Events); 6] = [
     ("reflect", Events::REFLECT),
@@ -368,6 +369,11 @@ impl Parser<'_> {
             "camera" => Ok(Expr::Kind(PathKind::Camera)),
             "lightpath" => Ok(Expr::Kind(PathKind::Light)),
             "escaped" => Ok(Expr::Escaped),
+            // A light path's sensor vertices are where it registered; a camera path's origin is its only one.
+            "sensor" => Ok(Expr::And(
+                Box::new(Expr::Kind(PathKind::Light)),
+                Box::new(Expr::Count { objects: None, events: Events::SENSOR, cmp: Cmp::AtLeast, n: 1 }),
+            )),
             "light" => {
                 self.expect(Tok::Open, "`(` and an emitter's name")?;
                 let (name, s, e) = self.name()?;

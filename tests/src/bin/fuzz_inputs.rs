@@ -13,7 +13,9 @@ use photonfarm::accumulation::{Accumulator, AuxLayer, AuxLayout};
 use photonfarm::color::Rgb;
 use photonfarm::protocol::frame::{read_frame, write_frame};
 use photonfarm::protocol::message::{decode, encode};
-use photonfarm::protocol::{EngineSpec, FileRef, Job, Message, Role, Share, Snapshot, WorkerInfo};
+use photonfarm::protocol::{
+    EngineSpec, FileRef, Job, Message, RayMapPortion, RayMapRequest, Role, Share, Snapshot, WorkerInfo,
+};
 use photonfarm::render::checkpoint::Checkpoint;
 use photonfarm::render::method::ParallelMethod;
 use photonfarm::render::{Method, RayTotals, RenderSettings};
@@ -291,6 +293,7 @@ fn main() -> Result<()> {
             memory_limit: Some(1 << 30),
         },
         snapshot_interval_ms: 1000,
+        ray_map: Some(RayMapRequest { fraction: 0.01 }),
     };
     let messages = [
         Message::Hello { version: 5, role: Role::Worker, nonce: [7; 32], name: "w".into() },
@@ -328,6 +331,7 @@ fn main() -> Result<()> {
             rank: 2,
             merged_phases: Share::compress_phases(base.pixels.iter().map(|p| p.phases)),
         }),
+        Message::RayMapPortion(RayMapPortion { raw_bytes: 64, paths: 1, segments: 1, frame: vec![0x28, 0xb5, 0x2f] }),
     ];
     let runtime = tokio::runtime::Builder::new_current_thread().build()?;
     let mut frame_seeds = Vec::new();

@@ -7,6 +7,7 @@ use super::map_slot::MapSlot;
 use super::mask;
 use photonfarm::accumulation::{Accumulator, AuxLayout};
 use photonfarm::pbpm::ProcessShare;
+use photonfarm::ray_map::Recorder;
 use photonfarm::render::record::StageSeconds;
 use photonfarm::render::session::Progressive;
 use photonfarm::render::{ActiveTiles, RayTotals, RenderSettings};
@@ -14,6 +15,7 @@ use photonfarm::scene::Scene;
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, RecvTimeoutError};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 pub use photonfarm::render::ParallelMethod;
@@ -154,6 +156,8 @@ pub struct ParallelEngine<'s> {
     waiting_nanos: u64,
     between_nanos: u64,
     last_round_end: Option<Instant>,
+    /// Records the kept camera and light paths of every group into a ray map.
+    recorder: Option<Arc<Recorder>>,
 }
 
 impl<'s> ParallelEngine<'s> {
@@ -197,7 +201,17 @@ impl<'s> ParallelEngine<'s> {
             waiting_nanos: 0,
             between_nanos: 0,
             last_round_end: None,
+            recorder: None,
         })
+    }
+
+    /// Records the paths `recorder` keeps (a ray map) from the next round on, on every thread of every group;
+    /// recording does not change the image.
+    pub fn set_recorder(&mut self, recorder: Option<Arc<Recorder>>) {
+        for g in &mut self.groups {
+            g.set_recorder(recorder.clone());
+        }
+        self.recorder = recorder;
     }
 
     /// The configuration.
@@ -281,6 +295,7 @@ impl<'s> ParallelEngine<'s> {
             deal: self.deals,
             rendered_pixels,
             numbering: self.share.numbering(1, 0),
+            recorder: self.recorder.as_deref(),
         };
         let k = self.config.phases_per_deal as u64;
         let (tx, rx) = mpsc::channel();

@@ -9,6 +9,7 @@ use photonfarm::pbpm::{
     mean_phase, AtomicGatherBuffer, Executor, ForwardStats, LightEvent, LocalPixels, Phase, PhaseBuffers,
     PhaseNumbering, PhotonMap,
 };
+use photonfarm::ray_map::{PathKind, RecordedPath, Recorder};
 use photonfarm::render::RenderSettings;
 use photonfarm::scene::Scene;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
@@ -146,6 +147,8 @@ pub struct RoundContext<'a> {
     /// The processes rendering the same pixels, for the radius schedule (each group adds the groups of its
     /// deal).
     pub numbering: PhaseNumbering,
+    /// Records the light paths it keeps into a ray map (the camera paths are recorded by each group's buffers).
+    pub recorder: Option<&'a Recorder>,
 }
 
 /// A mask pixel's phases before a deal.
@@ -244,6 +247,11 @@ impl Group {
         &self.aux_sums
     }
 
+    /// Records the camera paths `recorder` keeps from the next camera pass on.
+    pub fn set_recorder(&mut self, recorder: Option<Arc<Recorder>>) {
+        self.buffers.set_recorder(recorder);
+    }
+
     /// Bytes of the group's buffers, including its map slot.
     pub fn capacity_bytes(&mut self, slot: &MapSlot<GroupMap>) -> usize {
         let own = self.mask.capacity() * 4
@@ -320,7 +328,10 @@ impl Group {
             let before = phases_before[local];
             numbering.next_phase(before.all as u64, before.own as u64, sums[local].phases as u64)
         };
-        let phase = phase.at_pixel_phase(mean_phase(self.mask.len(), |i| next_phase(i).radius));
+        // The phase's j for its ghost chains, and the phase number its recorded light paths carry (a camera
+        // path carries its own pixel's radius j).
+        let number = mean_phase(self.mask.len(), |i| next_phase(i).radius);
+        let phase = phase.at_pixel_phase(number);
         let map = &mut slot.data_mut(&mut self.token).photons;
         let backward = self.buffers.camera_pass(exec, &phase, Some(&self.mask), next_phase, map);
         self.stats.backward_rays += backward.rays;
@@ -351,7 +362,7 @@ impl Group {
 
         // 3. Forward pass with the map open to every group.
         let t0 = Instant::now();
-        let tally = self.forward_pass(ctx, &phase, required);
+        let tally = self.forward_pass(ctx, &phase, required, number);
         self.stats.nanos.forward += nanos_since(t0);
         let t0 = Instant::now();
         self.stats.light_paths += tally.traced;
@@ -381,8 +392,9 @@ impl Group {
     /// Stage 3 with the map open: traces the phase's light paths on the group's threads until the quota is met
     /// (and, while another group's map still lacks light, helps it), then keeps tracing until no other group is
     /// inside the map, and closes it. Every vertex is held back per map and gathered in that map's bucket order
-    /// (`ThreadGathers`); none is left held back when the pass returns.
-    fn forward_pass<'c>(&mut self, ctx: &RoundContext<'c>, phase: &Phase, required: u64) -> ForwardTally {
+    /// (`ThreadGathers`); none is left held back when the pass returns. The light paths the round's recorder
+    /// keeps are recorded as paths of phase `number`.
+    fn forward_pass<'c>(&mut self, ctx: &RoundContext<'c>, phase: &Phase, required: u64, number: u64) -> ForwardTally {
         let me = self.index;
         let slot = &ctx.slots[me];
         slot.open(&self.token);
@@ -415,7 +427,8 @@ impl Group {
         let trace_batch = |batch: Batch,
                            thread: &mut ThreadGathers,
                            held: &mut [Option<Guard<'c, GroupMap>>],
-                           tally: &mut ForwardTally| {
+                           tally: &mut ForwardTally,
+                           log: &mut RecordedPath| {
             // While closing, the owner takes no other map: two closing owners never wait on each other.
             if ctx.shared_maps && !batch.closing {
                 for (k, (h, sl)) in held.iter_mut().zip(ctx.slots).enumerate() {
@@ -429,25 +442,32 @@ impl Group {
                 if index >= batch.stop_from && ctx.stop.load(Ordering::Relaxed) {
                     break;
                 }
-                phase.trace_light_path(index, &mut tally.stats, &mut |e| match e {
-                    LightEvent::Vertex(v) => {
-                        let point = v.point();
-                        own_merges += thread.push_own(&own.photons, point, rules);
-                        for (k, g) in held.iter().enumerate() {
-                            if let Some(g) = g {
-                                thread.push_foreign(k, &g.data().photons, &g.data().shared, sole, point, rules);
+                let kept = ctx.recorder.filter(|r| r.keeps(PathKind::Light, number, index));
+                let record = kept.map(|r| (r, number, &mut *log));
+                phase.trace_light_path_recorded(
+                    index,
+                    &mut tally.stats,
+                    &mut |e| match e {
+                        LightEvent::Vertex(v) => {
+                            let point = v.point();
+                            own_merges += thread.push_own(&own.photons, point, rules);
+                            for (k, g) in held.iter().enumerate() {
+                                if let Some(g) = g {
+                                    thread.push_foreign(k, &g.data().photons, &g.data().shared, sole, point, rules);
+                                }
                             }
                         }
-                    }
-                    LightEvent::Sensor(hit) => {
-                        phase.register(&own.pixels, hit, &mut thread.gathered);
-                        for g in held.iter().flatten() {
-                            let shared = &g.data().shared;
-                            let mut sink = if sole { shared.sole_writer_sink() } else { shared.sink() };
-                            phase.register(&g.data().pixels, hit, &mut sink);
+                        LightEvent::Sensor(hit) => {
+                            phase.register(&own.pixels, hit, &mut thread.gathered);
+                            for g in held.iter().flatten() {
+                                let shared = &g.data().shared;
+                                let mut sink = if sole { shared.sole_writer_sink() } else { shared.sink() };
+                                phase.register(&g.data().pixels, hit, &mut sink);
+                            }
                         }
-                    }
-                });
+                    },
+                    record,
+                );
                 done += 1;
             }
             let stopping = ctx.stop.load(Ordering::Relaxed);
@@ -477,6 +497,7 @@ impl Group {
             let mut held: Vec<Option<Guard<'c, GroupMap>>> = ctx.slots.iter().map(|_| None).collect();
             let mut tally = ForwardTally::default();
             let mut others_lack = false;
+            let mut log = RecordedPath::new(PathKind::Light, 0, 0, 0);
             loop {
                 let foreign = slot.light_paths();
                 let batch = match own.claim_towards_quota(BATCH, foreign) {
@@ -489,7 +510,7 @@ impl Group {
                     None => break,
                 };
                 let cut;
-                (cut, others_lack) = trace_batch(batch, thread, &mut held, &mut tally);
+                (cut, others_lack) = trace_batch(batch, thread, &mut held, &mut tally, &mut log);
                 if cut {
                     break;
                 }
@@ -511,9 +532,10 @@ impl Group {
         // Keep tracing useful paths until no other group is inside the map (paper Fig. 9).
         let thread = thread_mut(&mut self.threads[0]);
         let mut held: Vec<Option<Guard<'c, GroupMap>>> = Vec::new();
+        let mut log = RecordedPath::new(PathKind::Light, 0, 0, 0);
         while !slot.try_close(&self.token) {
             let batch = Batch { first: own.claim_beyond_quota(1), count: 1, stop_from: u64::MAX, closing: true };
-            trace_batch(batch, thread, &mut held, &mut tally);
+            trace_batch(batch, thread, &mut held, &mut tally, &mut log);
         }
         // The owner's own photons stay as they are until the phase closes: its last vertices may gather after
         // the map closed to other groups.

@@ -16,14 +16,15 @@ use std::sync::OnceLock;
 pub(super) const CHART_SIZE: (u32, u32) = (1024, 640);
 /// Width of the legend panel at the right of every chart: the legend never covers data.
 pub(super) const LEGEND_WIDTH: u32 = 250;
-/// plotters looks fonts up by family name; its own default text uses this one.
-pub(super) const FONT: &str = "sans-serif";
+/// plotters looks fonts up by family name; its own default text uses this one (the rays pictures too).
+pub(crate) const FONT: &str = "sans-serif";
 /// Embedded so that PNG text does not depend on the machine's fonts (see assets/README.md).
 pub(super) static FONT_DATA: &[u8] = include_bytes!("../../../assets/DejaVuSans.ttf");
 /// Most markers along one line: enough to tell its shape, few enough not to hide the line.
 pub(super) const MARKERS_PER_LINE: usize = 9;
 
-pub(super) fn register_embedded_font() -> Result<()> {
+/// Registers the embedded font under `FONT` for plotters (once per process).
+pub(crate) fn register_embedded_font() -> Result<()> {
     // plotters keeps registered fonts in a process-wide table, so once is enough (and tests run in parallel).
     static REGISTERED: OnceLock<bool> = OnceLock::new();
     let ok = *REGISTERED.get_or_init(|| plotters::style::register_font(FONT, FontStyle::Normal, FONT_DATA).is_ok());
