@@ -1,6 +1,6 @@
 //! The outdoor scene against Mitsuba 3: `scenes/references/outdoor-mitsuba-80x60.exr` is Mitsuba 3.9.1's image of
-//! `scenes/outdoor.toml` at 80 × 60 pixels (32 independent images of 1024 samples per pixel averaged, by
-//! `scripts/mitsuba/reference`; the `-sem` file holds each pixel's standard error from their spread). PBPM's
+//! `scenes/outdoor.toml` at 80 × 60 pixels (32 independent images of 1024 samples per pixel averaged, by this
+//! branch's `scripts/mitsuba/reference --size 80 60 --batches 32` before main's `--batches` replaced it; the `-sem` file holds each pixel's standard error from their spread). PBPM's
 //! and the path tracer's images must differ from it by no more than their own error δ and the reference's
 //! noise allow: relative RMSE ≤ 2 √(δ² + δ_ref²), the factor 2 being the calibration of δ against true error
 //! (calibration.rs).
