@@ -10,7 +10,7 @@
 //! +X (azimuth 90, a quarter across), which is the map's u = azimuth / 360. Its irradiance (on a plane facing
 //! it) is in the map's radiance units times sr; the sky's zenith radiance is about 0.5 in blue.
 
-use exr::prelude::{Image, SpecificChannels, Vec2, WritableImage};
+use exr::prelude::{Encoding, Image, SpecificChannels, Vec2, WritableImage};
 use glam::Vec3;
 use std::f32::consts::PI;
 use std::path::PathBuf;
@@ -136,8 +136,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
         }
     }
-    let image = Image::from_channels(
+    // ZIP-compressed, so that a small map can live in the repository.
+    let image = Image::from_encoded_channels(
         (w, h),
+        Encoding::SMALL_LOSSLESS,
         SpecificChannels::rgb(|p: Vec2<usize>| {
             let t = texels[p.y() * w + p.x()];
             (t.x, t.y, t.z)

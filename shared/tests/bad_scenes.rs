@@ -181,12 +181,132 @@ fn scene_without_light_is_refused() {
 }
 
 #[test]
-fn emission_on_an_analytic_sphere_is_refused() {
-    let t = GOOD.replace(
-        "quad = { corner = [-1.0, -1.0, 0.0], edge1 = [2.0, 0.0, 0.0], edge2 = [0.0, 2.0, 0.0] }",
-        "sphere = { center = [0.0, 0.0, 0.0], radius = 0.5 }\nemission = [1.0, 1.0, 1.0]",
-    );
-    expect_error(&t, line_of(&t, "emission"), &["objects[0].emission", "cannot emit"]);
+fn emission_on_an_analytic_sphere_and_a_full_disc_makes_them_lights() {
+    for shape in [
+        "sphere = { center = [0.0, 0.0, 0.0], radius = 0.5 }",
+        "annulus = { center = [0.0, 0.0, 0.0], axis = [0.0, 0.0, 1.0], inner_radius = 0.0, outer_radius = 0.5 }",
+    ] {
+        let t = GOOD.replace(
+            "quad = { corner = [-1.0, -1.0, 0.0], edge1 = [2.0, 0.0, 0.0], edge2 = [0.0, 2.0, 0.0] }",
+            &format!("{shape}\nemission = [1.0, 1.0, 1.0]"),
+        );
+        let scene = load(&t).unwrap_or_else(|e| panic!("{shape}: {e}"));
+        // The shape's light and the point light.
+        assert_eq!(scene.lights.all().len(), 2, "{shape}");
+    }
+}
+
+#[test]
+fn emission_on_an_annulus_with_a_hole_or_a_lens_surface_is_refused() {
+    for shape in [
+        "annulus = { center = [0.0, 0.0, 0.0], axis = [0.0, 0.0, 1.0], inner_radius = 0.1, outer_radius = 0.5 }",
+        "lens_surface = { vertex = [0.0, 0.0, 0.0], axis = [0.0, 0.0, 1.0], curvature_radius = 1.0, aperture_radius = 0.2 }",
+    ] {
+        let t = GOOD.replace(
+            "quad = { corner = [-1.0, -1.0, 0.0], edge1 = [2.0, 0.0, 0.0], edge2 = [0.0, 2.0, 0.0] }",
+            &format!("{shape}\nemission = [1.0, 1.0, 1.0]"),
+        );
+        expect_error(&t, line_of(&t, "emission"), &["objects[0].emission", "full disc"]);
+    }
+}
+
+/// GOOD with its point light replaced by `light` (the lines of one `[[lights]]` table).
+fn with_light(light: &str) -> String {
+    GOOD.replace("type = \"point\"\nposition = [0.0, 0.0, -0.5]\nintensity = [1.0, 1.0, 1.0]", light)
+}
+
+/// A PFM file (little-endian, rows from the bottom) of `w` × `h` RGB texels.
+fn pfm(w: usize, h: usize, texels: &[[f32; 3]]) -> Vec<u8> {
+    let mut bytes = format!("PF\n{w} {h}\n-1.0\n").into_bytes();
+    for y in (0..h).rev() {
+        for t in &texels[y * w..(y + 1) * w] {
+            for c in t {
+                bytes.extend_from_slice(&c.to_le_bytes());
+            }
+        }
+    }
+    bytes
+}
+
+/// Loads GOOD lit by an environment map `map.pfm` holding `bytes`, from a scratch folder.
+fn load_with_map(bytes: &[u8]) -> (String, Result<Scene, SceneError>) {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("map.pfm"), bytes).unwrap();
+    let t = with_light("type = \"environment\"\nfilename = \"map.pfm\"");
+    let r = Scene::from_toml(&t, Path::new("bad.toml"), dir.path());
+    (t, r)
+}
+
+#[test]
+fn environments_and_suns_load() {
+    let (_, r) = load_with_map(&pfm(4, 3, &[[0.5, 1.0, 2.0]; 12]));
+    assert_eq!(r.unwrap().lights.all().len(), 1);
+    for light in [
+        "type = \"environment\"\nradiance = [0.5, 0.5, 0.5]",
+        "type = \"sun\"\ndirection = [0.0, -1.0, 0.2]\nirradiance = [3.0, 3.0, 3.0]",
+        "type = \"directional\"\ndirection = [0.0, -1.0, 0.2]\nirradiance = [3.0, 3.0, 3.0]\nangular_radius_deg = 0.5",
+    ] {
+        load(&with_light(light)).unwrap_or_else(|e| panic!("{light}: {e}"));
+    }
+}
+
+#[test]
+fn a_missing_environment_map_names_the_file_and_the_field() {
+    let t = with_light("type = \"environment\"\nfilename = \"no/such/sky.exr\"");
+    expect_error(&t, line_of(&t, "[[lights]]"), &["lights[0].filename", "no/such/sky.exr", "cannot read"]);
+}
+
+#[test]
+fn an_environment_map_that_is_no_image_is_refused() {
+    let t = with_light("type = \"environment\"\nfilename = \"cornell/floor.obj\"");
+    expect_error(&t, line_of(&t, "[[lights]]"), &["lights[0].filename", "not an image file"]);
+}
+
+#[test]
+fn an_environment_map_with_a_non_finite_texel_is_refused() {
+    let mut texels = [[1.0f32; 3]; 12];
+    texels[5][1] = f32::NAN;
+    let (t, r) = load_with_map(&pfm(4, 3, &texels));
+    let msg = r.err().expect("accepted a NaN texel").to_string();
+    assert!(msg.contains("lights[0].filename") && msg.contains("not a finite number"), "{msg}");
+    assert!(msg.starts_with(&format!("bad.toml:{}:", line_of(&t, "[[lights]]").unwrap())), "{msg}");
+    assert!(msg.contains("pixel (1, 1)"), "the error names the texel: {msg}");
+}
+
+#[test]
+fn an_environment_map_of_one_row_or_all_black_is_refused() {
+    let (_, r) = load_with_map(&pfm(4, 1, &[[1.0; 3]; 4]));
+    let msg = r.err().expect("accepted a map of one row").to_string();
+    assert!(msg.contains("lights[0].filename") && msg.contains("at least 1 × 2 texels"), "{msg}");
+    let (_, r) = load_with_map(&pfm(4, 3, &[[0.0; 3]; 12]));
+    let msg = r.err().expect("accepted a black map").to_string();
+    assert!(msg.contains("lights[0].filename") && msg.contains("black everywhere"), "{msg}");
+}
+
+#[test]
+fn bad_environment_and_sun_parameters_name_their_field() {
+    let cases = [
+        ("type = \"environment\"", "lights[0].filename", "needs `filename`"),
+        ("type = \"environment\"\nradiance = [0.0, 0.0, 0.0]", "lights[0].radiance", "not all zero"),
+        ("type = \"environment\"\nradiance = [1.0, 1.0, 1.0]\nfilename = \"x.exr\"", "lights[0].radiance", "not both"),
+        ("type = \"environment\"\nradiance = [1.0, 1.0, 1.0]\nscale = -2.0", "lights[0].scale", "positive"),
+        (
+            "type = \"environment\"\nfilename = \"x.exr\"\nto_world = [[1.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 1.0]]",
+            "lights[0].to_world",
+            "not a rotation",
+        ),
+        ("type = \"sun\"\ndirection = [0.0, 0.0, 0.0]\nirradiance = [1.0, 1.0, 1.0]", "lights[0].direction", "zero"),
+        ("type = \"sun\"\ndirection = [0.0, -1.0, 0.0]\nirradiance = [0.0, 0.0, 0.0]", "lights[0].irradiance", "not all zero"),
+        (
+            "type = \"sun\"\ndirection = [0.0, -1.0, 0.0]\nirradiance = [1.0, 1.0, 1.0]\nangular_radius_deg = 95",
+            "lights[0].angular_radius_deg",
+            "[0, 90)",
+        ),
+    ];
+    for (light, field, what) in cases {
+        let t = with_light(light);
+        expect_error(&t, line_of(&t, "[[lights]]"), &[field, what]);
+    }
 }
 
 #[test]

@@ -290,6 +290,17 @@ impl SceneGeometry {
         &self.analytic
     }
 
+    /// The box around every surface, triangles and analytic ones (slightly widened for rounding); None for a
+    /// scene without surfaces.
+    pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
+        let (lo, hi) = self
+            .analytic
+            .iter()
+            .map(|(_, a)| a.bounds())
+            .fold(self.triangle_box, |(lo, hi), b| (lo.min(b.min), hi.max(b.max)));
+        (lo.cmple(hi).all() && lo.is_finite() && hi.is_finite()).then_some((lo, hi))
+    }
+
     /// Number of triangles.
     pub fn triangle_count(&self) -> usize {
         self.by_index.len()

@@ -84,7 +84,7 @@ impl Analytic {
         }
     }
 
-    /// Surface area (for diagnostics; analytic surfaces cannot emit).
+    /// Surface area.
     pub fn area(&self) -> f32 {
         match self {
             Analytic::Sphere(s) => 4.0 * std::f32::consts::PI * s.radius * s.radius,

@@ -147,6 +147,38 @@ impl<const S: bool, V: StoredVertices<S>> Technique<S> for CameraPath<'_, V> {
     const MODE: Transport = Transport::Radiance;
 
     #[inline(always)]
+    fn on_escape<L: PathLog>(&mut self, w: &Walk<S>, log: &mut L) {
+        let lights = &self.scene.lights;
+        if !lights.any_escaping() {
+            return;
+        }
+        let direction = w.ray.direction;
+        // The infinite lights are emitters like any other: the same layers, MIS against next-event estimation
+        // after a non-delta sample, and the same rule for what a storing vertex leaves to light paths.
+        let (beta, le) = match self.from {
+            Some(f) => (f.direct, lights.escaped(direction, Some(f.pdf))),
+            None if V::STORES && self.k > 0 => return,
+            None => (w.beta, lights.escaped(direction, None)),
+        };
+        if le == Rgb::ZERO {
+            return;
+        }
+        log.event(Events::EMISSION);
+        let value = w.spectrum.to_image(beta * w.spectrum.quantity(le));
+        let (out, ghost) = (&mut self.out, &mut self.ghost);
+        match self.from {
+            Some(_) => add_contribution(out, ghost, layer_of(self.n, false), value),
+            None if self.n == 0 => {
+                // A ghost path's view of the sky through the lens is the light paths' where they bring ghosts.
+                if !(self.sensor_ghosts && ghost.is_some()) {
+                    add_contribution(out, ghost, Layer::VisibleLights, value);
+                }
+            }
+            None => add_contribution(out, ghost, layer_of(self.n, true), value),
+        }
+    }
+
+    #[inline(always)]
     fn on_hit<L: PathLog>(&mut self, w: &mut Walk<S>, hit: &SurfaceHit, log: &mut L) -> bool {
         let le = self.scene.lights.emitted(hit, w.ray.direction);
         if le != Rgb::ZERO {

@@ -1,5 +1,5 @@
 //! Deciding the lit-pixel mask (`accumulation::LitMask`) from the scene: stratified primary rays per pixel that
-//! follow every specular branch and look for an emitter.
+//! follow every specular branch and look for an emitter, or for an environment where they leave the scene.
 
 use crate::accumulation::lit_mask::{LitMask, LIT_MASK_SAMPLES};
 use crate::color::Rgb;
@@ -55,7 +55,8 @@ struct Branch {
     probability: f32,
 }
 
-/// True when some branch of the specular trees from `rays` reaches an emitter before a diffuse surface.
+/// True when some branch of the specular trees from `rays` reaches an emitter, or leaves the scene toward an
+/// infinite light's radiance, before a diffuse surface.
 fn sees_emitter(scene: &Scene, rays: impl Iterator<Item = Ray>, max_depth: u32) -> bool {
     let mut frontier: Vec<Branch> = rays.map(|ray| Branch { ray, segment: 1, probability: 1.0 }).collect();
     for _ in 0..PIXEL_BUDGET {
@@ -66,7 +67,13 @@ fn sees_emitter(scene: &Scene, rays: impl Iterator<Item = Ray>, max_depth: u32) 
             return false;
         };
         let Branch { ray, segment, probability } = frontier.swap_remove(next);
-        let Some(hit) = scene.geometry.intersect(&ray) else { continue };
+        let Some(hit) = scene.geometry.intersect(&ray) else {
+            // A ray that leaves the scene sees the infinite lights.
+            if scene.lights.escaped(ray.direction, None) != Rgb::ZERO {
+                return true;
+            }
+            continue;
+        };
         if scene.lights.emitted(&hit, ray.direction) != Rgb::ZERO {
             return true;
         }

@@ -52,6 +52,10 @@ pub trait Technique<const S: bool> {
     #[inline(always)]
     fn on_segment<L: PathLog>(&mut self, _w: &Walk<S>, _hit: Option<&SurfaceHit>, _log: &mut L) {}
 
+    /// When the segment left the scene without a hit: a camera path adds the infinite lights' radiance.
+    #[inline(always)]
+    fn on_escape<L: PathLog>(&mut self, _w: &Walk<S>, _log: &mut L) {}
+
     /// At a surface hit, before its BSDF is resolved: a camera path adds an emitter's light.
     #[inline(always)]
     fn on_hit<L: PathLog>(&mut self, _w: &mut Walk<S>, _hit: &SurfaceHit, _log: &mut L) -> bool {
@@ -105,6 +109,7 @@ pub fn walk<const S: bool, T: Technique<S>, L: PathLog>(
         let hit = scene.geometry.intersect(&w.ray);
         technique.on_segment(w, hit.as_ref(), log);
         let Some(hit) = hit else {
+            technique.on_escape(w, log);
             log.escape(w.ray.direction);
             break;
         };

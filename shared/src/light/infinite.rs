@@ -9,9 +9,12 @@
 //! L(ω) / (p(ω) · 1/(π r²)), and the power over the sphere is its expectation, π r² ∫ L(ω) dω.
 
 use crate::color::Rgb;
+use crate::light::directional::Sun;
+use crate::light::environment::{ConstantEnvironment, EnvironmentMap};
 use crate::sampling::{concentric_disk, Frame};
 use glam::{Mat3, Vec2, Vec3};
 use std::f32::consts::PI;
+use std::sync::Arc;
 use thiserror::Error;
 
 /// Light arriving from an infinite light along one direction.
@@ -97,6 +100,25 @@ impl InfiniteRay {
 }
 
 impl SceneSphere {
+    /// The sphere around the box `bounds` (its centre and half its diagonal); for a scene without surfaces, the
+    /// unit sphere, which only keeps the light's power finite (no photon can land anywhere).
+    pub fn around(bounds: Option<(Vec3, Vec3)>) -> SceneSphere {
+        match bounds {
+            Some((lo, hi)) if (hi - lo).length() > 0.0 => {
+                SceneSphere { center: 0.5 * (lo + hi), radius: 0.5 * (hi - lo).length() }
+            }
+            Some((lo, _)) => SceneSphere { center: lo, radius: 1.0 },
+            None => SceneSphere { center: Vec3::ZERO, radius: 1.0 },
+        }
+    }
+
+    /// A point past the sphere along `direction` (unit) from `p`: the end of a shadow ray toward an infinite
+    /// light, beyond every surface.
+    #[inline]
+    pub fn beyond(&self, p: Vec3, direction: Vec3) -> Vec3 {
+        p + direction * (2.0 * ((p - self.center).length() + self.radius))
+    }
+
     /// The light path that arrives along `sample` (a direction sampled from an infinite light), starting on the
     /// disc facing it at the point `u` (uniform in [0, 1)²) chooses. None for a zero pdf or a degenerate sphere.
     pub fn ray_from(&self, sample: &InfiniteSample, u: Vec2) -> Option<InfiniteRay> {
@@ -122,11 +144,67 @@ impl SceneSphere {
     }
 }
 
+/// A light at infinity, as the scene's light list holds it.
+#[derive(Clone, Debug)]
+pub enum InfiniteLight {
+    /// Uniform radiance from every direction.
+    Constant(ConstantEnvironment),
+    /// An equirectangular image of radiance; shared, since a map can be large.
+    Map(Arc<EnvironmentMap>),
+    /// The sun, a delta direction or a cone.
+    Sun(Sun),
+}
+
+impl InfiniteLight {
+    /// The radiance arriving from `direction` (unit, from the scene toward the light); zero for a delta sun,
+    /// which no path can hit.
+    #[inline]
+    pub fn radiance(&self, direction: Vec3) -> Rgb {
+        match self {
+            InfiniteLight::Constant(c) => c.radiance(direction),
+            InfiniteLight::Map(m) => m.radiance(direction),
+            InfiniteLight::Sun(s) => s.radiance(direction),
+        }
+    }
+
+    /// A direction toward the light with its radiance and solid-angle pdf (see `InfiniteSample`).
+    #[inline]
+    pub fn sample(&self, u: Vec2) -> Option<InfiniteSample> {
+        match self {
+            InfiniteLight::Constant(c) => Some(c.sample(u)),
+            InfiniteLight::Map(m) => m.sample(u),
+            InfiniteLight::Sun(s) => Some(s.sample(u)),
+        }
+    }
+
+    /// The solid-angle density with which `sample` draws `direction` (0 for a delta sun).
+    #[inline]
+    pub fn pdf(&self, direction: Vec3) -> f32 {
+        match self {
+            InfiniteLight::Constant(c) => c.pdf(direction),
+            InfiniteLight::Map(m) => m.pdf(direction),
+            InfiniteLight::Sun(s) => s.pdf(direction),
+        }
+    }
+
+    /// ∫ L dω over all directions (E for a delta sun), from which the power over the scene follows.
+    pub fn radiance_integral(&self) -> Rgb {
+        match self {
+            InfiniteLight::Constant(c) => c.radiance_integral(),
+            InfiniteLight::Map(m) => m.radiance_integral(),
+            InfiniteLight::Sun(s) => s.radiance_integral(),
+        }
+    }
+
+    /// True for a sun without angular radius: only next-event estimation and light paths find it.
+    pub fn is_delta(&self) -> bool {
+        matches!(self, InfiniteLight::Sun(s) if s.is_delta())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::light::directional::Sun;
-    use crate::light::environment::{ConstantEnvironment, EnvironmentMap};
     use crate::sampling::{Pass, Sampler};
 
     /// The distance along a ray to a sphere it enters, if it does.

@@ -1,7 +1,8 @@
-//! Light sources: emissive triangles (one-sided, front = CCW winding), point lights and spot lights, chosen by
-//! power both for next-event estimation and for emitting light paths. Its submodules hold the infinite lights
-//! (`environment`: constant and image-based; `directional`: the sun; `infinite`: the start of their light paths
-//! and their power over the scene) and the sampling of spherical and disc emitters (`shape_sampling`).
+//! Light sources: emissive triangles (one-sided, front = CCW winding), emitting analytic spheres and discs, point
+//! lights, spot lights and lights at infinity (environments and the sun), chosen by power both for next-event
+//! estimation and for emitting light paths. Its submodules hold the infinite lights (`environment`: constant and
+//! image-based; `directional`: the sun; `infinite`: the start of their light paths and their power over the
+//! scene) and the sampling of spherical and disc emitters (`shape_sampling`).
 
 pub mod directional;
 pub mod environment;
@@ -12,14 +13,16 @@ use crate::camera::RearElement;
 use crate::color::{luminance, Rgb};
 use crate::geometry::{SceneGeometry, SurfaceHit};
 use crate::sampling::{concentric_disk, cosine_hemisphere};
-use crate::sampling::{uniform_cone, uniform_sphere, uniform_triangle, Discrete, Frame};
+use crate::sampling::{power_heuristic, uniform_cone, uniform_sphere, uniform_triangle, Discrete, Frame};
 use crate::texture::{barycentric, interpolate_uv, Bitmap};
 use glam::{Vec2, Vec3};
+use infinite::{InfiniteLight, SceneSphere};
+use shape_sampling::{DiscSampling, SphereSampling};
 use std::f32::consts::PI;
 use std::sync::Arc;
 
 /// One light source.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub enum Light {
     /// One triangle of an emissive object, radiance `emission` (W·sr⁻¹·m⁻²) from its front side.
     Area { triangle: u32, emission: Rgb, area: f32, normal: Vec3 },
@@ -27,6 +30,14 @@ pub enum Light {
     Point { position: Vec3, intensity: Rgb },
     /// A point light restricted to a cone, with a smooth falloff between `cos_falloff_start` and `cos_total`.
     Spot { position: Vec3, direction: Vec3, intensity: Rgb, cos_total: f32, cos_falloff_start: f32 },
+    /// The analytic sphere of object `object`, radiance `emission` leaving its outside (seen from inside it
+    /// is black, as a one-sided emitter's back is).
+    Sphere { object: u32, center: Vec3, radius: f32, emission: Rgb },
+    /// The analytic disc (an annulus of inner radius 0) of object `object`, radiance `emission` leaving the side
+    /// its unit `normal` faces (the surface's normal, −axis).
+    Disc { object: u32, center: Vec3, normal: Vec3, radius: f32, emission: Rgb },
+    /// A light at infinity: a constant environment, an environment map or the sun.
+    Infinite(InfiniteLight),
 }
 
 /// Incident light at a point, sampled for next-event estimation.
@@ -36,12 +47,13 @@ pub struct IncidentSample {
     pub wi: Vec3,
     /// The point on the light (for the shadow ray).
     pub point: Vec3,
-    /// Incident radiance (area lights) or intensity / d² (point and spot lights).
+    /// Incident radiance (area, shape and infinite lights), intensity / d² (point and spot lights) or
+    /// irradiance (a sun without angular radius).
     pub li: Rgb,
     /// Solid-angle pdf including the light's selection probability; for delta lights, the selection
     /// probability alone.
     pub pdf: f32,
-    /// True for point and spot lights, which MIS cannot weigh.
+    /// True for point and spot lights and a sun without radius, which MIS cannot weigh.
     pub delta: bool,
 }
 
@@ -49,7 +61,8 @@ pub struct IncidentSample {
 #[derive(Clone, Copy, Debug)]
 pub struct EmissionSample {
     pub origin: Vec3,
-    /// Surface normal at the origin (zero for point lights): the first ray is offset along it.
+    /// Surface normal at the origin (zero for point lights and infinite lights, whose paths start off every
+    /// surface): the first ray is offset along it.
     pub normal: Vec3,
     pub direction: Vec3,
     /// Flux carried by the path: Le · cos / (pdf_select · pdf_position · pdf_direction).
@@ -168,6 +181,12 @@ pub struct Lights {
     by_power: Option<Discrete>,
     /// Light index of every scene triangle, u32::MAX for non-emitters.
     light_of_triangle: Vec<u32>,
+    /// Light index of every object up to the last emitting analytic one, u32::MAX for the others.
+    light_of_object: Vec<u32>,
+    /// The infinite lights a path can hit (all but delta suns): what an escaping path sees.
+    escaping: Vec<u32>,
+    /// The scene's bounding sphere: where infinite lights' paths start, and what their power is over.
+    sphere: SceneSphere,
     /// Emission texture of each light, parallel to `lights` (None for most).
     textures: Vec<Option<EmissionTexture>>,
     /// The disc area lights aim part of their light paths at (a lens's front element), if any.
@@ -183,14 +202,19 @@ pub const AIMED_FRACTION: f32 = 0.5;
 
 impl Light {
     /// Emitted power in luminance units, the weight that chooses this light (without an emission texture:
-    /// `Lights::with_textures` weighs a textured one by the texture's mean over its triangle).
-    pub fn power(&self) -> f32 {
-        match *self {
-            Light::Area { emission, area, .. } => PI * area * luminance(emission),
-            Light::Point { intensity, .. } => 4.0 * PI * luminance(intensity),
+    /// `Lights::with_textures` weighs a textured one by the texture's mean over its triangle); an infinite
+    /// light's is what it sends through the scene's bounding sphere `scene`, π r² ∫ L dω.
+    pub fn power(&self, scene: &SceneSphere) -> f32 {
+        match self {
+            Light::Area { emission, area, .. } => PI * area * luminance(*emission),
+            Light::Point { intensity, .. } => 4.0 * PI * luminance(*intensity),
             Light::Spot { intensity, cos_total, cos_falloff_start, .. } => {
-                2.0 * PI * (1.0 - 0.5 * (cos_total + cos_falloff_start)) * luminance(intensity)
+                2.0 * PI * (1.0 - 0.5 * (cos_total + cos_falloff_start)) * luminance(*intensity)
             }
+            // Φ = π A L for a Lambertian emitter of area A.
+            Light::Sphere { radius, emission, .. } => PI * 4.0 * PI * radius * radius * luminance(*emission),
+            Light::Disc { radius, emission, .. } => PI * PI * radius * radius * luminance(*emission),
+            Light::Infinite(l) => luminance(scene.power(l.radiance_integral())),
         }
     }
 }
@@ -208,21 +232,38 @@ fn spot_falloff(cos_theta: f32, cos_total: f32, cos_falloff_start: f32) -> f32 {
 }
 
 impl Lights {
-    /// Collects the lights; `triangle_count` sizes the triangle → light table.
-    pub fn new(lights: Vec<Light>, triangle_count: usize) -> Self {
+    /// Collects the lights; `triangle_count` sizes the triangle → light table, `sphere` bounds the scene.
+    pub fn new(lights: Vec<Light>, triangle_count: usize, sphere: SceneSphere) -> Self {
         let textures = vec![None; lights.len()];
-        Lights::with_textures(lights, textures, triangle_count)
+        Lights::with_textures(lights, textures, triangle_count, sphere)
     }
 
     /// Collects the lights with the emission texture of each (parallel to `lights`). A textured light's power,
     /// which chooses it, is its emission times the texture's mean over its triangle; the emitted flux Φ = π A
     /// E[Le] is then what the sampled paths carry on average, since their positions stay uniform on the
-    /// triangle and each carries the texture's value at its point.
-    pub fn with_textures(lights: Vec<Light>, textures: Vec<Option<EmissionTexture>>, triangle_count: usize) -> Self {
+    /// triangle and each carries the texture's value at its point. Infinite lights start their paths on, and
+    /// are weighed by their power through, the scene's bounding sphere `sphere`.
+    pub fn with_textures(
+        lights: Vec<Light>,
+        textures: Vec<Option<EmissionTexture>>,
+        triangle_count: usize,
+        sphere: SceneSphere,
+    ) -> Self {
         let mut light_of_triangle = vec![u32::MAX; triangle_count];
+        let mut light_of_object = Vec::new();
+        let mut escaping = Vec::new();
         for (i, l) in lights.iter().enumerate() {
-            if let Light::Area { triangle, .. } = l {
-                light_of_triangle[*triangle as usize] = i as u32;
+            match l {
+                Light::Area { triangle, .. } => light_of_triangle[*triangle as usize] = i as u32,
+                Light::Sphere { object, .. } | Light::Disc { object, .. } => {
+                    let o = *object as usize;
+                    if light_of_object.len() <= o {
+                        light_of_object.resize(o + 1, u32::MAX);
+                    }
+                    light_of_object[o] = i as u32;
+                }
+                Light::Infinite(inf) if !inf.is_delta() => escaping.push(i as u32),
+                _ => {}
             }
         }
         let mut textures = textures;
@@ -234,13 +275,16 @@ impl Lights {
                 (Light::Area { emission, area, .. }, Some(t)) => {
                     PI * area * luminance(*emission * t.mean_over_triangle())
                 }
-                _ => l.power(),
+                _ => l.power(&sphere),
             })
             .collect();
         Lights {
             by_power: Discrete::new(&powers),
             lights,
             light_of_triangle,
+            light_of_object,
+            escaping,
+            sphere,
             textures,
             aim: None,
             lens_image_by_light_paths: Vec::new(),
@@ -302,10 +346,54 @@ impl Lights {
         self.by_power.is_some()
     }
 
+    /// The light whose surface `hit` is on, if it emits.
+    #[inline]
+    fn light_at(&self, hit: &SurfaceHit) -> Option<usize> {
+        let l = if hit.triangle == u32::MAX {
+            self.light_of_object.get(hit.object as usize)
+        } else {
+            self.light_of_triangle.get(hit.triangle as usize)
+        };
+        l.filter(|&&l| l != u32::MAX).map(|&l| l as usize)
+    }
+
+    /// The scene's bounding sphere, over which infinite lights start their paths.
+    pub fn scene_sphere(&self) -> SceneSphere {
+        self.sphere
+    }
+
+    /// True when some infinite light can be seen by a path that leaves the scene.
+    pub fn any_escaping(&self) -> bool {
+        !self.escaping.is_empty()
+    }
+
+    /// The radiance a path that leaves the scene along `direction` (unit) receives from the infinite lights.
+    /// With `bsdf_pdf` (the solid-angle pdf of the BSDF sample that left), each light's share is weighted by
+    /// the power heuristic against the pdf with which next-event estimation would have chosen the direction:
+    /// w = p_bsdf² / (p_bsdf² + (P_select p_light)²).
+    pub fn escaped(&self, direction: Vec3, bsdf_pdf: Option<f32>) -> Rgb {
+        let mut sum = Rgb::ZERO;
+        for &l in &self.escaping {
+            let Light::Infinite(inf) = &self.lights[l as usize] else { continue };
+            let le = inf.radiance(direction);
+            if le == Rgb::ZERO {
+                continue;
+            }
+            let m = bsdf_pdf.map_or(1.0, |p| power_heuristic(p, self.selection_pmf(l as usize) * inf.pdf(direction)));
+            sum += le * m;
+        }
+        sum
+    }
+
     /// Radiance leaving an emitter hit toward the viewer at `-ray_dir` (zero from the back side).
     pub fn emitted(&self, hit: &SurfaceHit, ray_dir: Vec3) -> Rgb {
         if hit.triangle == u32::MAX {
-            return Rgb::ZERO;
+            return match self.light_at(hit).map(|l| &self.lights[l]) {
+                Some(Light::Sphere { emission, .. } | Light::Disc { emission, .. }) if ray_dir.dot(hit.ng) < 0.0 => {
+                    *emission
+                }
+                _ => Rgb::ZERO,
+            };
         }
         match self.light_of_triangle.get(hit.triangle as usize) {
             Some(&l) if l != u32::MAX => match self.lights[l as usize] {
@@ -321,14 +409,18 @@ impl Lights {
     /// Solid-angle pdf with which next-event estimation from `from` would have chosen the emitter point `hit`.
     pub fn pdf_incident(&self, from: Vec3, hit: &SurfaceHit) -> f32 {
         let Some(dist) = &self.by_power else { return 0.0 };
-        let Some(&l) = self.light_of_triangle.get(hit.triangle as usize) else {
-            return 0.0;
-        };
-        if l == u32::MAX {
-            return 0.0;
-        }
-        let Light::Area { area, normal, .. } = self.lights[l as usize] else {
-            return 0.0;
+        let Some(l) = self.light_at(hit) else { return 0.0 };
+        let (area, normal) = match self.lights[l] {
+            Light::Area { area, normal, .. } => (area, normal),
+            Light::Sphere { center, radius, .. } => {
+                let Some(direction) = (hit.p - from).try_normalize() else { return 0.0 };
+                return dist.pmf(l) * SphereSampling { center, radius }.pdf(from, direction);
+            }
+            Light::Disc { center, normal, radius, .. } => {
+                let Some(direction) = (hit.p - from).try_normalize() else { return 0.0 };
+                return dist.pmf(l) * DiscSampling { center, normal, radius }.pdf(from, direction);
+            }
+            _ => return 0.0,
         };
         let d = hit.p - from;
         let d2 = d.length_squared();
@@ -336,13 +428,41 @@ impl Lights {
         if cos_l <= 0.0 {
             return 0.0;
         }
-        dist.pmf(l as usize) * d2 / (area * cos_l)
+        dist.pmf(l) * d2 / (area * cos_l)
     }
 
     /// Samples light arriving at `p` (paper eq. 3/5's light-sampling term).
     pub fn sample_incident(&self, geometry: &SceneGeometry, p: Vec3, u_select: f32, u: Vec2) -> Option<IncidentSample> {
         let (index, pmf) = self.by_power.as_ref()?.sample(u_select);
         match self.lights[index] {
+            Light::Sphere { center, radius, emission, .. } => {
+                let s = SphereSampling { center, radius }.sample(p, u)?;
+                // From inside, the sample is on the sphere's inside, which emits nothing.
+                if s.normal.dot(s.direction) >= 0.0 {
+                    return None;
+                }
+                Some(IncidentSample { wi: s.direction, point: s.point, li: emission, pdf: pmf * s.pdf, delta: false })
+            }
+            Light::Disc { center, normal, radius, emission, .. } => {
+                let s = DiscSampling { center, normal, radius }.sample(p, u)?;
+                if s.direction.dot(normal) >= 0.0 {
+                    return None;
+                }
+                Some(IncidentSample { wi: s.direction, point: s.point, li: emission, pdf: pmf * s.pdf, delta: false })
+            }
+            Light::Infinite(ref inf) => {
+                let s = inf.sample(u)?;
+                if s.radiance == Rgb::ZERO {
+                    return None;
+                }
+                Some(IncidentSample {
+                    wi: s.direction,
+                    point: self.sphere.beyond(p, s.direction),
+                    li: s.radiance,
+                    pdf: pmf * s.pdf,
+                    delta: s.delta,
+                })
+            }
             Light::Area { triangle, emission, area, normal } => {
                 let tri = geometry.triangle(triangle);
                 let b = uniform_triangle(u);
@@ -378,6 +498,30 @@ impl Lights {
         }
     }
 
+    /// A light path leaving `origin` on a Lambertian emitter of area `area` with `normal`, by the cosine:
+    /// Le cos / ((1/A) (cos/π) P_select) = Le π A / P_select.
+    fn lambertian_emission(
+        origin: Vec3,
+        normal: Vec3,
+        u_dir: Vec2,
+        emission: Rgb,
+        area: f32,
+        pmf: f32,
+        index: usize,
+    ) -> Option<EmissionSample> {
+        let local = cosine_hemisphere(u_dir);
+        if local.z <= 0.0 {
+            return None;
+        }
+        Some(EmissionSample {
+            origin,
+            normal,
+            direction: Frame::from_normal(normal).to_world(local),
+            beta: emission * (PI * area / pmf),
+            light: index as u32,
+        })
+    }
+
     /// Starts a light path: a light chosen by power, a point on it and a direction.
     pub fn sample_emission(
         &self,
@@ -402,6 +546,35 @@ impl Lights {
     ) -> Option<EmissionSample> {
         let (index, pmf) = self.by_power.as_ref()?.sample(u_select);
         let sample = match self.lights[index] {
+            Light::Sphere { center, radius, emission, .. } => {
+                let normal = uniform_sphere(u_pos);
+                Self::lambertian_emission(
+                    center + radius * normal,
+                    normal,
+                    u_dir,
+                    emission,
+                    4.0 * PI * radius * radius,
+                    pmf,
+                    index,
+                )?
+            }
+            Light::Disc { center, normal, radius, emission, .. } => {
+                let disc = DiscSampling { center, normal, radius };
+                Self::lambertian_emission(disc.sample_point(u_pos), normal, u_dir, emission, disc.area(), pmf, index)?
+            }
+            Light::Infinite(ref inf) => {
+                // Photons start on the disc facing the sampled direction that covers the scene's bounding sphere:
+                // β = L(ω) / (p(ω) · 1/(π r²) · P_select).
+                let s = inf.sample(u_dir)?;
+                let ray = self.sphere.ray_from(&s, u_pos)?;
+                EmissionSample {
+                    origin: ray.origin,
+                    normal: Vec3::ZERO,
+                    direction: ray.direction,
+                    beta: ray.flux(s.radiance) / pmf,
+                    light: index as u32,
+                }
+            }
             Light::Area { triangle, emission, area, normal } => {
                 let tri = geometry.triangle(triangle);
                 let b = uniform_triangle(u_pos);

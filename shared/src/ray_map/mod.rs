@@ -53,9 +53,14 @@ pub fn object_names(scene: &Scene) -> Vec<String> {
 /// The emitters of a scene: the emitting objects (by object index), then the `[[lights]]` entries.
 pub fn emitter_names(scene: &Scene) -> Vec<String> {
     let mut names = object_names(scene);
-    let entries = scene.lights.all().iter().filter(|l| !matches!(l, Light::Area { .. })).count();
+    let entries = scene.lights.all().iter().filter(|l| is_entry(l)).count();
     names.extend((0..entries).map(|i| format!("lights[{i}]")));
     names
+}
+
+/// True for a light of a `[[lights]]` entry; the others are the surfaces of emitting objects.
+fn is_entry(light: &Light) -> bool {
+    !matches!(light, Light::Area { .. } | Light::Sphere { .. } | Light::Disc { .. })
 }
 
 /// The emitter (index into `emitter_names`) of light number `light`.
@@ -63,8 +68,9 @@ pub fn emitter_of(scene: &Scene, light: u32) -> u32 {
     let all = scene.lights.all();
     match all.get(light as usize) {
         Some(Light::Area { triangle, .. }) => scene.geometry.object_of_triangle(*triangle),
+        Some(Light::Sphere { object, .. } | Light::Disc { object, .. }) => *object,
         _ => {
-            let entry = all[..(light as usize).min(all.len())].iter().filter(|l| !matches!(l, Light::Area { .. }));
+            let entry = all[..(light as usize).min(all.len())].iter().filter(|l| is_entry(l));
             (scene.objects.len() + entry.count()) as u32
         }
     }

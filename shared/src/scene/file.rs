@@ -247,10 +247,31 @@ pub struct AnnulusSection {
     pub outer_radius: f32,
 }
 
-/// A point or spot light.
+/// A point, spot, environment or sun light.
 #[derive(Deserialize, Debug)]
 #[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
 pub enum LightSection {
+    /// Light from every direction: an equirectangular map (`filename`) or a constant `radiance`.
+    Environment {
+        /// An OpenEXR, Radiance HDR or PFM file of linear radiance, relative to the scene file.
+        filename: Option<String>,
+        /// A constant radiance instead of a map.
+        radiance: Option<[f32; 3]>,
+        /// Multiplies the map's (or the constant's) radiance; default 1.
+        scale: Option<f32>,
+        /// The rotation from the map's frame to the world, as three rows; default the identity.
+        to_world: Option<[[f32; 3]; 3]>,
+    },
+    /// A distant light: the sun.
+    #[serde(alias = "directional")]
+    Sun {
+        /// The direction the light travels (from the sun into the scene).
+        direction: [f32; 3],
+        /// Irradiance on a plane facing the sun (W/m²).
+        irradiance: [f32; 3],
+        /// The sun disc's angular radius in degrees; default 0 (a delta direction, hard shadows).
+        angular_radius_deg: Option<f32>,
+    },
     Point {
         position: [f32; 3],
         intensity: [f32; 3],

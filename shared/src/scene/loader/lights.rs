@@ -1,19 +1,26 @@
-//! The `[[lights]]` entries: point and spot lights.
+//! The `[[lights]]` entries: point and spot lights, environments (a map or a constant radiance) and the sun.
 
 use super::state::Loader;
+use crate::light::directional::Sun;
+use crate::light::environment::{ConstantEnvironment, EnvironmentMap};
+use crate::light::infinite::{InfiniteLight, InfiniteLightError};
 use crate::light::Light;
 use crate::scene::file::LightSection;
 use crate::scene::SceneError;
+use crate::texture::Encoding;
+use glam::Mat3;
+use std::ops::Range;
+use std::sync::Arc;
 use toml::Spanned;
 
 impl Loader<'_> {
     /// Every entry of `[[lights]]`, in order.
-    pub(super) fn lights(&self, entries: &[Spanned<LightSection>]) -> Result<Vec<Light>, SceneError> {
+    pub(super) fn lights(&mut self, entries: &[Spanned<LightSection>]) -> Result<Vec<Light>, SceneError> {
         entries.iter().enumerate().map(|(i, l)| self.light(l, i)).collect()
     }
 
     /// Entry `i`.
-    fn light(&self, l: &Spanned<LightSection>, i: usize) -> Result<Light, SceneError> {
+    fn light(&mut self, l: &Spanned<LightSection>, i: usize) -> Result<Light, SceneError> {
         let s = l.span();
         let f = |x: &str| format!("lights[{i}].{x}");
         Ok(match l.get_ref() {
@@ -48,6 +55,88 @@ impl Loader<'_> {
                     cos_falloff_start: start.to_radians().cos(),
                 }
             }
+            LightSection::Environment { filename, radiance, scale, to_world } => {
+                let scale = self.scalar(scale.unwrap_or(1.0), &s, &f("scale"), |v| v > 0.0, "a positive number")?;
+                let rotation = self.rotation(*to_world, &s, &f("to_world"))?;
+                let infinite = match (filename, radiance) {
+                    (Some(name), None) => {
+                        let field = f("filename");
+                        let bitmap = self.bitmap(name, Some(s.clone()), &field, Encoding::Linear)?;
+                        let (w, h) = (bitmap.width() as usize, bitmap.height() as usize);
+                        let texels = (0..w * h).map(|k| bitmap.texel((k % w) as i64, (k / w) as i64)).collect();
+                        let map = EnvironmentMap::new(w, h, texels, scale, rotation)
+                            .map_err(|e| self.error(Some(s.clone()), field, format!("{name}: {e}")))?;
+                        InfiniteLight::Map(Arc::new(map))
+                    }
+                    (None, Some(radiance)) => {
+                        if to_world.is_some() {
+                            return Err(self.error(
+                                Some(s),
+                                f("to_world"),
+                                "a constant environment is the same from every direction: it takes no rotation",
+                            ));
+                        }
+                        let field = f("radiance");
+                        let c = self.colour(*radiance, &s, &field, None)? * scale;
+                        let env = ConstantEnvironment::new(c).map_err(|e| self.light_error(&s, &field, e))?;
+                        InfiniteLight::Constant(env)
+                    }
+                    (Some(_), Some(_)) => {
+                        return Err(self.error(
+                            Some(s),
+                            f("radiance"),
+                            "give either `filename` (a map) or `radiance` (a constant), not both",
+                        ))
+                    }
+                    (None, None) => {
+                        return Err(self.error(
+                            Some(s),
+                            f("filename"),
+                            "an environment needs `filename` (an OpenEXR, HDR or PFM map) or a constant `radiance`",
+                        ))
+                    }
+                };
+                Light::Infinite(infinite)
+            }
+            LightSection::Sun { direction, irradiance, angular_radius_deg } => {
+                let dir = self.vec3(*direction, &s, &f("direction"))?;
+                if dir.length_squared() == 0.0 {
+                    return Err(self.error(Some(s), f("direction"), "must not be the zero vector"));
+                }
+                let irradiance = self.colour(*irradiance, &s, &f("irradiance"), None)?;
+                let radius = self.scalar(
+                    angular_radius_deg.unwrap_or(0.0),
+                    &s,
+                    &f("angular_radius_deg"),
+                    |v| (0.0..90.0).contains(&v),
+                    "in [0, 90) degrees",
+                )?;
+                // `direction` is where the light travels; the sun lies the other way.
+                let sun = Sun::new(-dir, irradiance, radius.to_radians())
+                    .map_err(|e| self.light_error(&s, &f("irradiance"), e))?;
+                Light::Infinite(InfiniteLight::Sun(sun))
+            }
         })
+    }
+
+    /// A `to_world` rotation given as three rows (the identity when absent); refused unless orthonormal with
+    /// determinant 1.
+    fn rotation(&self, rows: Option<[[f32; 3]; 3]>, span: &Range<usize>, field: &str) -> Result<Mat3, SceneError> {
+        let Some(rows) = rows else { return Ok(Mat3::IDENTITY) };
+        if !rows.iter().flatten().all(|x| x.is_finite()) {
+            return Err(self.error(
+                Some(span.clone()),
+                field,
+                format!("every entry must be a finite number, {rows:?}"),
+            ));
+        }
+        let m = Mat3::from_cols_array_2d(&rows).transpose();
+        crate::light::infinite::check_rotation(m).map_err(|e| self.light_error(span, field, e))?;
+        Ok(m)
+    }
+
+    /// An infinite light's parameter error at `field`.
+    fn light_error(&self, span: &Range<usize>, field: &str, e: InfiniteLightError) -> SceneError {
+        self.error(Some(span.clone()), field, e.to_string())
     }
 }

@@ -19,6 +19,7 @@ use super::file::{RenderSection, SceneFile};
 use super::{Scene, SceneError, SceneRenderSettings};
 use crate::camera::Camera;
 use crate::geometry::SceneGeometry;
+use crate::light::infinite::SceneSphere;
 use crate::light::{Light, Lights};
 use materials::Materials;
 use objects::ObjectParts;
@@ -114,7 +115,8 @@ impl Loader<'_> {
             field: None,
             message: e.to_string(),
         })?;
-        let lights = Lights::with_textures(lights, parts.light_textures, geometry.triangle_count());
+        let sphere = SceneSphere::around(geometry.bounds());
+        let lights = Lights::with_textures(lights, parts.light_textures, geometry.triangle_count(), sphere);
         if !lights.any() {
             return Err(SceneError {
                 file: self.file.to_path_buf(),

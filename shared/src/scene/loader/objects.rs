@@ -1,5 +1,6 @@
 //! The `[[objects]]` entries: each object's material, emission and shape (a mesh, quad or box of triangles, or
-//! an analytic sphere, lens surface or annulus), and the area lights of the emitting triangles.
+//! an analytic sphere, lens surface or annulus), and the area lights of the emitting triangles, spheres and
+//! discs.
 
 use super::files::TriangleUvs;
 use super::materials::Materials;
@@ -96,14 +97,19 @@ impl Loader<'_> {
         match triangles {
             Some((mesh, uvs)) => parts.add_triangles(id, mesh, uvs, emission, emission_texture),
             None => {
-                if emission.is_some_and(|e| e != Rgb::ZERO) {
-                    return Err(self.error(
-                        obj.emission.as_ref().map(|e| e.span()),
-                        field("emission"),
-                        "analytic surfaces (sphere, lens_surface, annulus) cannot emit; use a mesh, quad or box",
-                    ));
-                }
                 let shape = self.analytic(obj, &field)?;
+                if let Some(le) = emission.filter(|&e| e != Rgb::ZERO) {
+                    let light = Self::analytic_emitter(id, &shape, le).ok_or_else(|| {
+                        self.error(
+                            obj.emission.as_ref().map(|e| e.span()),
+                            field("emission"),
+                            "of the analytic surfaces only a sphere and a full disc (an annulus with inner_radius = 0) \
+                             can emit; use a mesh, quad or box",
+                        )
+                    })?;
+                    parts.area_lights.push(light);
+                    parts.light_textures.push(None);
+                }
                 parts.add_analytic(id, shape, obj.name.as_ref());
             }
         }
@@ -246,6 +252,19 @@ impl Loader<'_> {
             ));
         }
         Ok(())
+    }
+
+    /// The light of object `object`'s analytic surface emitting `emission`; None for the surfaces that cannot
+    /// emit (lens surfaces and annuli with a hole).
+    fn analytic_emitter(object: u32, shape: &Analytic, emission: Rgb) -> Option<Light> {
+        match *shape {
+            Analytic::Sphere(sp) => Some(Light::Sphere { object, center: sp.center, radius: sp.radius, emission }),
+            // The annulus's surface normal is −axis: a disc emits toward −axis.
+            Analytic::Annulus(a) if a.inner_radius == 0.0 => {
+                Some(Light::Disc { object, center: a.center, normal: -a.axis, radius: a.outer_radius, emission })
+            }
+            _ => None,
+        }
     }
 
     /// The analytic shape of an object that has one (a sphere, an annulus or a lens surface).
