@@ -238,7 +238,10 @@ impl<'f> Reader<'f> {
         }
         let text = String::from_utf8(bytes.into_owned())
             .map_err(|_| cannot(format!("{} is not UTF-8 text", path.display())))?;
-        self.read.push(path.to_path_buf());
+        if element.is_some() {
+            // An included file (the scene file itself is read from no element).
+            self.read.push(path.to_path_buf());
+        }
         self.include_stack.push(canonical);
         let mut top = Vec::new();
         let result = self.read_text(&text, path, &mut top, parent);
