@@ -764,7 +764,7 @@ fn substitute(text: &str, variables: &HashMap<String, String>, used: &mut HashSe
 
 /// Reads a spectrum file as Mitsuba does: lines of "wavelength value", `#` comments.
 fn read_spectrum_file(path: &Path, files: FileSource) -> Result<Spectrum, String> {
-    let bytes = files.read(path).map_err(|e| format!("the spectrum file: {e}"))?;
+    let bytes = files.read(path).map_err(|e| format!("cannot read the spectrum file: {e}"))?;
     let text = std::str::from_utf8(&bytes).map_err(|_| format!("{} is not UTF-8 text", path.display()))?;
     let mut pairs = Vec::new();
     for (number, line) in text.lines().enumerate() {
