@@ -205,13 +205,20 @@ mod tests {
 
     #[test]
     fn a_look_at_frame_gives_back_its_position_and_direction() {
-        let m = DMat4::look_at_rh(DVec3::new(1.0, 2.0, 3.0), DVec3::ZERO, DVec3::Y).inverse();
-        // glam's look_at looks along −z; Mitsuba's along +z: turn it round the y axis.
-        let m = m * DMat4::from_rotation_y(std::f64::consts::PI);
+        // Mitsuba's lookat from (1, 2, 3) towards the origin: columns left, up, forward, origin.
+        let origin = DVec3::new(1.0, 2.0, 3.0);
+        let dir = (-origin).normalize();
+        let left = DVec3::Y.cross(dir).normalize();
+        let m = DMat4::from_cols(
+            left.extend(0.0),
+            dir.cross(left).extend(0.0),
+            dir.extend(0.0),
+            origin.extend(1.0),
+        );
         let (p, at, up) = camera_frame(&m).unwrap();
         assert!((p - Vec3::new(1.0, 2.0, 3.0)).length() < 1e-5);
         assert!(((at - p).normalize() - (-p).normalize()).length() < 1e-5);
-        assert!(up.dot(Vec3::Y) > 0.9);
+        assert!(up.dot(Vec3::Y) > 0.8 && up.dot(at - p).abs() < 1e-5, "{up}");
         let mirrored = m * DMat4::from_scale(DVec3::new(-1.0, 1.0, 1.0));
         assert!(camera_frame(&mirrored).unwrap_err().contains("mirrors"));
     }
