@@ -111,7 +111,7 @@ fn an_xml_scene_renders_on_every_method_and_three_level_workers_render_the_image
     let scene = xml_scene(&dir);
     let define = ["--define", "radiance=8"];
     let (single, three) = (dir.join("single"), dir.join("three"));
-    coordinator(&scene, &single, &[&define[..], &["--method", "pbpm", "--phases", "300", "--seed", "3"]].concat());
+    coordinator(&scene, &single, &[&define[..], &["--method", "pbpm", "--phases", "100", "--seed", "3"]].concat());
     let r = record(&single);
     assert_eq!((r["width"].as_u64(), r["height"].as_u64()), (Some(24), Some(18)));
     let flags: Vec<&str> = r["flags"].as_array().unwrap().iter().filter_map(|f| f.as_str()).collect();
@@ -121,7 +121,18 @@ fn an_xml_scene_renders_on_every_method_and_three_level_workers_render_the_image
         &three,
         &[
             &define[..],
-            &["--method", "three-level", "--topology", TWO_NODES, "--group-size", "1", "--phases", "300", "--seed", "4"],
+            &[
+                "--method",
+                "three-level",
+                "--topology",
+                TWO_NODES,
+                "--group-size",
+                "1",
+                "--phases",
+                "100",
+                "--seed",
+                "4",
+            ],
         ]
         .concat(),
     );
@@ -136,7 +147,7 @@ fn an_xml_scene_renders_on_every_method_and_three_level_workers_render_the_image
     assert_same_image(&single, &three, "XML scene, three-level against one process");
     for method in ["path", "sync", "async", "two-level", "combination"] {
         let out = dir.join(method);
-        let mut args = vec!["--method", method, "--phases", "4"];
+        let mut args = vec!["--method", method, "--phases", "2"];
         if method == "combination" {
             args.extend(["--topology", TWO_NODES]);
         }

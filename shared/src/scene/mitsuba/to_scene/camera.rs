@@ -209,12 +209,7 @@ mod tests {
         let origin = DVec3::new(1.0, 2.0, 3.0);
         let dir = (-origin).normalize();
         let left = DVec3::Y.cross(dir).normalize();
-        let m = DMat4::from_cols(
-            left.extend(0.0),
-            dir.cross(left).extend(0.0),
-            dir.extend(0.0),
-            origin.extend(1.0),
-        );
+        let m = DMat4::from_cols(left.extend(0.0), dir.cross(left).extend(0.0), dir.extend(0.0), origin.extend(1.0));
         let (p, at, up) = camera_frame(&m).unwrap();
         assert!((p - Vec3::new(1.0, 2.0, 3.0)).length() < 1e-5);
         assert!(((at - p).normalize() - (-p).normalize()).length() < 1e-5);
