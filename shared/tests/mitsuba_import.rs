@@ -175,9 +175,9 @@ fn a_mitsuba_room_sees_through_the_camera_of_its_toml_twin_and_renders_its_image
         let mut engine = Engine::new(scene, settings(scene, Method::Path, seed));
         means.push(regions_phase_means(&mut engine, 200, &regions));
     }
-    for b in 0..blocks.len() {
-        let (m1, s1) = mean_sem(&means[0][b]);
-        let (m2, s2) = mean_sem(&means[1][b]);
+    for (b, (xml_block, toml_block)) in means[0].iter().zip(&means[1]).enumerate() {
+        let (m1, s1) = mean_sem(xml_block);
+        let (m2, s2) = mean_sem(toml_block);
         let z = (m1 - m2) / (s1 * s1 + s2 * s2).sqrt().max(1e-12);
         assert!(z.abs() < 4.5, "block {b}: {m1} ± {s1} (XML) vs {m2} ± {s2} (TOML), z = {z}");
     }

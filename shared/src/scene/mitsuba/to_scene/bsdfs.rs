@@ -215,7 +215,7 @@ impl Importer<'_> {
         let alpha = |l: &mut Self, name: &str| -> Result<Option<Texture>, MitsubaError> {
             let t = l.texture_param(p, name, SpectrumUse::Reflectance, None)?;
             if let Some(c) = t.as_ref().and_then(Texture::constant) {
-                if !(c.x > 0.0) {
+                if c.x.is_nan() || c.x <= 0.0 {
                     return Err(p.error(format!("{name} must be above 0, got {}", c.x)));
                 }
             }

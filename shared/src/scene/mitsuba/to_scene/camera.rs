@@ -182,7 +182,7 @@ fn camera_frame(m: &DMat4) -> Result<(Vec3, Vec3, Vec3), String> {
     let up = m.transform_vector3(DVec3::Y);
     let forward = m.transform_vector3(DVec3::Z);
     let lengths = [left.length(), up.length(), forward.length()];
-    if lengths.iter().any(|&l| !(l > 1e-12)) {
+    if lengths.iter().any(|&l| l.is_nan() || l <= 1e-12) {
         return Err("the sensor's to_world collapses a direction".into());
     }
     let (l, u, f) = (left / lengths[0], up / lengths[1], forward / lengths[2]);

@@ -30,7 +30,7 @@ impl Importer<'_> {
             "spot" => {
                 let cutoff = p.float_or("cutoff_angle", 20.0)?;
                 let beam = p.float_or("beam_width", 0.75 * cutoff)?;
-                if !(cutoff > 0.0 && cutoff <= 90.0) || !(beam >= 0.0 && beam <= cutoff) {
+                if !(cutoff > 0.0 && cutoff <= 90.0 && beam >= 0.0 && beam <= cutoff) {
                     return Err(p.error(format!(
                         "cutoff_angle must be in (0, 90] and beam_width in [0, cutoff_angle], got {cutoff} and {beam}"
                     )));

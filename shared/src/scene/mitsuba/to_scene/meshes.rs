@@ -132,7 +132,7 @@ impl Placement {
             }
             let area2 = (v[1] - v[0]).cross(v[2] - v[0]).length();
             let scale = (v[1] - v[0]).length().max((v[2] - v[0]).length());
-            if !(area2 > 1e-7 * scale * scale) {
+            if area2.is_nan() || area2 <= 1e-7 * scale * scale {
                 skipped += 1;
                 continue;
             }

@@ -125,7 +125,7 @@ impl<'d> Importer<'d> {
             self.hash_file(path, &start)?;
         }
         let render = self.integrator()?;
-        for other in &self.doc.others {
+        if let Some(other) = self.doc.others.first() {
             return Err(other.error(format!(
                 "a top-level {} is not supported (photonfarm renders surfaces in vacuum)",
                 other.element()

@@ -203,7 +203,7 @@ fn analytic(p: &Params, kind: &str, placement: &Placement) -> Result<Analytic, M
     if kind == "sphere" {
         let center = p.point("center")?.unwrap_or(DVec3::ZERO);
         let radius = p.float("radius")?.unwrap_or(1.0);
-        if !(radius > 0.0) {
+        if radius <= 0.0 {
             return Err(p.error(format!("the radius must be positive, got {radius}")));
         }
         return Ok(Analytic::Sphere(Sphere {

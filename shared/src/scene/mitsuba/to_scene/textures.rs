@@ -80,7 +80,7 @@ impl Importer<'_> {
                     "clamp" => Wrap::Clamp,
                     other => return Err(p.error(format!("wrap_mode \"{other}\" is not repeat, mirror or clamp"))),
                 };
-                let to_uv = self.to_uv(&p)?;
+                let to_uv = self.uv_transform(&p)?;
                 let image = self.bitmap(file, encoding, &plugin.position, &plugin.element())?;
                 let mut texture = BitmapTexture::new(image);
                 texture.filter = filter;
@@ -92,7 +92,7 @@ impl Importer<'_> {
                 let defaults = Checkerboard::default();
                 let color0 = self.texture_param(&p, "color0", usage, None)?.unwrap_or(defaults.color0);
                 let color1 = self.texture_param(&p, "color1", usage, None)?.unwrap_or(defaults.color1);
-                let to_uv = self.to_uv(&p)?;
+                let to_uv = self.uv_transform(&p)?;
                 Texture::Checkerboard(Box::new(Checkerboard { color0, color1, to_uv }))
             }
             other => {
@@ -104,7 +104,7 @@ impl Importer<'_> {
     }
 
     /// A texture's `to_uv`: Mitsuba applies the upper-left 3×3 block of the 4×4 transform to (u, v, 1).
-    fn to_uv(&mut self, p: &Params) -> Result<UvTransform, MitsubaError> {
+    fn uv_transform(&mut self, p: &Params) -> Result<UvTransform, MitsubaError> {
         let m: DMat4 = p.transform("to_uv")?;
         if m == DMat4::IDENTITY {
             return Ok(UvTransform::IDENTITY);
