@@ -81,6 +81,23 @@ fn with_a_dispersive_sphere_pbpm_and_the_path_tracer_converge_to_the_same_spectr
     check_partition(&sc, 2000, 8000);
 }
 
+#[test]
+fn with_glossy_vertices_pbpm_and_the_path_tracer_converge_layer_by_layer() {
+    // The mirror box becomes rough aluminium whose lobe is stored (camera paths store backward photons on it),
+    // a rough glass sphere's lobes are passed (paths sample through them), and a rough plastic sphere mixes
+    // both classes: a stored base under a passed coat. The smooth glass sphere keeps the caustic layer lit.
+    let glossy = SCENE.replace(
+        "type = \"mirror\"\nreflectance = [0.9, 0.9, 0.9]",
+        "type = \"conductor\"\nmaterial = \"Al\"\nalpha = 0.4\ndistribution = \"ggx\"",
+    ) + "[materials.rough_glass]\ntype = \"dielectric\"\nior = 1.5\nalpha = 0.1\n\
+         [materials.plastic]\ntype = \"plastic\"\ndiffuse_reflectance = [0.2, 0.3, 0.6]\nalpha = 0.1\n\
+         [[objects]]\nmaterial = \"rough_glass\"\nsphere = { center = [0.42, 0.08, 0.12], radius = 0.07 }\n\
+         [[objects]]\nmaterial = \"plastic\"\nsphere = { center = [0.1, 0.3, 0.1], radius = 0.07 }\n";
+    let sc = scene(&glossy);
+    assert!(sc.materials.iter().any(|m| matches!(m.front, photonfarm::material::Surface::RoughDielectric { .. })));
+    check_partition(&sc, 1500, 6000);
+}
+
 fn check_partition(sc: &photonfarm::scene::Scene, pbpm_phases: usize, path_phases: usize) {
     // Two independent single-threaded engines, run side by side.
     let render = |method, seed, phases| {
