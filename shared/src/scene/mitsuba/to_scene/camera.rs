@@ -94,7 +94,7 @@ impl Importer<'_> {
             return Err(f.error("a crop window is not supported: render the whole film"));
         }
         // How Mitsuba writes its output file; photonfarm writes its own outputs.
-        f.ignore(&["pixel_format", "component_format", "file_format", "sample_border", "banned"]);
+        f.ignore(&["pixel_format", "component_format", "file_format", "sample_border", "banner"]);
         for rfilter in f.children_of(Category::ReconstructionFilter) {
             if rfilter.plugin.kind != "box" {
                 self.notes.push(format!(
