@@ -213,10 +213,21 @@ pub enum ErrorOverArg {
     All,
 }
 
+/// A `--define NAME=VALUE`.
+fn parse_define(text: &str) -> Result<(String, String), String> {
+    match text.split_once('=') {
+        Some((name, value)) if !name.is_empty() => Ok((name.to_string(), value.to_string())),
+        _ => Err(format!("\"{text}\" is not NAME=VALUE")),
+    }
+}
+
 #[derive(clap::Args, Debug)]
 pub struct RenderArgs {
-    /// The scene file (TOML), e.g. scenes/cornell.toml.
+    /// The scene file: TOML (e.g. scenes/cornell.toml) or Mitsuba 3 XML (`.xml`, docs/scenes.md).
     pub scene: PathBuf,
+    /// Set a Mitsuba scene's `$NAME` parameter, overriding its <default> (Mitsuba's -D); repeatable.
+    #[arg(long = "define", short = 'D', value_name = "NAME=VALUE", value_parser = parse_define)]
+    pub defines: Vec<(String, String)>,
     /// Stop after this many seconds of rendering. Default when no stop rule is given: 30.
     #[arg(long, value_name = "SECONDS")]
     pub time: Option<f64>,

@@ -33,7 +33,7 @@ const CHECKPOINT: &str = "checkpoint.bin";
 
 pub fn run(args: RenderArgs) -> Result<()> {
     let stop = stop_rule(&args)?;
-    let scene = Scene::load(&args.scene)?;
+    let scene = Scene::load_with_defines(&args.scene, &args.defines)?;
     check_method_options(&args)?;
     let mut settings = settings_of(&args, &scene)?;
     let reference = match &args.reference {
@@ -511,6 +511,7 @@ fn launch_options(args: &RenderArgs) -> LaunchOptions {
     LaunchOptions {
         method: args.method,
         scene_path: args.scene.clone(),
+        defines: args.defines.clone(),
         topology: args.topology.clone(),
         remote_workers: args.workers.clone(),
         listen: args.listen,
@@ -594,7 +595,13 @@ impl Outputs<'_> {
             session: self.session,
             true_error: self.reference.map(|r| r.compare(engine.sums(), self.lit)),
             history: history.to_vec(),
-            flags: self.notes.iter().cloned().chain(flags_of(&engine.totals(), dropped, workers.as_deref())).collect(),
+            flags: scene
+                .notes
+                .iter()
+                .map(|n| format!("scene import: {n}"))
+                .chain(self.notes.iter().cloned())
+                .chain(flags_of(&engine.totals(), dropped, workers.as_deref()))
+                .collect(),
             workers,
         }
     }

@@ -30,8 +30,8 @@ pub enum JobEvent {
 
 /// Builds the job's scene from its text and the meshes received, and checks it is the coordinator's scene.
 pub fn load_scene(job: &Job, meshes: &BTreeMap<String, Vec<u8>>) -> Result<Scene, String> {
-    let scene =
-        Scene::from_toml_with_meshes(&job.scene_text, Path::new(&job.scene_name), meshes).map_err(|e| e.to_string())?;
+    let scene = Scene::from_job_files(&job.scene_text, Path::new(&job.scene_name), &job.defines, meshes)
+        .map_err(|e| e.to_string())?;
     if scene.hash != job.scene_hash {
         return Err(format!(
             "the scene built here hashes to {} but the coordinator's is {}",

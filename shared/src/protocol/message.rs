@@ -65,6 +65,8 @@ pub struct Job {
     /// The scene file's name, for messages.
     pub scene_name: String,
     pub scene_text: String,
+    /// A Mitsuba scene's `$name` parameters (`--define`), which the worker applies as the coordinator did.
+    pub defines: Vec<(String, String)>,
     /// Meshes the scene references; the worker asks for the ones it does not hold.
     pub files: Vec<FileRef>,
     /// The scene's hash as the coordinator computed it; the worker checks its own against it.

@@ -86,9 +86,49 @@ pub struct Scene {
     pub has_delta_surfaces: bool,
     /// The pairs of reflecting surfaces ghost paths draw from, where the scene traces ghost paths.
     pub ghost_pairs: Option<crate::pbpm::GhostPairs>,
+    /// What an imported scene's mapping ignored or rendered differently, one sentence each, for the run record
+    /// (empty for TOML scenes, whose every key maps exactly).
+    pub notes: Vec<String>,
+}
+
+/// True when the file is a Mitsuba 3 scene, told by its extension `.xml`; other files are TOML scenes.
+pub fn is_mitsuba(path: &std::path::Path) -> bool {
+    path.extension().is_some_and(|e| e.eq_ignore_ascii_case("xml"))
 }
 
 impl Scene {
+    /// Reads a scene file of either format; `defines` set a Mitsuba scene's `$name` parameters and are refused
+    /// for a TOML scene, which has none.
+    pub fn load_with_defines(path: &std::path::Path, defines: &[(String, String)]) -> Result<Scene, SceneError> {
+        if is_mitsuba(path) {
+            return Scene::load_mitsuba(path, defines);
+        }
+        if let Some((name, _)) = defines.first() {
+            return Err(SceneError {
+                file: path.to_path_buf(),
+                line: None,
+                field: None,
+                message: format!("--define {name}=...: only Mitsuba scenes (.xml) take parameters"),
+            });
+        }
+        Scene::load(path)
+    }
+
+    /// Builds a job's scene from the scene file's text, its name (whose extension tells the format), the
+    /// Mitsuba defines and the referenced files by the path the scene writes, as a worker does.
+    pub fn from_job_files(
+        text: &str,
+        name: &std::path::Path,
+        defines: &[(String, String)],
+        files: &std::collections::BTreeMap<String, Vec<u8>>,
+    ) -> Result<Scene, SceneError> {
+        if is_mitsuba(name) {
+            Scene::from_mitsuba_with_files(text, name, defines, files)
+        } else {
+            Scene::from_toml_with_meshes(text, name, files)
+        }
+    }
+
     /// True when a material disperses light: the scene then renders spectrally (after dispersive events).
     pub fn is_spectral(&self) -> bool {
         self.materials.iter().any(Material::is_dispersive)

@@ -29,8 +29,12 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 impl Scene {
-    /// Reads and validates a scene file; meshes and textures are resolved relative to its folder.
+    /// Reads and validates a scene file, TOML or (by the extension `.xml`) Mitsuba 3; meshes and textures are
+    /// resolved relative to its folder.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        if super::is_mitsuba(path) {
+            return Scene::load_mitsuba(path, &[]);
+        }
         let text = std::fs::read_to_string(path).map_err(|e| SceneError {
             file: path.to_path_buf(),
             line: None,
@@ -139,6 +143,7 @@ impl Loader<'_> {
             mesh_files: self.mesh_files,
             has_delta_surfaces,
             ghost_pairs: None,
+            notes: Vec::new(),
         })
     }
 

@@ -2,6 +2,7 @@
 //! nested children and resolved references, each with the position it was written at.
 
 use super::error::{MitsubaError, SourcePos};
+use super::files::FileSource;
 use super::spectrum::Spectrum;
 use glam::{DMat4, DVec3};
 use std::path::{Path, PathBuf};
@@ -187,6 +188,8 @@ pub struct Document {
     /// Folders named by `<path value="...">`, most recent first: where `filename` parameters are looked up
     /// before the scene's own folder.
     pub search_paths: Vec<PathBuf>,
+    /// The files read besides the scene file (included XML, spectrum files), in the order they were read.
+    pub files: Vec<PathBuf>,
 }
 
 impl Document {
@@ -195,12 +198,23 @@ impl Document {
     /// nowhere, the path in the scene's folder (so that the error names it).
     pub fn resolve_file(&self, name: &str) -> PathBuf {
         let scene_folder = self.path.parent().unwrap_or(Path::new("."));
-        resolve_in(name, &self.search_paths, scene_folder)
+        resolve_in(name, &self.search_paths, scene_folder, Path::exists)
+    }
+
+    /// `resolve_file` with existence judged by `files` (a job's files on a worker).
+    pub fn resolve_file_in(&self, name: &str, files: FileSource) -> PathBuf {
+        let scene_folder = self.path.parent().unwrap_or(Path::new("."));
+        resolve_in(name, &self.search_paths, scene_folder, |p| files.exists(p))
     }
 }
 
 /// Looks `name` up in `search_paths`, then in `folder`.
-pub(crate) fn resolve_in(name: &str, search_paths: &[PathBuf], folder: &Path) -> PathBuf {
+pub(crate) fn resolve_in(
+    name: &str,
+    search_paths: &[PathBuf],
+    folder: &Path,
+    exists: impl Fn(&Path) -> bool,
+) -> PathBuf {
     let path = Path::new(name);
     if path.is_absolute() {
         return path.to_path_buf();
@@ -208,6 +222,6 @@ pub(crate) fn resolve_in(name: &str, search_paths: &[PathBuf], folder: &Path) ->
     search_paths
         .iter()
         .map(|dir| dir.join(path))
-        .find(|candidate| candidate.exists())
+        .find(|candidate| exists(candidate))
         .unwrap_or_else(|| folder.join(path))
 }

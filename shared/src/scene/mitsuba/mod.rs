@@ -8,12 +8,16 @@
 
 pub mod document;
 pub mod error;
+pub mod files;
+pub mod ply;
 pub mod serialized;
 pub mod spectrum;
+mod to_scene;
 mod transform;
 pub mod xml;
 
 pub use document::{Category, Child, Document, Param, Plugin, Value};
 pub use error::{MitsubaError, SourcePos};
+pub use files::FileSource;
 pub use spectrum::{Spectrum, SpectrumUse};
-pub use xml::{read_file, read_str};
+pub use xml::{read_file, read_str, read_str_from};

@@ -3,6 +3,7 @@
 
 use super::document::{resolve_in, Category, Child, Document, Param, Plugin, Value};
 use super::error::{MitsubaError, SourcePos};
+use super::files::FileSource;
 use super::spectrum::Spectrum;
 use super::transform;
 use glam::{DMat4, DVec3};
@@ -22,14 +23,24 @@ const MAX_FILE_BYTES: u64 = 64 << 20;
 /// Reads the scene file at `path` and every file it includes. `defines` set `$name` parameters and override
 /// the file's `<default>`s (Mitsuba's `-D name=value`).
 pub fn read_file(path: &Path, defines: &[(String, String)]) -> Result<Document, MitsubaError> {
-    let mut reader = Reader::new(path, defines);
+    let mut reader = Reader::new(path, defines, FileSource::Disk);
     let top = reader.read_included(path, &SourcePos::file_start(path), None, None)?;
     reader.finish(path, top)
 }
 
 /// Reads a scene from `text` as if it were the file `path` (whose folder includes and files are relative to).
 pub fn read_str(text: &str, path: &Path, defines: &[(String, String)]) -> Result<Document, MitsubaError> {
-    let mut reader = Reader::new(path, defines);
+    read_str_from(text, path, defines, FileSource::Disk)
+}
+
+/// `read_str` with the included and spectrum files read from `files` (a job's files on a worker).
+pub fn read_str_from(
+    text: &str,
+    path: &Path,
+    defines: &[(String, String)],
+    files: FileSource,
+) -> Result<Document, MitsubaError> {
+    let mut reader = Reader::new(path, defines, files);
     let mut top = Vec::new();
     reader.read_text(text, path, &mut top, None)?;
     reader.finish(path, top)
@@ -64,7 +75,11 @@ enum Target {
 /// Where the elements being read go: the top level of the scene or a plugin's children.
 type Parent = Option<usize>;
 
-struct Reader {
+struct Reader<'f> {
+    /// Where included and spectrum files are read from.
+    files: FileSource<'f>,
+    /// The included and spectrum files read, in order.
+    read: Vec<PathBuf>,
     /// `$name` parameters: the caller's defines, then `<default>`s in document order (the first one wins).
     variables: HashMap<String, String>,
     /// The caller's defines, to refuse one that the scene never uses (a typo, as Mitsuba also refuses).
@@ -174,9 +189,11 @@ fn parse_number(text: &str) -> Result<f64, String> {
     }
 }
 
-impl Reader {
-    fn new(path: &Path, defines: &[(String, String)]) -> Reader {
+impl<'f> Reader<'f> {
+    fn new(path: &Path, defines: &[(String, String)], files: FileSource<'f>) -> Reader<'f> {
         Reader {
+            files,
+            read: Vec::new(),
             variables: defines.iter().cloned().collect(),
             defines: defines.iter().map(|(name, _)| name.clone()).collect(),
             used: RefCell::new(HashSet::new()),
@@ -202,7 +219,7 @@ impl Reader {
     ) -> Result<Vec<usize>, MitsubaError> {
         let cannot =
             |what: String| MitsubaError { position: from.clone(), element: element.map(str::to_string), message: what };
-        let canonical = path.canonicalize().map_err(|e| cannot(format!("cannot read {}: {e}", path.display())))?;
+        let canonical = self.files.identity(path).map_err(cannot)?;
         if let Some(first) = self.include_stack.iter().position(|p| *p == canonical) {
             let chain: Vec<String> =
                 self.include_stack[first..].iter().chain([&canonical]).map(|p| p.display().to_string()).collect();
@@ -211,14 +228,20 @@ impl Reader {
         if self.include_stack.len() >= MAX_INCLUDE_DEPTH {
             return Err(cannot(format!("more than {MAX_INCLUDE_DEPTH} nested includes")));
         }
-        let size = std::fs::metadata(path).map_err(|e| cannot(format!("cannot read {}: {e}", path.display())))?.len();
+        let bytes = self.files.read(path).map_err(cannot)?;
+        let size = bytes.len() as u64;
         if size > MAX_FILE_BYTES {
             return Err(cannot(format!(
                 "{} is {size} bytes, over the {MAX_FILE_BYTES} read for a scene file",
                 path.display()
             )));
         }
-        let text = std::fs::read_to_string(path).map_err(|e| cannot(format!("cannot read {}: {e}", path.display())))?;
+        let text = String::from_utf8(bytes.into_owned())
+            .map_err(|_| cannot(format!("{} is not UTF-8 text", path.display())))?;
+        if element.is_some() {
+            // An included file (the scene file itself is read from no element).
+            self.read.push(path.to_path_buf());
+        }
         self.include_stack.push(canonical);
         let mut top = Vec::new();
         let result = self.read_text(&text, path, &mut top, parent);
@@ -308,10 +331,10 @@ impl Reader {
                 let name = attributes.required("filename")?;
                 let here = source.file.parent().unwrap_or(Path::new("."));
                 let mut path = here.join(name);
-                if !path.exists() {
-                    path = resolve_in(name, &self.search_paths, &self.scene_folder);
+                if !self.files.exists(&path) {
+                    path = resolve_in(name, &self.search_paths, &self.scene_folder, |p| self.files.exists(p));
                 }
-                if !path.exists() {
+                if !self.files.exists(&path) {
                     return Err(
                         attributes.error(format!("the included file {} does not exist", here.join(name).display()))
                     );
@@ -324,10 +347,14 @@ impl Reader {
                 attributes.allow_only(&["value"])?;
                 let value = attributes.required("value")?;
                 let folder = source.file.parent().unwrap_or(Path::new(".")).join(value);
-                if !folder.is_dir() {
+                if !self.files.is_dir(&folder) {
                     return Err(attributes.error(format!("the folder {} does not exist", folder.display())));
                 }
-                self.search_paths.insert(0, folder.canonicalize().unwrap_or(folder));
+                let folder = match self.files {
+                    FileSource::Disk => folder.canonicalize().unwrap_or(folder),
+                    FileSource::Memory(_) => folder,
+                };
+                self.search_paths.insert(0, folder);
                 Ok(())
             }
             "alias" => {
@@ -474,7 +501,12 @@ impl Reader {
         Ok(())
     }
 
-    fn value(&self, source: &Source, node: roxmltree::Node, attributes: &Attributes) -> Result<Value, MitsubaError> {
+    fn value(
+        &mut self,
+        source: &Source,
+        node: roxmltree::Node,
+        attributes: &Attributes,
+    ) -> Result<Value, MitsubaError> {
         let tag = attributes.tag.as_str();
         if tag != "transform" {
             if let Some(child) = node.children().find(roxmltree::Node::is_element) {
@@ -523,8 +555,10 @@ impl Reader {
                     (Some(_), Some(_)) => Err(attributes.error("give either value or filename, not both")),
                     (Some(text), None) => Spectrum::parse(text).map(Value::Spectrum).map_err(|m| attributes.error(m)),
                     (None, Some(name)) => {
-                        let path = resolve_in(name, &self.search_paths, &self.scene_folder);
-                        read_spectrum_file(&path).map(Value::Spectrum).map_err(|m| attributes.error(m))
+                        let path = resolve_in(name, &self.search_paths, &self.scene_folder, |p| self.files.exists(p));
+                        let spectrum = read_spectrum_file(&path, self.files).map_err(|m| attributes.error(m))?;
+                        self.read.push(path);
+                        Ok(Value::Spectrum(spectrum))
                     }
                     (None, None) => Err(attributes.error("a spectrum needs `value` or `filename`")),
                 }
@@ -570,6 +604,7 @@ impl Reader {
             path: path.to_path_buf(),
             version: self.version.clone().unwrap_or_default(),
             search_paths: self.search_paths.clone(),
+            files: self.read.clone(),
             ..Document::default()
         };
         // Every plugin is resolved, also those no one references, so that a dangling ref anywhere is refused.
@@ -625,7 +660,7 @@ impl Source<'_> {
 }
 
 struct Resolver<'a> {
-    reader: &'a Reader,
+    reader: &'a Reader<'a>,
     done: Vec<Option<Arc<Plugin>>>,
     in_progress: HashSet<usize>,
 }
@@ -728,9 +763,9 @@ fn substitute(text: &str, variables: &HashMap<String, String>, used: &mut HashSe
 }
 
 /// Reads a spectrum file as Mitsuba does: lines of "wavelength value", `#` comments.
-fn read_spectrum_file(path: &Path) -> Result<Spectrum, String> {
-    let text =
-        std::fs::read_to_string(path).map_err(|e| format!("cannot read the spectrum file {}: {e}", path.display()))?;
+fn read_spectrum_file(path: &Path, files: FileSource) -> Result<Spectrum, String> {
+    let bytes = files.read(path).map_err(|e| format!("cannot read the spectrum file: {e}"))?;
+    let text = std::str::from_utf8(&bytes).map_err(|_| format!("{} is not UTF-8 text", path.display()))?;
     let mut pairs = Vec::new();
     for (number, line) in text.lines().enumerate() {
         let line = line.trim();

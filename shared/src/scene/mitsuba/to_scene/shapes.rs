@@ -1,0 +1,222 @@
+//! Shapes: `obj`, `ply`, `serialized`, `rectangle` and `cube` as triangles, `sphere` and `disk` as analytic
+//! surfaces, each with its BSDF (Mitsuba's diffuse default when it names none) and, on triangles, an `area`
+//! emitter.
+
+use super::meshes::{read_obj, read_ply, read_serialized, IndexedMesh, Placement};
+use super::params::Params;
+use super::{rgb, Importer};
+use crate::color::Rgb;
+use crate::geometry::{Analytic, Annulus, MeshTriangle, Sphere};
+use crate::light::Light;
+use crate::scene::mitsuba::{Category, MitsubaError, Plugin, SpectrumUse};
+use crate::scene::SceneObject;
+use glam::{DMat3, DVec3, Vec2, Vec3};
+use std::sync::Arc;
+
+impl Importer<'_> {
+    /// One top-level shape with its material and emission.
+    pub(super) fn shape(&mut self, plugin: &Arc<Plugin>) -> Result<(), MitsubaError> {
+        let p = Params::new(plugin);
+        // Mitsuba's plugin names are lower case; exporters sometimes capitalise them.
+        let kind = plugin.kind.to_ascii_lowercase();
+        let bsdfs = p.children_of(Category::Bsdf);
+        let material = match bsdfs.as_slice() {
+            [] => self.default_material(),
+            [one] => self.material(&one.plugin)?,
+            [_, second, ..] => {
+                return Err(MitsubaError::at(&second.position, second.plugin.element(), "a shape takes one BSDF"))
+            }
+        };
+        let emission = self.area_emission(&p)?;
+        let placement =
+            Placement { to_world: p.transform("to_world")?, flip_normals: p.boolean("flip_normals", false)? };
+        let id = self.objects.len() as u32;
+        let name =
+            plugin.id.clone().unwrap_or_else(|| format!("{} at line {}", plugin.element(), plugin.position.line));
+        match kind.as_str() {
+            "obj" | "ply" | "serialized" | "rectangle" | "cube" => {
+                let mesh = self.shape_mesh(&p, &kind)?;
+                let (triangles, skipped) = placement.triangles(&mesh).map_err(|m| p.error(m))?;
+                if skipped > 0 {
+                    self.notes.push(format!("{name}: {skipped} degenerate triangles (no area) left out"));
+                }
+                if triangles.is_empty() {
+                    return Err(p.error("the shape has no triangle with an area"));
+                }
+                let has_uvs = triangles.iter().all(|t| t.uv.is_some());
+                if self.materials[material as usize].uses_uv() && !has_uvs {
+                    return Err(p.error("its BSDF is textured but the shape has no texture coordinates"));
+                }
+                for t in triangles {
+                    let triangle = MeshTriangle { v: t.v, n: t.n };
+                    if let Some(le) = emission.filter(|e| *e != Rgb::ZERO) {
+                        let c = triangle.cross();
+                        self.lights.push(Light::Area {
+                            triangle: self.triangles.len() as u32,
+                            emission: le,
+                            area: 0.5 * c.length(),
+                            normal: c.normalize(),
+                        });
+                        self.light_textures.push(None);
+                    }
+                    self.triangles.push((id, triangle));
+                    self.triangle_uvs.push(if has_uvs { t.uv } else { None });
+                }
+            }
+            "sphere" | "disk" => {
+                if emission.is_some() {
+                    return Err(p.error(format!(
+                        "an area emitter on a {kind} is not supported yet (emitting analytic shapes are being wired); \
+                         a mesh (obj, ply, serialized, rectangle, cube) can emit"
+                    )));
+                }
+                if self.materials[material as usize].uses_uv() {
+                    return Err(
+                        p.error(format!("its BSDF is textured but photonfarm's {kind} has no texture coordinates"))
+                    );
+                }
+                if placement.flip_normals {
+                    return Err(p.error(format!("flip_normals on a {kind} is not supported")));
+                }
+                let shape = analytic(&p, &kind, &placement)?;
+                self.analytic.push((id, shape));
+            }
+            "shapegroup" | "instance" => {
+                return Err(p.error(format!("`{kind}` is not supported yet: write the shapes out in place")))
+            }
+            other => {
+                return Err(p.error(format!(
+                    "the shape `{other}` is not supported (obj, ply, serialized, rectangle, cube, sphere and disk are)"
+                )))
+            }
+        }
+        p.finish()?;
+        self.objects.push(SceneObject { name, material, emission: emission.filter(|e| *e != Rgb::ZERO) });
+        Ok(())
+    }
+
+    /// The radiance of the shape's `area` emitter, when it has one.
+    fn area_emission(&mut self, p: &Params) -> Result<Option<Rgb>, MitsubaError> {
+        let emitters = p.children_of(Category::Emitter);
+        let Some(emitter) = emitters.first() else { return Ok(None) };
+        let e = Params::new(&emitter.plugin);
+        if emitters.len() > 1 {
+            return Err(e.error("a shape takes one emitter"));
+        }
+        if emitter.plugin.kind != "area" {
+            return Err(e.error(format!("a shape's emitter is an `area` emitter, not `{}`", emitter.plugin.kind)));
+        }
+        if e.child("radiance").is_some() {
+            return Err(e.error("a textured radiance is not supported yet: give a colour or a spectrum"));
+        }
+        let radiance = rgb(e.colour("radiance", SpectrumUse::Emission)?.unwrap_or([1.0; 3]));
+        if !radiance.is_finite() || radiance.min_element() < 0.0 {
+            return Err(e.error(format!("the radiance must be finite and not negative, got {radiance:?}")));
+        }
+        e.finish()?;
+        Ok(Some(radiance))
+    }
+
+    /// The mesh of a triangle shape, in its own coordinates.
+    fn shape_mesh(&mut self, p: &Params, kind: &str) -> Result<IndexedMesh, MitsubaError> {
+        let mesh = match kind {
+            "rectangle" => rectangle(),
+            "cube" => cube(),
+            _ => {
+                let name = p.string("filename")?.ok_or_else(|| p.error("the shape needs a filename"))?;
+                let (_, bytes) = self.read_file(name, &p.plugin.position, &p.plugin.element())?;
+                let fail = |m: String| p.error(format!("{name}: {m}"));
+                let (mesh, own_face_normals) = match kind {
+                    "obj" => (read_obj(&bytes, p.boolean("flip_tex_coords", true)?).map_err(fail)?, false),
+                    "ply" => (read_ply(&bytes).map_err(fail)?, false),
+                    _ => {
+                        let index = p.integer("shape_index")?.unwrap_or(0);
+                        let index = u32::try_from(index).map_err(|_| p.error("shape_index must not be negative"))?;
+                        read_serialized(&bytes, index).map_err(fail)?
+                    }
+                };
+                let mut mesh = mesh;
+                if p.boolean("face_normals", false)? || own_face_normals {
+                    mesh.normals = None;
+                }
+                mesh
+            }
+        };
+        if mesh.triangles.is_empty() {
+            return Err(p.error("the mesh has no triangles"));
+        }
+        Ok(mesh)
+    }
+}
+
+/// Mitsuba's `rectangle`: [−1, 1]² in the plane z = 0, facing +z, texture coordinates (0, 0) at (−1, −1).
+fn rectangle() -> IndexedMesh {
+    IndexedMesh {
+        positions: vec![
+            Vec3::new(-1.0, -1.0, 0.0),
+            Vec3::new(1.0, -1.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.0),
+            Vec3::new(-1.0, 1.0, 0.0),
+        ],
+        triangles: vec![[0, 1, 2], [0, 2, 3]],
+        normals: Some(vec![Vec3::Z; 4]),
+        uvs: Some(vec![Vec2::new(0.0, 0.0), Vec2::new(1.0, 0.0), Vec2::new(1.0, 1.0), Vec2::new(0.0, 1.0)]),
+    }
+}
+
+/// Mitsuba's `cube`: [−1, 1]³ with outward faces, each with its own normal.
+fn cube() -> IndexedMesh {
+    let mut mesh = IndexedMesh { normals: Some(Vec::new()), ..IndexedMesh::default() };
+    let axes = [Vec3::X, Vec3::Y, Vec3::Z];
+    for a in 0..3 {
+        let (b, c) = (axes[(a + 1) % 3], axes[(a + 2) % 3]);
+        for sign in [1.0f32, -1.0] {
+            let n = axes[a] * sign;
+            let base = mesh.positions.len() as u32;
+            for (sb, sc) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+                mesh.positions.push(n + b * sb + c * sc);
+                mesh.normals.as_mut().expect("set above").push(n);
+            }
+            // b × c = a: counter-clockwise seen from outside on the + face, the other way round on the − face.
+            let quad = if sign > 0.0 { [0, 1, 2, 3] } else { [0, 3, 2, 1] };
+            mesh.triangles.push([base + quad[0], base + quad[1], base + quad[2]]);
+            mesh.triangles.push([base + quad[0], base + quad[2], base + quad[3]]);
+        }
+    }
+    mesh
+}
+
+/// A sphere or a disk, whose `to_world` must keep it round (a rotation, a uniform scale and a translation).
+fn analytic(p: &Params, kind: &str, placement: &Placement) -> Result<Analytic, MitsubaError> {
+    let m = placement.to_world;
+    let linear = DMat3::from_mat4(m);
+    let scale = linear.determinant().abs().cbrt();
+    let similar = scale > 0.0 && {
+        let q = linear * (1.0 / scale);
+        (q.transpose() * q - DMat3::IDENTITY).to_cols_array().iter().all(|x| x.abs() < 1e-5)
+    };
+    if !similar {
+        return Err(p.error(format!(
+            "the {kind}'s to_world stretches it unevenly, which photonfarm's analytic {kind} cannot: use a mesh"
+        )));
+    }
+    if kind == "sphere" {
+        let center = p.point("center")?.unwrap_or(DVec3::ZERO);
+        let radius = p.float("radius")?.unwrap_or(1.0);
+        if radius <= 0.0 {
+            return Err(p.error(format!("the radius must be positive, got {radius}")));
+        }
+        return Ok(Analytic::Sphere(Sphere {
+            center: m.transform_point3(center).as_vec3(),
+            radius: (radius * scale) as f32,
+        }));
+    }
+    // photonfarm's annulus faces −axis; Mitsuba's disk faces its transformed +z.
+    let normal = (linear.inverse().transpose() * DVec3::Z).normalize();
+    Ok(Analytic::Annulus(Annulus {
+        center: m.transform_point3(DVec3::ZERO).as_vec3(),
+        axis: (-normal).as_vec3(),
+        inner_radius: 0.0,
+        outer_radius: scale as f32,
+    }))
+}

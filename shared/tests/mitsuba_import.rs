@@ -1,0 +1,491 @@
+//! Mitsuba 3 scenes imported into photonfarm's `Scene`: a room written in both formats renders the same image,
+//! every BSDF maps to its family, PLY (ASCII, both binary byte orders) and serialized meshes load with their
+//! texture coordinates, mirrored meshes keep their sides, a worker rebuilds the same scene from the job's files,
+//! and unsupported or malformed input is refused at its file, line and element.
+
+mod common;
+
+use common::{mean_sem, regions_phase_means, settings};
+use glam::{Vec2, Vec3};
+use photonfarm::bsdf::conductor::ConductorFresnel;
+use photonfarm::bsdf::plastic::Coat;
+use photonfarm::material::{Back, Surface};
+use photonfarm::render::{Engine, Method};
+use photonfarm::scene::mitsuba::serialized::{write_serialized, SerializedMesh};
+use photonfarm::scene::{Scene, SceneError};
+use photonfarm::texture::Texture;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// Writes `files` (name, contents) into a fresh folder and returns it with the folder's guard.
+fn folder(files: &[(&str, &[u8])]) -> (tempfile::TempDir, PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, bytes) in files {
+        let path = dir.path().join(name);
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        std::fs::write(path, bytes).unwrap();
+    }
+    let path = dir.path().to_path_buf();
+    (dir, path)
+}
+
+/// Loads `scene.xml` written with `text` (and `files`) into a fresh folder.
+fn import(text: &str, files: &[(&str, &[u8])]) -> Result<Scene, SceneError> {
+    let mut all = files.to_vec();
+    all.push(("scene.xml", text.as_bytes()));
+    let (_guard, dir) = folder(&all);
+    Scene::load(&dir.join("scene.xml"))
+}
+
+/// The error of a scene that must not load.
+fn error_of(result: Result<Scene, SceneError>) -> SceneError {
+    match result {
+        Ok(_) => panic!("the scene loaded"),
+        Err(e) => e,
+    }
+}
+
+/// A scene file around `body`: a sensor looking at the origin from +z and an emitting rectangle, so that the
+/// shapes of `body` are what a test looks at.
+fn scene_with(body: &str) -> String {
+    format!(
+        r#"<scene version="3.0.0">
+    <sensor type="perspective">
+        <float name="fov" value="40"/>
+        <transform name="to_world"><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>
+        <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="6"/></film>
+    </sensor>
+    <shape type="rectangle">
+        <transform name="to_world"><translate z="4"/></transform>
+        <emitter type="area"><rgb name="radiance" value="1"/></emitter>
+    </shape>
+{body}
+</scene>"#
+    )
+}
+
+const ROOM_XML: &str = r#"<scene version="3.0.0">
+    <default name="size" value="32"/>
+    <integrator type="path"><integer name="max_depth" value="5"/></integrator>
+    <sensor type="perspective">
+        <string name="fov_axis" value="x"/>
+        <float name="fov" value="50"/>
+        <transform name="to_world">
+            <lookat origin="0, 1, 3.2" target="0, 1, 0" up="0, 1, 0"/>
+        </transform>
+        <film type="hdrfilm">
+            <integer name="width" value="$size"/>
+            <integer name="height" value="24"/>
+            <rfilter type="box"/>
+        </film>
+    </sensor>
+    <bsdf type="diffuse" id="white"><rgb name="reflectance" value="0.7, 0.7, 0.7"/></bsdf>
+    <bsdf type="diffuse" id="red"><rgb name="reflectance" value="0.7, 0.1, 0.1"/></bsdf>
+    <shape type="rectangle">
+        <transform name="to_world"><rotate x="1" angle="-90"/></transform>
+        <ref id="white"/>
+    </shape>
+    <shape type="rectangle">
+        <transform name="to_world"><translate y="1" z="-1"/></transform>
+        <ref id="white"/>
+    </shape>
+    <shape type="rectangle">
+        <transform name="to_world"><rotate y="1" angle="90"/><translate x="-1" y="1"/></transform>
+        <ref id="red"/>
+    </shape>
+    <shape type="rectangle">
+        <transform name="to_world"><scale value="0.3"/><rotate x="1" angle="90"/><translate y="1.99"/></transform>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0"/></bsdf>
+        <emitter type="area"><rgb name="radiance" value="10, 9, 8"/></emitter>
+    </shape>
+</scene>"#;
+
+/// The room of `ROOM_XML` in photonfarm's format: the same quads (Mitsuba's rectangles are [−1, 1]² facing +z),
+/// one-sided materials, and the field of view along y that a 50° one along x gives a 32 × 24 film.
+fn room_toml() -> String {
+    let fov_y = 2.0 * ((25f64).to_radians().tan() * 24.0 / 32.0).atan().to_degrees();
+    format!(
+        r#"
+[render]
+max_depth = 5
+[camera]
+position = [0.0, 1.0, 3.2]
+look_at = [0.0, 1.0, 0.0]
+fov_y_deg = {fov_y}
+width = 32
+height = 24
+[materials.white]
+type = "diffuse"
+albedo = [0.7, 0.7, 0.7]
+back = "black"
+[materials.red]
+type = "diffuse"
+albedo = [0.7, 0.1, 0.1]
+back = "black"
+[materials.black]
+type = "diffuse"
+albedo = 0.0
+back = "black"
+[[objects]]
+material = "white"
+quad = {{ corner = [-1.0, 0.0, 1.0], edge1 = [2.0, 0.0, 0.0], edge2 = [0.0, 0.0, -2.0] }}
+[[objects]]
+material = "white"
+quad = {{ corner = [-1.0, 0.0, -1.0], edge1 = [2.0, 0.0, 0.0], edge2 = [0.0, 2.0, 0.0] }}
+[[objects]]
+material = "red"
+quad = {{ corner = [-1.0, 0.0, 1.0], edge1 = [0.0, 0.0, -2.0], edge2 = [0.0, 2.0, 0.0] }}
+[[objects]]
+material = "black"
+emission = [10.0, 9.0, 8.0]
+quad = {{ corner = [-0.3, 1.99, -0.3], edge1 = [0.6, 0.0, 0.0], edge2 = [0.0, 0.0, 0.6] }}
+"#
+    )
+}
+
+#[test]
+fn a_mitsuba_room_sees_through_the_camera_of_its_toml_twin_and_renders_its_image() {
+    let xml = import(ROOM_XML, &[]).unwrap();
+    let toml = Scene::from_toml(&room_toml(), Path::new("room.toml"), Path::new(".")).unwrap();
+    assert_eq!((xml.camera.width, xml.camera.height), (32, 24));
+    assert_eq!(xml.render.max_depth, 5);
+    for (x, y) in [(0, 0), (31, 0), (16, 12), (5, 23), (31, 23)] {
+        for jitter in [Vec2::ZERO, Vec2::new(0.5, 0.5), Vec2::new(0.99, 0.01)] {
+            let a = xml.camera.generate_ray(x, y, jitter, Vec2::ZERO).ray;
+            let b = toml.camera.generate_ray(x, y, jitter, Vec2::ZERO).ray;
+            assert!((a.origin - b.origin).length() < 1e-5, "pixel ({x}, {y}) origin");
+            assert!(
+                (a.direction - b.direction).length() < 1e-5,
+                "pixel ({x}, {y}): {} vs {}",
+                a.direction,
+                b.direction
+            );
+        }
+    }
+    // Twelve blocks of 8 × 8 pixels, each block's mean over independent phases of the two scenes.
+    let blocks: Vec<Vec<usize>> = (0..12)
+        .map(|b| {
+            let (bx, by) = (b % 4 * 8, b / 4 * 8);
+            (0..64).map(|i| ((by + i / 8) * 32 + bx + i % 8) as usize).collect()
+        })
+        .collect();
+    let regions: Vec<(&[usize], _)> = blocks.iter().map(|b| (b.as_slice(), None)).collect();
+    let mut means = Vec::new();
+    for (scene, seed) in [(&xml, 7), (&toml, 8)] {
+        let mut engine = Engine::new(scene, settings(scene, Method::Path, seed));
+        means.push(regions_phase_means(&mut engine, 200, &regions));
+    }
+    for (b, (xml_block, toml_block)) in means[0].iter().zip(&means[1]).enumerate() {
+        let (m1, s1) = mean_sem(xml_block);
+        let (m2, s2) = mean_sem(toml_block);
+        let z = (m1 - m2) / (s1 * s1 + s2 * s2).sqrt().max(1e-12);
+        assert!(z.abs() < 4.5, "block {b}: {m1} ± {s1} (XML) vs {m2} ± {s2} (TOML), z = {z}");
+    }
+}
+
+#[test]
+fn each_bsdf_maps_to_its_family_with_mitsubas_defaults_and_sides() {
+    let shapes = [
+        r#"<bsdf type="diffuse"/>"#,
+        r#"<bsdf type="twosided"><bsdf type="diffuse"><rgb name="reflectance" value="0.2"/></bsdf></bsdf>"#,
+        r#"<bsdf type="conductor"><string name="material" value="Au"/></bsdf>"#,
+        r#"<bsdf type="roughconductor"><string name="distribution" value="ggx"/></bsdf>"#,
+        r#"<bsdf type="dielectric"><string name="int_ior" value="water"/></bsdf>"#,
+        r#"<bsdf type="roughdielectric"><float name="alpha" value="0.3"/></bsdf>"#,
+        r#"<bsdf type="thindielectric"/>"#,
+        r#"<bsdf type="plastic"><float name="int_ior" value="1.9"/></bsdf>"#,
+        r#"<bsdf type="roughplastic"><float name="alpha" value="0.2"/></bsdf>"#,
+        r#"<bsdf type="principled"><float name="metallic" value="0.5"/></bsdf>"#,
+        r#"<bsdf type="mask"><float name="opacity" value="0.3"/><bsdf type="diffuse"/></bsdf>"#,
+        r#"<bsdf type="twosided"><bsdf type="diffuse"/><bsdf type="conductor"/></bsdf>"#,
+        "",
+    ];
+    let body: String = shapes
+        .iter()
+        .enumerate()
+        .map(|(i, b)| {
+            format!("<shape type=\"sphere\"><point name=\"center\" x=\"{i}\" y=\"0\" z=\"-9\"/>{b}</shape>\n")
+        })
+        .collect();
+    let scene = import(&scene_with(&body), &[]).unwrap();
+    // Object 0 is the emitter; the spheres follow in order.
+    let m = |i: usize| &scene.materials[scene.objects[i + 1].material as usize];
+    let grey = |v: f32| Texture::grey(v);
+    assert_eq!(m(0).front, Surface::Diffuse { reflectance: grey(0.5) });
+    assert_eq!(m(0).back, Back::Black, "Mitsuba's BSDFs are one-sided");
+    assert_eq!(m(1).front, Surface::Diffuse { reflectance: grey(0.2) });
+    assert_eq!(m(1).back, Back::Same);
+    let Surface::Conductor { fresnel, roughness: None, .. } = &m(2).front else { panic!("{:?}", m(2).front) };
+    assert_eq!(*fresnel, ConductorFresnel::named("Au").unwrap());
+    let Surface::Conductor { fresnel: ConductorFresnel::Perfect, roughness: Some(r), .. } = &m(3).front else {
+        panic!("{:?}", m(3).front)
+    };
+    assert_eq!((r.distribution, r.alpha_u.clone()), (photonfarm::bsdf::microfacet::Distribution::Ggx, grey(0.1)));
+    let Surface::Dielectric { ior, ext_ior, anti_reflection: false } = &m(4).front else { panic!() };
+    assert_eq!((ior.d, ext_ior.d), (1.333, 1.000277));
+    let Surface::RoughDielectric { ior, roughness, .. } = &m(5).front else { panic!("{:?}", m(5).front) };
+    assert_eq!((ior.d, roughness.alpha_v.clone()), (1.5046, grey(0.3)));
+    assert!(matches!(m(6).front, Surface::ThinDielectric { .. }));
+    let Surface::Plastic { eta, coat: Coat::Smooth, diffuse_reflectance, .. } = &m(7).front else { panic!() };
+    assert!((eta - 1.9 / 1.000277).abs() < 1e-6, "{eta}");
+    assert_eq!(*diffuse_reflectance, grey(0.5));
+    assert!(matches!(m(8).front, Surface::Plastic { coat: Coat::Rough { .. }, .. }));
+    let Surface::Principled(p) = &m(9).front else { panic!() };
+    assert_eq!(p.metallic, grey(0.5));
+    assert_eq!((m(10).opacity.clone(), &m(10).front), (Some(grey(0.3)), &Surface::Diffuse { reflectance: grey(0.5) }));
+    assert!(matches!(&m(11).back, Back::Other(s) if matches!(**s, Surface::Conductor { .. })));
+    assert_eq!(m(12), m(0), "a shape without a BSDF gets Mitsuba's default diffuse");
+}
+
+/// A unit quad in the plane z = 0 with texture coordinates, as PLY in `format`.
+fn ply_quad(format: &str) -> Vec<u8> {
+    let header = format!(
+        "ply\nformat {format} 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n\
+         property float nx\nproperty float ny\nproperty float nz\nproperty float u\nproperty float v\n\
+         element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+    );
+    let vertices = [
+        [0.0f32, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.0],
+        [1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.25],
+        [0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.25],
+    ];
+    let mut bytes = header.into_bytes();
+    match format {
+        "ascii" => {
+            for v in vertices {
+                bytes.extend(v.map(|x| x.to_string()).join(" ").bytes());
+                bytes.push(b'\n');
+            }
+            bytes.extend(b"4 0 1 2 3\n");
+        }
+        _ => {
+            let big = format == "binary_big_endian";
+            for x in vertices.iter().flatten() {
+                bytes.extend(if big { x.to_be_bytes() } else { x.to_le_bytes() });
+            }
+            bytes.push(4);
+            for i in [0i32, 1, 2, 3] {
+                bytes.extend(if big { i.to_be_bytes() } else { i.to_le_bytes() });
+            }
+        }
+    }
+    bytes
+}
+
+#[test]
+fn ply_in_every_encoding_and_serialized_meshes_load_placed_with_their_texture_coordinates() {
+    let quad = SerializedMesh {
+        positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]],
+        normals: None,
+        uvs: Some(vec![[0.0, 0.0], [1.0, 0.0], [1.0, 0.25], [0.0, 0.25]]),
+        triangles: vec![[0, 1, 2], [0, 2, 3]],
+        ..SerializedMesh::default()
+    };
+    let other = SerializedMesh {
+        positions: vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        triangles: vec![[0, 1, 2]],
+        ..SerializedMesh::default()
+    };
+    let serialized = write_serialized(&[other, quad], false).unwrap();
+    let textured = r#"<bsdf type="diffuse"><texture name="reflectance" type="checkerboard"/></bsdf>"#;
+    let shape = |kind: &str, file: &str, x: f32, extra: &str| {
+        format!(
+            "<shape type=\"{kind}\"><string name=\"filename\" value=\"{file}\"/>{extra}{textured}\
+             <transform name=\"to_world\"><translate x=\"{x}\" z=\"-2\"/></transform></shape>\n"
+        )
+    };
+    let body = [
+        shape("ply", "meshes/ascii.ply", 10.0, ""),
+        shape("ply", "meshes/little.ply", 20.0, ""),
+        shape("ply", "meshes/big.ply", 30.0, ""),
+        shape("serialized", "meshes/two.serialized", 40.0, r#"<integer name="shape_index" value="1"/>"#),
+    ]
+    .concat();
+    let files: [(&str, &[u8]); 4] = [
+        ("meshes/ascii.ply", &ply_quad("ascii")),
+        ("meshes/little.ply", &ply_quad("binary_little_endian")),
+        ("meshes/big.ply", &ply_quad("binary_big_endian")),
+        ("meshes/two.serialized", &serialized),
+    ];
+    let scene = import(&scene_with(&body), &files).unwrap();
+    // The emitting rectangle's two triangles, then two per quad.
+    assert_eq!(scene.geometry.triangle_count(), 2 + 4 * 2);
+    for (k, x) in [10.0f32, 20.0, 30.0, 40.0].into_iter().enumerate() {
+        let first = 2 + 2 * k as u32;
+        let t = scene.geometry.triangle(first);
+        assert_eq!(t.v[0], Vec3::new(x, 0.0, -2.0), "mesh {k} placed by to_world");
+        assert_eq!(t.v[2], Vec3::new(x + 1.0, 1.0, -2.0));
+        // Mitsuba's v = 0.25 is photonfarm's 0.75 (its v runs downward).
+        let uv = scene.triangle_uvs[first as usize].unwrap();
+        assert_eq!(uv, [Vec2::new(0.0, 1.0), Vec2::new(1.0, 1.0), Vec2::new(1.0, 0.75)], "mesh {k}");
+    }
+    assert_eq!(scene.mesh_files.len(), 4);
+}
+
+#[test]
+fn a_mirrored_mesh_keeps_the_side_its_vertex_normals_face_and_flip_normals_turns_it() {
+    let obj = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//1\n";
+    let shape = |transform: &str, flip: bool| {
+        format!(
+            "<shape type=\"obj\"><string name=\"filename\" value=\"t.obj\"/><boolean name=\"flip_normals\" \
+             value=\"{flip}\"/><transform name=\"to_world\">{transform}</transform></shape>\n"
+        )
+    };
+    let body = [
+        shape("<scale x=\"-1\"/>", false),
+        shape("", false),
+        shape("<scale x=\"-1\"/>", true),
+        shape("<matrix value=\"1 0 0 0  0 1 0 0  0 0 -1 0  0 0 0 1\"/>", false),
+    ]
+    .concat();
+    let scene = import(&scene_with(&body), &[("t.obj", obj)]).unwrap();
+    let facing = |k: u32| {
+        let t = scene.geometry.triangle(2 + k);
+        let geometric = (t.v[1] - t.v[0]).cross(t.v[2] - t.v[0]).normalize();
+        let shading = t.n.expect("vertex normals")[0];
+        assert!(geometric.dot(shading) > 0.99, "triangle {k}: winding and normals disagree");
+        shading
+    };
+    assert_eq!(facing(0), Vec3::Z, "mirrored along x, the normal still faces +z");
+    assert_eq!(facing(1), Vec3::Z);
+    assert_eq!(facing(2), -Vec3::Z, "flip_normals turns it");
+    assert_eq!(facing(3), -Vec3::Z, "mirrored along z, the normal follows the mirror");
+}
+
+#[test]
+fn a_worker_rebuilds_the_same_scene_from_the_job_files_includes_and_search_paths_among_them() {
+    let main = r#"<scene version="3.0.0">
+    <path value="../common"/>
+    <bsdf type="diffuse" id="wood"><texture name="reflectance" type="bitmap"><string name="filename" value="tex.png"/></texture></bsdf>
+    <include filename="parts/room.xml"/>
+</scene>"#;
+    let room =
+        scene_with(r#"<shape type="obj"><string name="filename" value="meshes/quad.obj"/><ref id="wood"/></shape>"#);
+    let png = {
+        let mut bytes = Vec::new();
+        let mut encoder = png::Encoder::new(&mut bytes, 2, 2);
+        encoder.set_color(png::ColorType::Rgb);
+        encoder.write_header().unwrap().write_image_data(&[200; 12]).unwrap();
+        bytes
+    };
+    let obj = b"v 0 0 0\nv 1 0 0\nv 1 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nf 1/1 2/2 3/3\n";
+    let (_guard, dir) = folder(&[
+        ("scenes/main.xml", main.as_bytes()),
+        ("scenes/parts/room.xml", room.as_bytes()),
+        ("common/tex.png", &png),
+        ("common/meshes/quad.obj", obj),
+    ]);
+    let path = dir.join("scenes/main.xml");
+    let here = Scene::load(&path).unwrap();
+    let keys: Vec<&str> = here.mesh_files.iter().map(|(k, _)| k.as_str()).collect();
+    assert_eq!(keys, ["parts/room.xml", "../common/tex.png", "../common/meshes/quad.obj"]);
+    let sent: BTreeMap<String, Vec<u8>> =
+        here.mesh_files.iter().map(|(k, _)| (k.clone(), std::fs::read(dir.join("scenes").join(k)).unwrap())).collect();
+    let there = Scene::from_job_files(main, Path::new("main.xml"), &[], &sent).unwrap();
+    assert_eq!(there.mesh_files, here.mesh_files);
+    assert_eq!(there.hash, here.hash);
+    assert_eq!(there.geometry.triangle_count(), here.geometry.triangle_count());
+    assert_eq!(there.materials, here.materials);
+    let mut missing = sent.clone();
+    missing.remove("../common/tex.png");
+    let e = error_of(Scene::from_job_files(main, Path::new("main.xml"), &[], &missing));
+    assert!(e.to_string().contains("was not sent with the job"), "{e}");
+}
+
+#[test]
+fn defines_override_defaults_and_change_the_hash() {
+    let text = ROOM_XML;
+    let (_guard, dir) = folder(&[("room.xml", text.as_bytes())]);
+    let path = dir.join("room.xml");
+    let plain = Scene::load_with_defines(&path, &[]).unwrap();
+    let wide = Scene::load_with_defines(&path, &[("size".into(), "48".into())]).unwrap();
+    assert_eq!((plain.camera.width, wide.camera.width), (32, 48));
+    assert_ne!(plain.hash, wide.hash);
+    let e = error_of(Scene::load_with_defines(&path, &[("sise".into(), "48".into())]));
+    assert!(e.message.contains("sise"), "{e}");
+}
+
+/// The error of importing `body` in `scene_with`, which must name the line of `needle` in the file and the
+/// element `element`, with `words` in its message.
+fn refused(body: &str, needle: &str, element: &str, words: &str) {
+    let text = scene_with(body);
+    let line = text.lines().position(|l| l.contains(needle)).expect("needle in the scene") + 1;
+    let e = error_of(import(&text, &[]));
+    assert_eq!(e.line, Some(line), "{e}");
+    assert!(e.field.as_deref().is_some_and(|f| f.contains(element)), "{e}");
+    assert!(e.message.contains(words), "{e}");
+}
+
+#[test]
+fn unsupported_plugins_and_parameters_are_refused_at_their_line_and_element() {
+    refused("<shape type=\"sphere\">\n<bsdf type=\"hair\"/></shape>", "hair", "bsdf type=\"hair\"", "`hair`");
+    refused(
+        "<shape type=\"sphere\"><bsdf type=\"diffuse\">\n<float name=\"roughness\" value=\"1\"/></bsdf></shape>",
+        "roughness",
+        "roughness",
+        "not supported",
+    );
+    refused("<emitter type=\"envmap\">\n</emitter>", "envmap", "envmap", "not supported yet");
+    refused(
+        "<shape type=\"sphere\"><emitter type=\"area\"/></shape>",
+        "type=\"sphere\"",
+        "sphere",
+        "not supported yet",
+    );
+    refused("<shape type=\"hair\"/>", "hair", "shape type=\"hair\"", "not supported");
+    refused(
+        "<shape type=\"obj\"><string name=\"filename\" value=\"missing.obj\"/></shape>",
+        "missing",
+        "obj",
+        "missing.obj",
+    );
+    refused("<integrator type=\"bdpt\"/>", "bdpt", "bdpt", "--define integrator=path");
+    refused("<medium type=\"homogeneous\"/>", "homogeneous", "medium", "not supported");
+    refused(
+        "<shape type=\"cube\"><bsdf type=\"diffuse\"><texture type=\"checkerboard\" name=\"reflectance\"/></bsdf></shape>",
+        "cube",
+        "cube",
+        "texture coordinates",
+    );
+    refused(
+        "<shape type=\"sphere\"><bsdf type=\"bumpmap\"><bsdf type=\"diffuse\"/></bsdf></shape>",
+        "bumpmap",
+        "bumpmap",
+        "not supported",
+    );
+    refused(
+        "<shape type=\"sphere\"><transform name=\"to_world\"><scale x=\"2\"/></transform></shape>",
+        "sphere",
+        "sphere",
+        "unevenly",
+    );
+    refused(
+        "<shape type=\"sphere\"><bsdf type=\"dielectric\">\n<string name=\"int_ior\" value=\"glas\"/></bsdf></shape>",
+        "glas",
+        "int_ior",
+        "named indices",
+    );
+    refused(
+        "<shape type=\"rectangle\"><bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"1.5\"/></bsdf></shape>",
+        "1.5",
+        "reflectance",
+        "above 1",
+    );
+}
+
+#[test]
+fn a_mirroring_camera_and_malformed_xml_are_refused_with_their_line() {
+    let mirrored = scene_with("").replace(
+        r#"<lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/>"#,
+        r#"<scale x="-1"/><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/>"#,
+    );
+    let e = error_of(import(&mirrored, &[]));
+    assert_eq!(e.line, Some(2), "{e}");
+    assert!(e.message.contains("mirrors the image"), "{e}");
+    let e = error_of(import("<scene version=\"3.0.0\">\n<shape type=\"sphere\">\n</scene>", &[]));
+    assert!(e.line.is_some() && e.message.contains("XML"), "{e}");
+    let dark = scene_with("").replace(r#"<rgb name="radiance" value="1"/>"#, r#"<rgb name="radiance" value="0"/>"#);
+    let e = error_of(import(&dark, &[]));
+    assert!(e.message.contains("no light"), "{e}");
+}
