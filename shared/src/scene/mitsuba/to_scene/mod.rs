@@ -255,7 +255,8 @@ impl<'d> Importer<'d> {
         let start = SourcePos::file_start(&self.doc.path);
         let geometry = SceneGeometry::build(self.triangles, self.analytic)
             .map_err(|e| MitsubaError::in_file(start.clone(), e.to_string()))?;
-        let lights = Lights::with_textures(self.lights, self.light_textures, geometry.triangle_count());
+        let sphere = crate::light::infinite::SceneSphere::around(geometry.bounds());
+        let lights = Lights::with_textures(self.lights, self.light_textures, geometry.triangle_count(), sphere);
         if !lights.any() {
             return Err(MitsubaError::in_file(
                 start,
