@@ -20,7 +20,8 @@ use photonfarm::bsdf::microfacet::{Distribution, Microfacet};
 use photonfarm::bsdf::plastic::Coat;
 use photonfarm::bsdf::principled::{eta_of_specular, PrincipledParams};
 use photonfarm::bsdf::{
-    Conductor, Dielectric, Diffuse, Model, Plastic, Principled, RoughDielectric, ThinDielectric, Transport,
+    Conductor, DeltaBranches, Dielectric, Diffuse, Model, Plastic, Principled, RoughDielectric, ThinDielectric,
+    Transport,
 };
 use photonfarm::color::Rgb;
 use photonfarm::spectrum::RefractiveIndex;
@@ -181,7 +182,7 @@ fn answer(line: &str) -> Result<String, Error> {
                 Model::ThinDielectric(t) => t.delta_branches(wo),
                 Model::Plastic(p) => p.delta_branches(wo),
                 Model::Conductor(c) => c.delta_branches(wo),
-                _ => Vec::new(),
+                _ => DeltaBranches::default(),
             };
             let out: Vec<String> = branches
                 .iter()

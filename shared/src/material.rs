@@ -225,7 +225,7 @@ impl Surface {
     }
 
     /// The family at texture coordinates `uv`, seen from the front of the surface or from its back.
-    #[inline]
+    #[inline(always)]
     fn resolve(&self, uv: Vec2, front: bool) -> Model {
         match self {
             Surface::Diffuse { reflectance } => Model::Diffuse(Diffuse { reflectance: reflectance.eval(uv) }),
@@ -291,6 +291,7 @@ pub struct Material {
     pub opacity: Option<Texture>,
     uses_uv: bool,
     needs_tangent: bool,
+    has_delta: bool,
 }
 
 impl Material {
@@ -302,7 +303,12 @@ impl Material {
         };
         let uses_uv = front.varies() || back_varies || opacity.as_ref().is_some_and(Texture::varies);
         let needs_tangent = front.needs_tangent() || back_tangent;
-        Material { front, back, opacity, uses_uv, needs_tangent }
+        let back_delta = match &back {
+            Back::Other(s) => s.flags().is_specular(),
+            _ => false,
+        };
+        let has_delta = front.flags().is_specular() || back_delta || opacity.is_some();
+        Material { front, back, opacity, uses_uv, needs_tangent, has_delta }
     }
 
     /// A material that scatters alike from both sides (every family of photonfarm's own scene format).
@@ -338,18 +344,15 @@ impl Material {
     }
 
     /// True when some side has a delta lobe (then caustics exist), or the surface is partly cut out.
+    #[inline]
     pub fn has_delta(&self) -> bool {
-        let back = match &self.back {
-            Back::Other(s) => s.flags().is_specular(),
-            _ => false,
-        };
-        self.front.flags().is_specular() || back || self.opacity.is_some()
+        self.has_delta
     }
 
     /// The BSDF at `hit` (texture coordinates `uv`) for a path arriving from `wo`: the side `wo` lies on, by
     /// the geometric normal, chooses the family, and the frame is turned to that side. The frame's tangents are
     /// those `Frame::from_normal` picks (Mitsuba's `coordinate_system`).
-    #[inline]
+    #[inline(always)]
     pub fn bsdf(&self, hit: &SurfaceHit, uv: Vec2, wo: Vec3) -> Bsdf {
         self.bsdf_in_frame(hit, uv, None, wo)
     }
@@ -361,7 +364,7 @@ impl Material {
         self.bsdf_in_frame(hit, uv, Some(tangent), wo)
     }
 
-    #[inline]
+    #[inline(always)]
     fn bsdf_in_frame(&self, hit: &SurfaceHit, uv: Vec2, tangent: Option<Vec3>, wo: Vec3) -> Bsdf {
         let front = wo.dot(hit.ng) >= 0.0;
         let (ng, ns) = if front { (hit.ng, hit.ns) } else { (-hit.ng, -hit.ns) };

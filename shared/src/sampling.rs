@@ -151,6 +151,7 @@ pub struct Frame {
 
 impl Frame {
     /// Builds a frame whose third axis is `n`.
+    #[inline]
     pub fn from_normal(n: Vec3) -> Self {
         let sign = 1.0f32.copysign(n.z);
         let a = -1.0 / (sign + n.z);

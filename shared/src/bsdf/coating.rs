@@ -1,7 +1,7 @@
 //! A thin partially reflecting coating (a head-up display's combiner): specular reflection with a
 //! reflectance, straight-through transmission with a transmittance, the rest absorbed, the same from both sides.
 
-use super::{grey_at, BsdfSample, LobeFlags, Scatter, Transport};
+use super::{grey_at, BsdfSample, DeltaBranches, LobeFlags, Scatter, Transport};
 use crate::color::{luminance, Rgb};
 use crate::spectrum::Wavelength;
 use glam::{Vec2, Vec3};
@@ -22,16 +22,16 @@ impl Coating {
     }
 
     /// Both delta continuations for `wo` with the probability `sample` picks each.
-    pub fn delta_branches(&self, wo: Vec3) -> Vec<(BsdfSample, f32)> {
-        let Some(p) = self.p_reflect() else { return Vec::new() };
-        let mut branches = Vec::with_capacity(2);
+    pub fn delta_branches(&self, wo: Vec3) -> DeltaBranches {
+        let mut branches = DeltaBranches::default();
+        let Some(p) = self.p_reflect() else { return branches };
         if p > 0.0 {
             let r = BsdfSample::specular(Vec3::new(-wo.x, -wo.y, wo.z), self.reflectance / p, LobeFlags::REFLECTION);
-            branches.push((r, p));
+            branches.push(r, p);
         }
         if p < 1.0 {
             let t = BsdfSample::specular(-wo, self.transmittance / (1.0 - p), LobeFlags::TRANSMISSION);
-            branches.push((t, 1.0 - p));
+            branches.push(t, 1.0 - p);
         }
         branches
     }

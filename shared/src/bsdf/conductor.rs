@@ -5,7 +5,7 @@
 use super::fresnel::fresnel_conductor_rgb;
 use super::metals::{self, UnknownMetal};
 use super::microfacet::Microfacet;
-use super::{grey_at, stores_glossy, BsdfSample, LobeFlags, Scatter, Transport};
+use super::{grey_at, stores_glossy, BsdfSample, DeltaBranches, LobeFlags, Scatter, Transport};
 use crate::color::Rgb;
 use crate::spectrum::Wavelength;
 use glam::{Vec2, Vec3};
@@ -63,11 +63,14 @@ impl Conductor {
     }
 
     /// The mirror branch of a smooth conductor, with probability 1; none for a rough one.
-    pub fn delta_branches(&self, wo: Vec3) -> Vec<(BsdfSample, f32)> {
-        match self.roughness {
-            None => self.sample(wo, Vec2::ZERO, Transport::Radiance).map(|s| (s, 1.0)).into_iter().collect(),
-            Some(_) => Vec::new(),
+    pub fn delta_branches(&self, wo: Vec3) -> DeltaBranches {
+        let mut branches = DeltaBranches::default();
+        if self.roughness.is_none() {
+            if let Some(s) = self.sample(wo, Vec2::ZERO, Transport::Radiance) {
+                branches.push(s, 1.0);
+            }
         }
+        branches
     }
 }
 

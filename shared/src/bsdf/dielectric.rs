@@ -2,7 +2,7 @@
 //! wavelength (dispersion), with an ideal anti-reflection coating as an option.
 
 use super::fresnel::fresnel_dielectric;
-use super::{BsdfSample, LobeFlags, Scatter, Transport};
+use super::{BsdfSample, DeltaBranches, LobeFlags, Scatter, Transport};
 use crate::color::Rgb;
 use crate::spectrum::{RefractiveIndex, Wavelength};
 use glam::{Vec2, Vec3};
@@ -76,14 +76,14 @@ impl Dielectric {
     }
 
     /// Both delta continuations for `wo` with the probability `sample` picks each.
-    pub fn delta_branches(&self, wo: Vec3) -> Vec<(BsdfSample, f32)> {
+    pub fn delta_branches(&self, wo: Vec3) -> DeltaBranches {
         let p_reflect = self.reflectance(wo).1;
-        let mut branches = Vec::with_capacity(2);
+        let mut branches = DeltaBranches::default();
         // `sample` reflects when u.x < F and refracts otherwise.
         for (u, p) in [(0.0, p_reflect), (1.0 - f32::EPSILON / 2.0, 1.0 - p_reflect)] {
             if p > 0.0 {
                 if let Some(s) = self.sample(wo, Vec2::new(u, 0.5), Transport::Radiance) {
-                    branches.push((s, p));
+                    branches.push(s, p);
                 }
             }
         }

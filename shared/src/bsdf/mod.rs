@@ -178,6 +178,51 @@ impl BsdfSample {
     }
 }
 
+/// The continuations a BSDF's delta lobes can take for one direction, each with the probability that sampling
+/// picks it ([`Bsdf::delta_branches`]): at most three (a cut-out's hole and two lobes). They are kept inline, not
+/// allocated, since the lit-pixel mask asks for them at every surface its rays meet.
+#[derive(Clone, Copy, Debug)]
+pub struct DeltaBranches {
+    items: [(BsdfSample, f32); 3],
+    len: usize,
+}
+
+impl Default for DeltaBranches {
+    #[inline]
+    fn default() -> Self {
+        let none = (BsdfSample::specular(Vec3::ZERO, Rgb::ZERO, LobeFlags::NONE), 0.0);
+        DeltaBranches { items: [none; 3], len: 0 }
+    }
+}
+
+impl DeltaBranches {
+    /// Adds the branch `s` taken with probability `p`.
+    #[inline]
+    pub fn push(&mut self, s: BsdfSample, p: f32) {
+        self.items[self.len] = (s, p);
+        self.len += 1;
+    }
+}
+
+impl std::ops::Deref for DeltaBranches {
+    type Target = [(BsdfSample, f32)];
+
+    #[inline]
+    fn deref(&self) -> &Self::Target {
+        &self.items[..self.len]
+    }
+}
+
+impl IntoIterator for DeltaBranches {
+    type Item = (BsdfSample, f32);
+    type IntoIter = std::iter::Take<std::array::IntoIter<(BsdfSample, f32), 3>>;
+
+    #[inline]
+    fn into_iter(self) -> Self::IntoIter {
+        self.items.into_iter().take(self.len)
+    }
+}
+
 /// What every family provides, in its local frame (see the module's doc for the conventions).
 pub trait Scatter {
     /// The lobes the BSDF has, with `LobeFlags::STORED` when some non-delta lobe is stored.
@@ -389,27 +434,14 @@ impl Bsdf {
     /// the geometry.
     #[inline]
     pub fn sample(&self, wo: Vec3, u: Vec2, mode: Transport) -> Option<BsdfSample> {
-        self.sample_with(wo, u, mode, |m, lo, u| dispatch!(m, m => m.sample(lo, u, mode), None))
+        // A smooth dielectric's own sampling is its choice by Fresnel reflectance.
+        self.sample_reflecting(wo, u, mode, Reflection::Fresnel)
     }
 
     /// `sample` where a smooth dielectric chooses between reflection and refraction by `choice` rather than by
     /// its Fresnel reflectance (`Dielectric::sample_reflecting`); other families sample as `sample` does.
-    #[inline]
-    pub fn sample_reflecting(&self, wo: Vec3, u: Vec2, mode: Transport, choice: Reflection) -> Option<BsdfSample> {
-        self.sample_with(wo, u, mode, |m, lo, u| match m {
-            Model::Dielectric(d) => d.sample_reflecting(lo, u, mode, choice),
-            m => dispatch!(m, m => m.sample(lo, u, mode), None),
-        })
-    }
-
     #[inline(always)]
-    fn sample_with(
-        &self,
-        wo: Vec3,
-        mut u: Vec2,
-        mode: Transport,
-        family: impl FnOnce(&Model, Vec3, Vec2) -> Option<BsdfSample>,
-    ) -> Option<BsdfSample> {
+    pub fn sample_reflecting(&self, wo: Vec3, mut u: Vec2, mode: Transport, choice: Reflection) -> Option<BsdfSample> {
         if self.opacity < 1.0 {
             // The cut-out's share passes straight through, a delta transmission of weight 1.
             let pass = 1.0 - self.opacity;
@@ -419,7 +451,10 @@ impl Bsdf {
             u.x = ((u.x - pass) / self.opacity).min(1.0 - f32::EPSILON / 2.0);
         }
         let lo = self.frame.to_local(wo);
-        let mut s = family(&self.model, lo, u)?;
+        let mut s = match &self.model {
+            Model::Dielectric(d) => d.sample_reflecting(lo, u, mode, choice),
+            m => dispatch!(m, m => m.sample(lo, u, mode), None),
+        }?;
         let local_z = s.wi.z;
         s.wi = self.frame.to_world(s.wi);
         if !s.is_delta() && !self.sides_agree(s.wi, local_z) {
@@ -459,10 +494,10 @@ impl Bsdf {
     /// Every continuation a delta lobe can take for `wo` with the probability that `sample` picks it. Empty
     /// where no lobe is a delta. Lets a caller follow every specular branch of a camera path instead of
     /// sampling one.
-    pub fn delta_branches(&self, wo: Vec3) -> Vec<(BsdfSample, f32)> {
-        let mut branches = Vec::with_capacity(3);
+    pub fn delta_branches(&self, wo: Vec3) -> DeltaBranches {
+        let mut branches = DeltaBranches::default();
         if self.opacity < 1.0 {
-            branches.push((BsdfSample::specular(-wo, Rgb::ONE, LobeFlags::TRANSMISSION), 1.0 - self.opacity));
+            branches.push(BsdfSample::specular(-wo, Rgb::ONE, LobeFlags::TRANSMISSION), 1.0 - self.opacity);
         }
         let lo = self.frame.to_local(wo);
         let family = match &self.model {
@@ -471,11 +506,11 @@ impl Bsdf {
             Model::Coating(c) => c.delta_branches(lo),
             Model::ThinDielectric(t) => t.delta_branches(lo),
             Model::Plastic(p) => p.delta_branches(lo),
-            Model::Diffuse(_) | Model::RoughDielectric(_) | Model::Principled(_) | Model::Black => Vec::new(),
+            Model::Diffuse(_) | Model::RoughDielectric(_) | Model::Principled(_) | Model::Black => return branches,
         };
         for (mut s, p) in family {
             s.wi = self.frame.to_world(s.wi);
-            branches.push((s, p * self.opacity));
+            branches.push(s, p * self.opacity);
         }
         branches
     }

@@ -20,7 +20,7 @@
 
 use super::fresnel::fresnel_dielectric;
 use super::microfacet::{Distribution, Microfacet};
-use super::{grey_at, stores_glossy, BsdfSample, ByClass, LobeFlags, Scatter, Transport};
+use super::{grey_at, stores_glossy, BsdfSample, ByClass, DeltaBranches, LobeFlags, Scatter, Transport};
 use crate::color::Rgb;
 use crate::sampling::cosine_hemisphere;
 use crate::spectrum::Wavelength;
@@ -170,15 +170,19 @@ impl Plastic {
     }
 
     /// The smooth coat's mirror branch for `wo` with the probability `sample` picks it; none for a rough coat.
-    pub fn delta_branches(&self, wo: Vec3) -> Vec<(BsdfSample, f32)> {
+    pub fn delta_branches(&self, wo: Vec3) -> DeltaBranches {
+        let mut branches = DeltaBranches::default();
         if self.coat != Coat::Smooth || wo.z <= 0.0 {
-            return Vec::new();
+            return branches;
         }
         let p = self.p_coat(wo);
         if p <= 0.0 {
-            return Vec::new();
+            return branches;
         }
-        self.sample(wo, Vec2::new(0.0, 0.5), Transport::Radiance).map(|s| (s, p)).into_iter().collect()
+        if let Some(s) = self.sample(wo, Vec2::new(0.0, 0.5), Transport::Radiance) {
+            branches.push(s, p);
+        }
+        branches
     }
 }
 

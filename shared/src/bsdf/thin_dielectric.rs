@@ -7,7 +7,7 @@
 //! `specular_reflectance` and `specular_transmittance` (default 1, factors on the two lobes).
 
 use super::fresnel::fresnel_dielectric;
-use super::{grey_at, BsdfSample, LobeFlags, Scatter, Transport};
+use super::{grey_at, BsdfSample, DeltaBranches, LobeFlags, Scatter, Transport};
 use crate::color::Rgb;
 use crate::spectrum::{RefractiveIndex, Wavelength};
 use glam::{Vec2, Vec3};
@@ -33,13 +33,13 @@ impl ThinDielectric {
     }
 
     /// Both delta continuations for `wo` with the probability `sample` picks each.
-    pub fn delta_branches(&self, wo: Vec3) -> Vec<(BsdfSample, f32)> {
+    pub fn delta_branches(&self, wo: Vec3) -> DeltaBranches {
         let r = self.reflectance(wo);
-        let mut branches = Vec::with_capacity(2);
+        let mut branches = DeltaBranches::default();
         for (u, p) in [(0.0, r), (1.0 - f32::EPSILON / 2.0, 1.0 - r)] {
             if p > 0.0 {
                 if let Some(s) = self.sample(wo, Vec2::new(u, 0.5), Transport::Radiance) {
-                    branches.push((s, p));
+                    branches.push(s, p);
                 }
             }
         }

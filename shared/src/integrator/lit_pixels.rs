@@ -77,7 +77,8 @@ fn sees_emitter(scene: &Scene, rays: impl Iterator<Item = Ray>, max_depth: u32) 
         if scene.lights.emitted(&hit, ray.direction) != Rgb::ZERO {
             return true;
         }
-        if segment >= max_depth {
+        // Most surfaces have no delta lobe: a cached flag skips resolving their BSDF, which would find no branch.
+        if segment >= max_depth || !scene.material_at(&hit).has_delta() {
             continue;
         }
         let wo = -ray.direction;

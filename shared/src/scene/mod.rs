@@ -143,7 +143,7 @@ impl Scene {
     /// The BSDF at `hit` for a path arriving from `wo` (pointing back along the path), with the material's
     /// textures read at the hit's texture coordinates and, for an anisotropic material, its frame oriented by
     /// the surface's tangent (`Scene::tangent_at`).
-    #[inline]
+    #[inline(always)]
     pub fn bsdf(&self, hit: &SurfaceHit, wo: Vec3) -> Bsdf {
         let material = self.material_at(hit);
         if material.needs_tangent() {
