@@ -1,7 +1,7 @@
 //! `coordinator render` on a Mitsuba 3 scene file with real processes: an XML scene with an include, a search
 //! path, PLY and serialized meshes, a bitmap texture and a `$name` parameter renders on every method, and its
 //! three-level workers, which receive the XML, the include and every mesh and texture by hash, render the image
-//! one process does.
+//! one process does; so do two workers given the shipped `scenes/mitsuba/cornell.xml` and its PLY meshes.
 
 mod common;
 
@@ -154,4 +154,43 @@ fn an_xml_scene_renders_on_every_method_and_three_level_workers_render_the_image
         coordinator(&scene, &out, &[&define[..], &args[..]].concat());
         assert_eq!(record(&out)["scene_hash"], r["scene_hash"], "{method}");
     }
+}
+
+#[test]
+fn the_shipped_mitsuba_cornell_box_renders_over_two_worker_processes_to_the_image_of_one_process() {
+    let dir = scratch_dir("mitsuba-cornell");
+    let scene = repo_root().join("scenes/mitsuba/cornell.xml");
+    let small = ["--define", "resx=32", "--define", "resy=32"];
+    let (single, three) = (dir.join("single"), dir.join("three"));
+    coordinator(&scene, &single, &[&small[..], &["--method", "pbpm", "--phases", "300", "--seed", "5"]].concat());
+    coordinator(
+        &scene,
+        &three,
+        &[
+            &small[..],
+            &[
+                "--method",
+                "three-level",
+                "--topology",
+                TWO_NODES,
+                "--group-size",
+                "1",
+                "--phases",
+                "300",
+                "--seed",
+                "6",
+            ],
+        ]
+        .concat(),
+    );
+    let (r, r3) = (record(&single), record(&three));
+    assert_eq!((r3["width"].as_u64(), r3["height"].as_u64()), (Some(32), Some(32)));
+    assert_eq!(r3["scene_hash"], r["scene_hash"]);
+    let workers = r3["workers"].as_array().unwrap();
+    assert_eq!(workers.len(), 2, "{workers:?}");
+    // Each worker rebuilt the scene from the XML and the eight PLY files it was sent, or its job would have failed.
+    for w in workers {
+        assert_eq!(w["state"], "finished", "{w}");
+    }
+    assert_same_image(&single, &three, "shipped cornell.xml, three-level against one process");
 }
