@@ -4,31 +4,12 @@
 
 mod common;
 
-use common::settings;
+use common::{settings, shipped_at};
 use photonfarm::accumulation::Accumulator;
 use photonfarm::color::luminance_f64;
 use photonfarm::integrator::Layer;
 use photonfarm::render::{Engine, Method};
 use photonfarm::scene::Scene;
-use std::path::Path;
-
-/// The shipped scene `name` rendered at `width` × `height` pixels.
-fn shipped_at(name: &str, width: u32, height: u32) -> Scene {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
-    let text = std::fs::read_to_string(dir.join(name)).unwrap();
-    let mut resized = String::new();
-    for line in text.lines() {
-        match line.split('=').next().map(str::trim) {
-            Some("width") => resized.push_str(&format!("width = {width}\n")),
-            Some("height") => resized.push_str(&format!("height = {height}\n")),
-            _ => {
-                resized.push_str(line);
-                resized.push('\n');
-            }
-        }
-    }
-    Scene::from_toml(&resized, &dir.join(name), &dir).unwrap_or_else(|e| panic!("{e}"))
-}
 
 /// Runs PBPM and the path tracer side by side, single-threaded, and returns their sums.
 fn render_both(scene: &Scene, pbpm_phases: usize, path_phases: usize) -> (Accumulator, Accumulator) {

@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{mean_sem, regions_phase_means, settings};
+use common::{mean_sem, regions_phase_means, settings, shipped_at};
 use glam::{Vec2, Vec3};
 use photonfarm::accumulation::Accumulator;
 use photonfarm::color::luminance_f64;
@@ -15,24 +15,6 @@ use std::path::Path;
 
 fn scenes_dir() -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes")
-}
-
-/// The TOML scene `name` at `width` × `height` pixels.
-fn toml_at(name: &str, width: u32, height: u32) -> Scene {
-    let dir = scenes_dir();
-    let text = std::fs::read_to_string(dir.join(name)).unwrap();
-    let mut resized = String::new();
-    for line in text.lines() {
-        match line.split('=').next().map(str::trim) {
-            Some("width") => resized.push_str(&format!("width = {width}\n")),
-            Some("height") => resized.push_str(&format!("height = {height}\n")),
-            _ => {
-                resized.push_str(line);
-                resized.push('\n');
-            }
-        }
-    }
-    Scene::from_toml(&resized, &dir.join(name), &dir).unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// The Mitsuba twin `name` at `width` × `height` pixels, through its `resx` and `resy` parameters.
@@ -151,7 +133,7 @@ fn assert_twins_converge(name: &str, xml: &Scene, toml: &Scene, phases: usize) {
 
 /// Loads both twins at the test size and checks everything but the image.
 fn twins(xml_name: &str, toml_name: &str, width: u32, height: u32) -> (Scene, Scene) {
-    let (xml, toml) = (xml_at(xml_name, width, height), toml_at(toml_name, width, height));
+    let (xml, toml) = (xml_at(xml_name, width, height), shipped_at(toml_name, width, height));
     assert_same_camera(&xml, &toml);
     assert_same_lights(&xml, &toml);
     assert_eq!(xml.render.max_depth, toml.render.max_depth, "max_depth");

@@ -22,6 +22,24 @@ pub fn shipped(name: &str) -> Scene {
     Scene::load(&path).unwrap_or_else(|e| panic!("{e}"))
 }
 
+/// The shipped scene `name` rendered at `width` × `height` pixels (its `width` and `height` lines rewritten).
+pub fn shipped_at(name: &str, width: u32, height: u32) -> Scene {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+    let text = std::fs::read_to_string(dir.join(name)).unwrap();
+    let mut resized = String::new();
+    for line in text.lines() {
+        match line.split('=').next().map(str::trim) {
+            Some("width") => resized.push_str(&format!("width = {width}\n")),
+            Some("height") => resized.push_str(&format!("height = {height}\n")),
+            _ => {
+                resized.push_str(line);
+                resized.push('\n');
+            }
+        }
+    }
+    Scene::from_toml(&resized, &dir.join(name), &dir).unwrap_or_else(|e| panic!("{e}"))
+}
+
 /// Settings of the scene with the given method and seed.
 pub fn settings(scene: &Scene, method: Method, seed: u64) -> RenderSettings {
     RenderSettings::for_scene(scene, method, seed)
