@@ -260,8 +260,8 @@ impl<'d> Importer<'d> {
         if !lights.any() {
             return Err(MitsubaError::in_file(
                 start,
-                "the scene has no light photonfarm renders: give a shape an <emitter type=\"area\"> or add a point \
-                 or spot emitter",
+                "the scene has no light photonfarm renders: give a shape an <emitter type=\"area\"> or add a point, \
+                 spot, envmap, constant or directional emitter",
             ));
         }
         let has_delta_surfaces = self.objects.iter().any(|o| self.materials[o.material as usize].has_delta());

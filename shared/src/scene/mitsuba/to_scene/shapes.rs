@@ -1,6 +1,5 @@
 //! Shapes: `obj`, `ply`, `serialized`, `rectangle` and `cube` as triangles, `sphere` and `disk` as analytic
-//! surfaces, each with its BSDF (Mitsuba's diffuse default when it names none) and, on triangles, an `area`
-//! emitter.
+//! surfaces, each with its BSDF (Mitsuba's diffuse default when it names none) and an `area` emitter.
 
 use super::meshes::{read_obj, read_ply, read_serialized, IndexedMesh, Placement};
 use super::params::Params;
@@ -64,12 +63,6 @@ impl Importer<'_> {
                 }
             }
             "sphere" | "disk" => {
-                if emission.is_some() {
-                    return Err(p.error(format!(
-                        "an area emitter on a {kind} is not supported yet (emitting analytic shapes are being wired); \
-                         a mesh (obj, ply, serialized, rectangle, cube) can emit"
-                    )));
-                }
                 if self.materials[material as usize].uses_uv() {
                     return Err(
                         p.error(format!("its BSDF is textured but photonfarm's {kind} has no texture coordinates"))
@@ -79,6 +72,14 @@ impl Importer<'_> {
                     return Err(p.error(format!("flip_normals on a {kind} is not supported")));
                 }
                 let shape = analytic(&p, &kind, &placement)?;
+                if let Some(le) = emission.filter(|e| *e != Rgb::ZERO) {
+                    // Mitsuba's area emitter radiates from the side the surface normal faces: a sphere's outside,
+                    // a disk's transformed +z, which `analytic` made the disc's emitting side.
+                    let light = Light::of_analytic(id, &shape, le)
+                        .ok_or_else(|| p.error(format!("photonfarm's {kind} cannot emit")))?;
+                    self.lights.push(light);
+                    self.light_textures.push(None);
+                }
                 self.analytic.push((id, shape));
             }
             "shapegroup" | "instance" => {
