@@ -1,7 +1,8 @@
 //! Mitsuba 3 scenes imported into photonfarm's `Scene`: a room written in both formats renders the same image,
 //! every BSDF maps to its family, PLY (ASCII, both binary byte orders) and serialized meshes load with their
-//! texture coordinates, mirrored meshes keep their sides, a worker rebuilds the same scene from the job's files,
-//! and unsupported or malformed input is refused at its file, line and element.
+//! texture coordinates, mirrored meshes keep their sides, every emitter type maps to the light of its TOML twin,
+//! instances are their group's shapes written out, a worker rebuilds the same scene from the job's files, and
+//! unsupported or malformed input is refused at its file, line and element.
 
 mod common;
 
@@ -9,6 +10,7 @@ use common::{mean_sem, regions_phase_means, settings};
 use glam::{DMat3, DVec3, Vec2, Vec3};
 use photonfarm::bsdf::conductor::ConductorFresnel;
 use photonfarm::bsdf::plastic::Coat;
+use photonfarm::geometry::Analytic;
 use photonfarm::light::infinite::InfiniteLight;
 use photonfarm::light::Light;
 use photonfarm::material::{Back, Surface};
@@ -480,6 +482,72 @@ fn an_envmap_shows_each_texel_in_mitsubas_direction_turned_by_a_rotating_or_mirr
             }
         }
     }
+}
+
+#[test]
+fn instances_of_a_shapegroup_are_its_shapes_written_out_with_the_instance_transform_after_their_own() {
+    let obj = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//1\n";
+    let triangle = r#"<shape type="obj"><string name="filename" value="tri.obj"/>
+        <transform name="to_world"><rotate y="1" angle="20"/><translate z="-1"/></transform>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0.3"/></bsdf></shape>"#;
+    let ball = r#"<shape type="sphere"><point name="center" x="0.5" y="0" z="0"/><float name="radius" value="0.2"/>
+        <transform name="to_world"><scale value="2"/></transform></shape>"#;
+    let instances =
+        [r#"<translate x="3" y="-1"/><rotate z="1" angle="35"/>"#, r#"<scale x="-1"/><translate x="-2" z="-4"/>"#];
+    let grouped = format!(
+        r#"<shape type="shapegroup" id="pair">{triangle}{ball}</shape>
+        <shape type="shapegroup" id="unused"><shape type="cube"/></shape>
+        <shape type="instance"><ref id="pair"/><transform name="to_world">{}</transform></shape>
+        <shape type="instance"><ref id="pair"/><transform name="to_world">{}</transform></shape>"#,
+        instances[0], instances[1]
+    );
+    // Written out: each shape's own transform elements, then the instance's (later elements apply after).
+    let written_out: String = instances
+        .iter()
+        .map(|t| {
+            let own = |shape: &str| shape.replace("</transform>", &format!("{t}</transform>"));
+            own(triangle) + &own(ball)
+        })
+        .collect();
+    let files: [(&str, &[u8]); 1] = [("tri.obj", obj)];
+    let a = import(&scene_with(&grouped), &files).unwrap();
+    let b = import(&scene_with(&written_out), &files).unwrap();
+    // The emitting rectangle's two triangles and one per instanced triangle; the unused group adds nothing.
+    assert_eq!(a.geometry.triangle_count(), 4);
+    assert_eq!(b.geometry.triangle_count(), 4);
+    let close = |x: Vec3, y: Vec3| (x - y).length() < 1e-5;
+    for i in 0..4 {
+        let (s, t) = (a.geometry.triangle(i), b.geometry.triangle(i));
+        let normals = match (s.n, t.n) {
+            (Some(m), Some(n)) => (0..3).all(|k| close(m[k], n[k])),
+            (m, n) => m.is_none() && n.is_none(),
+        };
+        assert!((0..3).all(|k| close(s.v[k], t.v[k])) && normals, "triangle {i}: {s:?} vs {t:?}");
+    }
+    let (sa, sb) = (a.geometry.analytic_surfaces(), b.geometry.analytic_surfaces());
+    assert_eq!(sa.len(), 2);
+    for ((ia, x), (ib, y)) in sa.iter().zip(sb) {
+        let (Analytic::Sphere(x), Analytic::Sphere(y)) = (x, y) else { panic!("{x:?} vs {y:?}") };
+        assert!(ia == ib && close(x.center, y.center) && (x.radius - y.radius).abs() < 1e-6, "{x:?} vs {y:?}");
+    }
+    assert_eq!(a.objects.len(), b.objects.len());
+    for (x, y) in a.objects.iter().zip(&b.objects) {
+        assert_eq!(a.materials[x.material as usize], b.materials[y.material as usize]);
+    }
+    // What Mitsuba refuses in a group is refused here at its line.
+    refused(
+        "<shape type=\"shapegroup\" id=\"g\"><shape type=\"sphere\">\n<emitter type=\"area\"/></shape></shape>",
+        "type=\"area\"/>",
+        "area",
+        "does not instance emitters",
+    );
+    refused(
+        "<shape type=\"shapegroup\" id=\"g\">\n<shape type=\"shapegroup\" id=\"h\"/></shape>",
+        "id=\"h\"",
+        "shapegroup",
+        "not allowed",
+    );
+    refused("<shape type=\"instance\">\n<shape type=\"sphere\"/></shape>", "instance", "instance", "one shapegroup");
 }
 
 /// A unit quad in the plane z = 0 with texture coordinates, as PLY in `format`.

@@ -23,6 +23,7 @@ use crate::material::Material;
 use crate::scene::{Scene, SceneError, SceneObject, SceneRenderSettings};
 use crate::texture::{Bitmap, Encoding};
 use glam::Vec2;
+use meshes::IndexedMesh;
 use params::Params;
 use sha2::{Digest, Sha256};
 use std::collections::{BTreeMap, HashMap};
@@ -81,6 +82,8 @@ struct Importer<'d> {
     materials: Vec<Material>,
     /// The material of each BSDF plugin already mapped (by address: a referenced BSDF is mapped once).
     material_of: HashMap<*const Plugin, u32>,
+    /// The mesh of each mesh shape already read (by address: an instanced shape is read once).
+    meshes: HashMap<*const Plugin, Arc<IndexedMesh>>,
     objects: Vec<SceneObject>,
     triangles: Vec<(u32, MeshTriangle)>,
     triangle_uvs: Vec<Option<[Vec2; 3]>>,
@@ -108,6 +111,7 @@ impl<'d> Importer<'d> {
             notes: Vec::new(),
             materials: Vec::new(),
             material_of: HashMap::new(),
+            meshes: HashMap::new(),
             objects: Vec::new(),
             triangles: Vec::new(),
             triangle_uvs: Vec::new(),
