@@ -16,7 +16,7 @@ use photonfarm::light::Light;
 use photonfarm::material::{Back, Surface};
 use photonfarm::render::{Engine, Method};
 use photonfarm::scene::mitsuba::serialized::{write_serialized, SerializedMesh};
-use photonfarm::scene::{Scene, SceneError};
+use photonfarm::scene::{MitsubaOptions, Scene, SceneError};
 use photonfarm::texture::Texture;
 use std::collections::BTreeMap;
 use std::f64::consts::{PI, TAU};
@@ -40,6 +40,11 @@ fn import(text: &str, files: &[(&str, &[u8])]) -> Result<Scene, SceneError> {
     all.push(("scene.xml", text.as_bytes()));
     let (_guard, dir) = folder(&all);
     Scene::load(&dir.join("scene.xml"))
+}
+
+/// Import options with these defines.
+fn defines(pairs: &[(&str, &str)]) -> MitsubaOptions {
+    MitsubaOptions { defines: pairs.iter().map(|(n, v)| (n.to_string(), v.to_string())).collect(), approximate: false }
 }
 
 /// The error of a scene that must not load.
@@ -550,6 +555,54 @@ fn instances_of_a_shapegroup_are_its_shapes_written_out_with_the_instance_transf
     refused("<shape type=\"instance\">\n<shape type=\"sphere\"/></shape>", "instance", "instance", "one shapegroup");
 }
 
+#[test]
+fn approximate_imports_what_has_no_counterpart_as_the_nearest_thing_and_notes_each_substitution_at_its_line() {
+    let body = r#"<integrator type="bdpt"><integer name="max_depth" value="7"/><boolean name="lightImage" value="true"/></integrator>
+<medium type="homogeneous" id="fog"/>
+<shape type="sphere"><bsdf type="hair"/></shape>
+<shape type="sphere"><point name="center" x="3" y="0" z="0"/><bsdf type="normalmap"><texture type="bitmap" name="normalmap"><string name="filename" value="n.png"/></texture><bsdf type="diffuse"><rgb name="reflectance" value="0.2"/></bsdf></bsdf></shape>
+<shape type="sphere"><point name="center" x="-3" y="0" z="0"/><ref name="interior" id="fog"/></shape>"#;
+    let text = scene_with(body);
+    let line_of = |needle: &str| text.lines().position(|l| l.contains(needle)).unwrap() + 1;
+    let (_guard, dir) = folder(&[("scene.xml", text.as_bytes())]);
+    let path = dir.join("scene.xml");
+    // Refused without the option, at the first thing that has no counterpart.
+    let e = error_of(Scene::load_with_options(&path, &MitsubaOptions::default()));
+    assert_eq!(e.line, Some(line_of("bdpt")), "{e}");
+    let approximate = MitsubaOptions { approximate: true, ..MitsubaOptions::default() };
+    let scene = Scene::load_with_options(&path, &approximate).unwrap();
+    assert_eq!(scene.render.max_depth, 7, "the other integrator's depth carries over");
+    // Object 0 is the emitting rectangle.
+    let m = |i: usize| &scene.materials[scene.objects[i].material as usize];
+    assert_eq!(m(1).front, Surface::Diffuse { reflectance: Texture::grey(0.5) }, "hair as Mitsuba's default BSDF");
+    assert_eq!(m(2).front, Surface::Diffuse { reflectance: Texture::grey(0.2) }, "the BSDF inside the normal map");
+    assert_eq!(scene.objects.len(), 4, "the shape inside a medium stays, in vacuum");
+    let approximated: Vec<&String> = scene.notes.iter().filter(|n| n.starts_with("approximated: ")).collect();
+    for (needle, element) in [
+        ("bdpt", "<integrator type=\"bdpt\">"),
+        ("homogeneous", "<medium type=\"homogeneous\">"),
+        ("hair", "<bsdf type=\"hair\">"),
+        ("normalmap", "<bsdf type=\"normalmap\">"),
+        ("interior", "<medium type=\"homogeneous\">"),
+    ] {
+        let at = format!("scene.xml:{}:", line_of(needle));
+        assert!(
+            approximated.iter().any(|n| n.contains(&at) && n.contains(element) && n.contains("; rendered ")),
+            "no note for {element} at {at}: {approximated:#?}"
+        );
+    }
+    assert_eq!(approximated.len(), 5, "{approximated:#?}");
+    // The option is part of the scene: a worker given it rebuilds the same scene, and without it none.
+    let files = BTreeMap::new();
+    let there = Scene::from_job_files(&text, Path::new("scene.xml"), &approximate, &files).unwrap();
+    assert_eq!(there.hash, scene.hash);
+    assert!(Scene::from_job_files(&text, Path::new("scene.xml"), &MitsubaOptions::default(), &files).is_err());
+    let toml = dir.join("room.toml");
+    std::fs::write(&toml, room_toml()).unwrap();
+    let e = error_of(Scene::load_with_options(&toml, &approximate));
+    assert!(e.message.contains("--approximate"), "{e}");
+}
+
 /// A unit quad in the plane z = 0 with texture coordinates, as PLY in `format`.
 fn ply_quad(format: &str) -> Vec<u8> {
     let header = format!(
@@ -695,14 +748,14 @@ fn a_worker_rebuilds_the_same_scene_from_the_job_files_includes_and_search_paths
     assert_eq!(keys, ["parts/room.xml", "../common/tex.png", "../common/meshes/quad.obj"]);
     let sent: BTreeMap<String, Vec<u8>> =
         here.mesh_files.iter().map(|(k, _)| (k.clone(), std::fs::read(dir.join("scenes").join(k)).unwrap())).collect();
-    let there = Scene::from_job_files(main, Path::new("main.xml"), &[], &sent).unwrap();
+    let there = Scene::from_job_files(main, Path::new("main.xml"), &MitsubaOptions::default(), &sent).unwrap();
     assert_eq!(there.mesh_files, here.mesh_files);
     assert_eq!(there.hash, here.hash);
     assert_eq!(there.geometry.triangle_count(), here.geometry.triangle_count());
     assert_eq!(there.materials, here.materials);
     let mut missing = sent.clone();
     missing.remove("../common/tex.png");
-    let e = error_of(Scene::from_job_files(main, Path::new("main.xml"), &[], &missing));
+    let e = error_of(Scene::from_job_files(main, Path::new("main.xml"), &MitsubaOptions::default(), &missing));
     assert!(e.to_string().contains("was not sent with the job"), "{e}");
 }
 
@@ -711,11 +764,11 @@ fn defines_override_defaults_and_change_the_hash() {
     let text = ROOM_XML;
     let (_guard, dir) = folder(&[("room.xml", text.as_bytes())]);
     let path = dir.join("room.xml");
-    let plain = Scene::load_with_defines(&path, &[]).unwrap();
-    let wide = Scene::load_with_defines(&path, &[("size".into(), "48".into())]).unwrap();
+    let plain = Scene::load_with_options(&path, &MitsubaOptions::default()).unwrap();
+    let wide = Scene::load_with_options(&path, &defines(&[("size", "48")])).unwrap();
     assert_eq!((plain.camera.width, wide.camera.width), (32, 48));
     assert_ne!(plain.hash, wide.hash);
-    let e = error_of(Scene::load_with_defines(&path, &[("sise".into(), "48".into())]));
+    let e = error_of(Scene::load_with_options(&path, &defines(&[("sise", "48")])));
     assert!(e.message.contains("sise"), "{e}");
 }
 

@@ -148,6 +148,14 @@ impl Importer<'_> {
                 )))
             }
         }
+        for medium in p.children_of(Category::Medium) {
+            let refusal = MitsubaError::at(
+                &medium.position,
+                medium.plugin.element(),
+                "participating media are not supported (photonfarm renders surfaces in vacuum)",
+            );
+            self.approximate(refusal, "without it")?;
+        }
         p.finish()?;
         self.objects.push(SceneObject { name, material, emission: emission.filter(|e| *e != Rgb::ZERO) });
         Ok(())
