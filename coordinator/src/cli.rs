@@ -228,6 +228,11 @@ pub struct RenderArgs {
     /// Set a Mitsuba scene's `$NAME` parameter, overriding its <default> (Mitsuba's -D); repeatable.
     #[arg(long = "define", short = 'D', value_name = "NAME=VALUE", value_parser = parse_define)]
     pub defines: Vec<(String, String)>,
+    /// Import what a Mitsuba scene has no exact counterpart for (another integrator, an unknown BSDF, a bump or
+    /// normal map, a medium, hide_emitters) as the nearest thing photonfarm renders instead of refusing it,
+    /// naming each substitution in the notes and the run record's flags.
+    #[arg(long)]
+    pub approximate: bool,
     /// Stop after this many seconds of rendering. Default when no stop rule is given: 30.
     #[arg(long, value_name = "SECONDS")]
     pub time: Option<f64>,

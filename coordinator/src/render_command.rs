@@ -20,7 +20,7 @@ use photonfarm::render::method::{Images, Processes};
 use photonfarm::render::record::{flags_of, HistoryEntry, RunRecord, WorkerRecord, WorkerState};
 use photonfarm::render::session::{self, ErrorOver, Progressive, StopReason, StopRule, Tracking};
 use photonfarm::render::{memory, ActiveTiles, Engine, Method, RenderSettings};
-use photonfarm::scene::Scene;
+use photonfarm::scene::{MitsubaOptions, Scene};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -33,7 +33,7 @@ const CHECKPOINT: &str = "checkpoint.bin";
 
 pub fn run(args: RenderArgs) -> Result<()> {
     let stop = stop_rule(&args)?;
-    let scene = Scene::load_with_defines(&args.scene, &args.defines)?;
+    let scene = Scene::load_with_options(&args.scene, &mitsuba_options(&args))?;
     check_method_options(&args)?;
     let mut settings = settings_of(&args, &scene)?;
     let reference = match &args.reference {
@@ -506,12 +506,17 @@ fn adaptive_tiles(args: &RenderArgs, scene: &Scene, stop: &StopRule) -> Result<O
     ))
 }
 
+/// How the command line imports a Mitsuba scene.
+fn mitsuba_options(args: &RenderArgs) -> MitsubaOptions {
+    MitsubaOptions { defines: args.defines.clone(), approximate: args.approximate }
+}
+
 /// What the launcher of worker processes takes from the command line.
 fn launch_options(args: &RenderArgs) -> LaunchOptions {
     LaunchOptions {
         method: args.method,
         scene_path: args.scene.clone(),
-        defines: args.defines.clone(),
+        mitsuba: mitsuba_options(args),
         topology: args.topology.clone(),
         remote_workers: args.workers.clone(),
         listen: args.listen,

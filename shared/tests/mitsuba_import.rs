@@ -1,20 +1,25 @@
 //! Mitsuba 3 scenes imported into photonfarm's `Scene`: a room written in both formats renders the same image,
 //! every BSDF maps to its family, PLY (ASCII, both binary byte orders) and serialized meshes load with their
-//! texture coordinates, mirrored meshes keep their sides, a worker rebuilds the same scene from the job's files,
-//! and unsupported or malformed input is refused at its file, line and element.
+//! texture coordinates, mirrored meshes keep their sides, every emitter type maps to the light of its TOML twin,
+//! instances are their group's shapes written out, a worker rebuilds the same scene from the job's files, and
+//! unsupported or malformed input is refused at its file, line and element.
 
 mod common;
 
 use common::{mean_sem, regions_phase_means, settings};
-use glam::{Vec2, Vec3};
+use glam::{DMat3, DVec3, Vec2, Vec3};
 use photonfarm::bsdf::conductor::ConductorFresnel;
 use photonfarm::bsdf::plastic::Coat;
+use photonfarm::geometry::Analytic;
+use photonfarm::light::infinite::InfiniteLight;
+use photonfarm::light::Light;
 use photonfarm::material::{Back, Surface};
 use photonfarm::render::{Engine, Method};
 use photonfarm::scene::mitsuba::serialized::{write_serialized, SerializedMesh};
-use photonfarm::scene::{Scene, SceneError};
+use photonfarm::scene::{MitsubaOptions, Scene, SceneError};
 use photonfarm::texture::Texture;
 use std::collections::BTreeMap;
+use std::f64::consts::{PI, TAU};
 use std::path::{Path, PathBuf};
 
 /// Writes `files` (name, contents) into a fresh folder and returns it with the folder's guard.
@@ -35,6 +40,11 @@ fn import(text: &str, files: &[(&str, &[u8])]) -> Result<Scene, SceneError> {
     all.push(("scene.xml", text.as_bytes()));
     let (_guard, dir) = folder(&all);
     Scene::load(&dir.join("scene.xml"))
+}
+
+/// Import options with these defines.
+fn defines(pairs: &[(&str, &str)]) -> MitsubaOptions {
+    MitsubaOptions { defines: pairs.iter().map(|(n, v)| (n.to_string(), v.to_string())).collect(), approximate: false }
 }
 
 /// The error of a scene that must not load.
@@ -237,6 +247,362 @@ fn each_bsdf_maps_to_its_family_with_mitsubas_defaults_and_sides() {
     assert_eq!(m(12), m(0), "a shape without a BSDF gets Mitsuba's default diffuse");
 }
 
+/// The texel (x, y) (y = 0 the top row) of the environment map the emitter tests write: every texel differs.
+fn env_texel(x: usize, y: usize) -> [f32; 3] {
+    [1.0 + x as f32, 1.0 + 2.0 * y as f32, 0.5 + 0.25 * (x + 3 * y) as f32]
+}
+
+/// An 8 × 4 environment map of `env_texel` as a PFM file (rows from the bottom up, little-endian).
+fn env_pfm() -> Vec<u8> {
+    let (w, h) = (8, 4);
+    let mut bytes = format!("PF\n{w} {h}\n-1.0\n").into_bytes();
+    for y in (0..h).rev() {
+        for x in 0..w {
+            for c in env_texel(x, y) {
+                bytes.extend(c.to_le_bytes());
+            }
+        }
+    }
+    bytes
+}
+
+/// Directions to compare lights along: a spiral over the whole sphere.
+fn spiral(n: usize) -> Vec<Vec3> {
+    (0..n)
+        .map(|i| {
+            let z = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
+            let phi = i as f32 * 2.399_963;
+            let r = (1.0 - z * z).sqrt();
+            Vec3::new(r * phi.cos(), z, r * phi.sin())
+        })
+        .collect()
+}
+
+/// Asserts that two lights are the same light: the same kind and parameters (to single-precision rounding of
+/// transforms), and for lights at infinity the same radiance and sampling density in every direction.
+fn assert_same_light(i: usize, a: &Light, b: &Light) {
+    let close = |x: Vec3, y: Vec3| (x - y).length() <= 1e-5 * (1.0 + y.length());
+    match (a, b) {
+        (
+            Light::Sphere { object: o1, center: c1, radius: r1, emission: e1 },
+            Light::Sphere { object: o2, center: c2, radius: r2, emission: e2 },
+        ) => {
+            assert_eq!((o1, e1), (o2, e2), "light {i}");
+            assert!(close(*c1, *c2) && (r1 - r2).abs() < 1e-6, "light {i}: {a:?} vs {b:?}");
+        }
+        (
+            Light::Disc { object: o1, center: c1, normal: n1, radius: r1, emission: e1 },
+            Light::Disc { object: o2, center: c2, normal: n2, radius: r2, emission: e2 },
+        ) => {
+            assert_eq!((o1, e1), (o2, e2), "light {i}");
+            assert!(close(*c1, *c2) && close(*n1, *n2) && (r1 - r2).abs() < 1e-6, "light {i}: {a:?} vs {b:?}");
+        }
+        (Light::Area { triangle: t1, emission: e1, .. }, Light::Area { triangle: t2, emission: e2, .. }) => {
+            assert_eq!((t1, e1), (t2, e2), "light {i}");
+        }
+        (Light::Infinite(x), Light::Infinite(y)) => {
+            assert_eq!(x.is_delta(), y.is_delta(), "light {i}");
+            assert!(close(x.radiance_integral(), y.radiance_integral()), "light {i}: {a:?} vs {b:?}");
+            for u in [Vec2::new(0.3, 0.7), Vec2::new(0.9, 0.1), Vec2::new(0.5, 0.5)] {
+                let (p, q) = (x.sample(u).unwrap(), y.sample(u).unwrap());
+                assert!(close(p.direction, q.direction) && p.delta == q.delta, "light {i} at {u}: {p:?} vs {q:?}");
+            }
+            for d in spiral(500) {
+                let (l1, l2) = (x.radiance(d), y.radiance(d));
+                assert!((l1 - l2).length() <= 1e-4 * (1.0 + l2.length()), "light {i} along {d}: {l1} vs {l2}");
+                let (p1, p2) = (x.pdf(d), y.pdf(d));
+                assert!((p1 - p2).abs() <= 1e-4 * (1.0 + p2), "light {i} pdf along {d}: {p1} vs {p2}");
+            }
+        }
+        _ => panic!("light {i}: {a:?} vs {b:?}"),
+    }
+}
+
+const EMITTERS_XML: &str = r#"<scene version="3.0.0">
+    <integrator type="path"><integer name="max_depth" value="4"/></integrator>
+    <sensor type="perspective">
+        <float name="fov" value="60"/>
+        <transform name="to_world"><lookat origin="0, 1.6, 3" target="0, 0.5, 0" up="0, 1, 0"/></transform>
+        <film type="hdrfilm"><integer name="width" value="32"/><integer name="height" value="24"/></film>
+    </sensor>
+    <shape type="rectangle">
+        <transform name="to_world"><scale value="2"/><rotate x="1" angle="-90"/></transform>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0.6, 0.6, 0.6"/></bsdf>
+    </shape>
+    <shape type="sphere">
+        <transform name="to_world"><scale value="0.25"/><translate x="-0.6" y="0.5" z="0.2"/></transform>
+        <emitter type="area"><rgb name="radiance" value="4, 2, 1"/></emitter>
+    </shape>
+    <shape type="disk">
+        <transform name="to_world"><scale value="0.3"/><rotate x="1" angle="90"/><translate x="0.5" y="1.2"/></transform>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0"/></bsdf>
+        <emitter type="area"><rgb name="radiance" value="3, 3, 5"/></emitter>
+    </shape>
+    <emitter type="envmap">
+        <string name="filename" value="env.pfm"/>
+        <float name="scale" value="0.05"/>
+        <transform name="to_world"><rotate y="1" angle="90"/><translate x="7"/></transform>
+    </emitter>
+    <emitter type="constant"><rgb name="radiance" value="0.05, 0.1, 0.2"/></emitter>
+    <emitter type="directional">
+        <vector name="direction" x="0.4" y="-1" z="-0.3"/>
+        <rgb name="irradiance" value="2, 1.8, 1.5"/>
+    </emitter>
+    <emitter type="directional">
+        <transform name="to_world"><rotate x="1" angle="70"/></transform>
+        <float name="irradiance" value="0.5"/>
+    </emitter>
+</scene>"#;
+
+/// The scene of `EMITTERS_XML` in photonfarm's format. The disk's normal, Mitsuba's +z turned by 90° about x,
+/// points down (−y): photonfarm's disc emits toward −axis, so its axis is +y. A 60° field of view along x on a
+/// 32 × 24 film is the vertical one below. The second directional light travels along +z turned by 70° about x.
+fn emitters_toml() -> String {
+    let fov_y = 2.0 * ((30f64).to_radians().tan() * 24.0 / 32.0).atan().to_degrees();
+    let (s, c) = 70f64.to_radians().sin_cos();
+    format!(
+        r#"
+[render]
+max_depth = 4
+[camera]
+position = [0.0, 1.6, 3.0]
+look_at = [0.0, 0.5, 0.0]
+fov_y_deg = {fov_y}
+width = 32
+height = 24
+[materials.floor]
+type = "diffuse"
+albedo = 0.6
+back = "black"
+[materials.default]
+type = "diffuse"
+albedo = 0.5
+back = "black"
+[materials.black]
+type = "diffuse"
+albedo = 0.0
+back = "black"
+[[objects]]
+material = "floor"
+quad = {{ corner = [-2.0, 0.0, 2.0], edge1 = [4.0, 0.0, 0.0], edge2 = [0.0, 0.0, -4.0] }}
+[[objects]]
+material = "default"
+emission = [4.0, 2.0, 1.0]
+sphere = {{ center = [-0.6, 0.5, 0.2], radius = 0.25 }}
+[[objects]]
+material = "black"
+emission = [3.0, 3.0, 5.0]
+annulus = {{ center = [0.5, 1.2, 0.0], axis = [0.0, 1.0, 0.0], inner_radius = 0.0, outer_radius = 0.3 }}
+[[lights]]
+type = "environment"
+filename = "env.pfm"
+scale = 0.05
+to_world = [[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]
+[[lights]]
+type = "environment"
+radiance = [0.05, 0.1, 0.2]
+[[lights]]
+type = "sun"
+direction = [0.4, -1.0, -0.3]
+irradiance = [2.0, 1.8, 1.5]
+[[lights]]
+type = "sun"
+direction = [0.0, {}, {c}]
+irradiance = [0.5, 0.5, 0.5]
+"#,
+        -s
+    )
+}
+
+#[test]
+fn each_emitter_type_maps_to_the_light_of_its_toml_twin_and_renders_its_image() {
+    let (pfm, toml) = (env_pfm(), emitters_toml());
+    let files: [(&str, &[u8]); 3] =
+        [("scene.xml", EMITTERS_XML.as_bytes()), ("twin.toml", toml.as_bytes()), ("env.pfm", &pfm)];
+    let (_guard, dir) = folder(&files);
+    let xml = Scene::load(&dir.join("scene.xml")).unwrap();
+    let twin = Scene::load(&dir.join("twin.toml")).unwrap();
+    let (a, b) = (xml.lights.all(), twin.lights.all());
+    assert_eq!(a.len(), 6, "{a:?}");
+    assert_eq!(a.len(), b.len());
+    for (i, (x, y)) in a.iter().zip(b).enumerate() {
+        assert_same_light(i, x, y);
+    }
+    let blocks: Vec<Vec<usize>> = (0..12)
+        .map(|b| {
+            let (bx, by) = (b % 4 * 8, b / 4 * 8);
+            (0..64).map(|i| (by + i / 8) * 32 + bx + i % 8).collect()
+        })
+        .collect();
+    let regions: Vec<(&[usize], _)> = blocks.iter().map(|b| (b.as_slice(), None)).collect();
+    let mut means = Vec::new();
+    for (scene, seed) in [(&xml, 11), (&twin, 12)] {
+        let mut engine = Engine::new(scene, settings(scene, Method::Path, seed));
+        means.push(regions_phase_means(&mut engine, 200, &regions));
+    }
+    for (b, (xml_block, toml_block)) in means[0].iter().zip(&means[1]).enumerate() {
+        let (m1, s1) = mean_sem(xml_block);
+        let (m2, s2) = mean_sem(toml_block);
+        let z = (m1 - m2) / (s1 * s1 + s2 * s2).sqrt().max(1e-12);
+        assert!(z.abs() < 4.5, "block {b}: {m1} ± {s1} (XML) vs {m2} ± {s2} (TOML), z = {z}");
+    }
+}
+
+#[test]
+fn an_envmap_shows_each_texel_in_mitsubas_direction_turned_by_a_rotating_or_mirroring_to_world() {
+    let pfm = env_pfm();
+    let (w, h) = (8, 4);
+    for transform in [
+        "<rotate y=\"1\" angle=\"30\"/><rotate x=\"1\" angle=\"-40\"/>",
+        "<scale x=\"-1\"/><rotate z=\"1\" angle=\"25\"/>",
+    ] {
+        let body = format!(
+            "<emitter type=\"envmap\"><string name=\"filename\" value=\"env.pfm\"/><float name=\"scale\" value=\"2\"/>\
+             <transform name=\"to_world\">{transform}<translate y=\"3\"/></transform></emitter>"
+        );
+        let scene = import(&scene_with(&body), &[("env.pfm", &pfm)]).unwrap();
+        let to_world = match scene.lights.all().iter().find_map(|l| match l {
+            Light::Infinite(InfiniteLight::Map(m)) => Some(m.clone()),
+            _ => None,
+        }) {
+            Some(m) => m,
+            None => panic!("no map among {:?}", scene.lights.all()),
+        };
+        // The same transform composed here: the map's frame to the world.
+        let m = match transform.contains("scale") {
+            false => DMat3::from_rotation_x((-40f64).to_radians()) * DMat3::from_rotation_y(30f64.to_radians()),
+            true => DMat3::from_rotation_z(25f64.to_radians()) * DMat3::from_diagonal(DVec3::new(-1.0, 1.0, 1.0)),
+        };
+        // Mitsuba's envmap: texel (x, y) is the radiance from u = (x + ½)/W, v = y/(H − 1), φ = 2πu, θ = πv,
+        // ω = (sin φ sin θ, cos θ, −cos φ sin θ) in the map's frame. The poles (top and bottom rows) are one
+        // direction each, so the rows between them are checked.
+        for y in 1..h - 1 {
+            for x in 0..w {
+                let (phi, theta) = (TAU * (x as f64 + 0.5) / w as f64, PI * y as f64 / (h - 1) as f64);
+                let local = DVec3::new(phi.sin() * theta.sin(), theta.cos(), -phi.cos() * theta.sin());
+                let d = (m * local).as_vec3();
+                let got = to_world.radiance(d);
+                let want = Vec3::from(env_texel(x, y)) * 2.0;
+                assert!((got - want).length() < 1e-3 * want.length(), "{transform}: texel ({x}, {y}) {got} vs {want}");
+            }
+        }
+    }
+}
+
+#[test]
+fn instances_of_a_shapegroup_are_its_shapes_written_out_with_the_instance_transform_after_their_own() {
+    let obj = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//1\n";
+    let triangle = r#"<shape type="obj"><string name="filename" value="tri.obj"/>
+        <transform name="to_world"><rotate y="1" angle="20"/><translate z="-1"/></transform>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0.3"/></bsdf></shape>"#;
+    let ball = r#"<shape type="sphere"><point name="center" x="0.5" y="0" z="0"/><float name="radius" value="0.2"/>
+        <transform name="to_world"><scale value="2"/></transform></shape>"#;
+    let instances =
+        [r#"<translate x="3" y="-1"/><rotate z="1" angle="35"/>"#, r#"<scale x="-1"/><translate x="-2" z="-4"/>"#];
+    let grouped = format!(
+        r#"<shape type="shapegroup" id="pair">{triangle}{ball}</shape>
+        <shape type="shapegroup" id="unused"><shape type="cube"/></shape>
+        <shape type="instance"><ref id="pair"/><transform name="to_world">{}</transform></shape>
+        <shape type="instance"><ref id="pair"/><transform name="to_world">{}</transform></shape>"#,
+        instances[0], instances[1]
+    );
+    // Written out: each shape's own transform elements, then the instance's (later elements apply after).
+    let written_out: String = instances
+        .iter()
+        .map(|t| {
+            let own = |shape: &str| shape.replace("</transform>", &format!("{t}</transform>"));
+            own(triangle) + &own(ball)
+        })
+        .collect();
+    let files: [(&str, &[u8]); 1] = [("tri.obj", obj)];
+    let a = import(&scene_with(&grouped), &files).unwrap();
+    let b = import(&scene_with(&written_out), &files).unwrap();
+    // The emitting rectangle's two triangles and one per instanced triangle; the unused group adds nothing.
+    assert_eq!(a.geometry.triangle_count(), 4);
+    assert_eq!(b.geometry.triangle_count(), 4);
+    let close = |x: Vec3, y: Vec3| (x - y).length() < 1e-5;
+    for i in 0..4 {
+        let (s, t) = (a.geometry.triangle(i), b.geometry.triangle(i));
+        let normals = match (s.n, t.n) {
+            (Some(m), Some(n)) => (0..3).all(|k| close(m[k], n[k])),
+            (m, n) => m.is_none() && n.is_none(),
+        };
+        assert!((0..3).all(|k| close(s.v[k], t.v[k])) && normals, "triangle {i}: {s:?} vs {t:?}");
+    }
+    let (sa, sb) = (a.geometry.analytic_surfaces(), b.geometry.analytic_surfaces());
+    assert_eq!(sa.len(), 2);
+    for ((ia, x), (ib, y)) in sa.iter().zip(sb) {
+        let (Analytic::Sphere(x), Analytic::Sphere(y)) = (x, y) else { panic!("{x:?} vs {y:?}") };
+        assert!(ia == ib && close(x.center, y.center) && (x.radius - y.radius).abs() < 1e-6, "{x:?} vs {y:?}");
+    }
+    assert_eq!(a.objects.len(), b.objects.len());
+    for (x, y) in a.objects.iter().zip(&b.objects) {
+        assert_eq!(a.materials[x.material as usize], b.materials[y.material as usize]);
+    }
+    // What Mitsuba refuses in a group is refused here at its line.
+    refused(
+        "<shape type=\"shapegroup\" id=\"g\"><shape type=\"sphere\">\n<emitter type=\"area\"/></shape></shape>",
+        "type=\"area\"/>",
+        "area",
+        "does not instance emitters",
+    );
+    refused(
+        "<shape type=\"shapegroup\" id=\"g\">\n<shape type=\"shapegroup\" id=\"h\"/></shape>",
+        "id=\"h\"",
+        "shapegroup",
+        "not allowed",
+    );
+    refused("<shape type=\"instance\">\n<shape type=\"sphere\"/></shape>", "instance", "instance", "one shapegroup");
+}
+
+#[test]
+fn approximate_imports_what_has_no_counterpart_as_the_nearest_thing_and_notes_each_substitution_at_its_line() {
+    let body = r#"<integrator type="bdpt"><integer name="max_depth" value="7"/><boolean name="lightImage" value="true"/></integrator>
+<medium type="homogeneous" id="fog"/>
+<shape type="sphere"><bsdf type="hair"/></shape>
+<shape type="sphere"><point name="center" x="3" y="0" z="0"/><bsdf type="normalmap"><texture type="bitmap" name="normalmap"><string name="filename" value="n.png"/></texture><bsdf type="diffuse"><rgb name="reflectance" value="0.2"/></bsdf></bsdf></shape>
+<shape type="sphere"><point name="center" x="-3" y="0" z="0"/><ref name="interior" id="fog"/></shape>"#;
+    let text = scene_with(body);
+    let line_of = |needle: &str| text.lines().position(|l| l.contains(needle)).unwrap() + 1;
+    let (_guard, dir) = folder(&[("scene.xml", text.as_bytes())]);
+    let path = dir.join("scene.xml");
+    // Refused without the option, at the first thing that has no counterpart.
+    let e = error_of(Scene::load_with_options(&path, &MitsubaOptions::default()));
+    assert_eq!(e.line, Some(line_of("bdpt")), "{e}");
+    let approximate = MitsubaOptions { approximate: true, ..MitsubaOptions::default() };
+    let scene = Scene::load_with_options(&path, &approximate).unwrap();
+    assert_eq!(scene.render.max_depth, 7, "the other integrator's depth carries over");
+    // Object 0 is the emitting rectangle.
+    let m = |i: usize| &scene.materials[scene.objects[i].material as usize];
+    assert_eq!(m(1).front, Surface::Diffuse { reflectance: Texture::grey(0.5) }, "hair as Mitsuba's default BSDF");
+    assert_eq!(m(2).front, Surface::Diffuse { reflectance: Texture::grey(0.2) }, "the BSDF inside the normal map");
+    assert_eq!(scene.objects.len(), 4, "the shape inside a medium stays, in vacuum");
+    let approximated: Vec<&String> = scene.notes.iter().filter(|n| n.starts_with("approximated: ")).collect();
+    for (needle, element) in [
+        ("bdpt", "<integrator type=\"bdpt\">"),
+        ("homogeneous", "<medium type=\"homogeneous\">"),
+        ("hair", "<bsdf type=\"hair\">"),
+        ("normalmap", "<bsdf type=\"normalmap\">"),
+        ("interior", "<medium type=\"homogeneous\">"),
+    ] {
+        let at = format!("scene.xml:{}:", line_of(needle));
+        assert!(
+            approximated.iter().any(|n| n.contains(&at) && n.contains(element) && n.contains("; rendered ")),
+            "no note for {element} at {at}: {approximated:#?}"
+        );
+    }
+    assert_eq!(approximated.len(), 5, "{approximated:#?}");
+    // The option is part of the scene: a worker given it rebuilds the same scene, and without it none.
+    let files = BTreeMap::new();
+    let there = Scene::from_job_files(&text, Path::new("scene.xml"), &approximate, &files).unwrap();
+    assert_eq!(there.hash, scene.hash);
+    assert!(Scene::from_job_files(&text, Path::new("scene.xml"), &MitsubaOptions::default(), &files).is_err());
+    let toml = dir.join("room.toml");
+    std::fs::write(&toml, room_toml()).unwrap();
+    let e = error_of(Scene::load_with_options(&toml, &approximate));
+    assert!(e.message.contains("--approximate"), "{e}");
+}
+
 /// A unit quad in the plane z = 0 with texture coordinates, as PLY in `format`.
 fn ply_quad(format: &str) -> Vec<u8> {
     let header = format!(
@@ -382,14 +748,14 @@ fn a_worker_rebuilds_the_same_scene_from_the_job_files_includes_and_search_paths
     assert_eq!(keys, ["parts/room.xml", "../common/tex.png", "../common/meshes/quad.obj"]);
     let sent: BTreeMap<String, Vec<u8>> =
         here.mesh_files.iter().map(|(k, _)| (k.clone(), std::fs::read(dir.join("scenes").join(k)).unwrap())).collect();
-    let there = Scene::from_job_files(main, Path::new("main.xml"), &[], &sent).unwrap();
+    let there = Scene::from_job_files(main, Path::new("main.xml"), &MitsubaOptions::default(), &sent).unwrap();
     assert_eq!(there.mesh_files, here.mesh_files);
     assert_eq!(there.hash, here.hash);
     assert_eq!(there.geometry.triangle_count(), here.geometry.triangle_count());
     assert_eq!(there.materials, here.materials);
     let mut missing = sent.clone();
     missing.remove("../common/tex.png");
-    let e = error_of(Scene::from_job_files(main, Path::new("main.xml"), &[], &missing));
+    let e = error_of(Scene::from_job_files(main, Path::new("main.xml"), &MitsubaOptions::default(), &missing));
     assert!(e.to_string().contains("was not sent with the job"), "{e}");
 }
 
@@ -398,11 +764,11 @@ fn defines_override_defaults_and_change_the_hash() {
     let text = ROOM_XML;
     let (_guard, dir) = folder(&[("room.xml", text.as_bytes())]);
     let path = dir.join("room.xml");
-    let plain = Scene::load_with_defines(&path, &[]).unwrap();
-    let wide = Scene::load_with_defines(&path, &[("size".into(), "48".into())]).unwrap();
+    let plain = Scene::load_with_options(&path, &MitsubaOptions::default()).unwrap();
+    let wide = Scene::load_with_options(&path, &defines(&[("size", "48")])).unwrap();
     assert_eq!((plain.camera.width, wide.camera.width), (32, 48));
     assert_ne!(plain.hash, wide.hash);
-    let e = error_of(Scene::load_with_defines(&path, &[("sise".into(), "48".into())]));
+    let e = error_of(Scene::load_with_options(&path, &defines(&[("sise", "48")])));
     assert!(e.message.contains("sise"), "{e}");
 }
 
@@ -426,12 +792,20 @@ fn unsupported_plugins_and_parameters_are_refused_at_their_line_and_element() {
         "roughness",
         "not supported",
     );
-    refused("<emitter type=\"envmap\">\n</emitter>", "envmap", "envmap", "not supported yet");
+    refused("<emitter type=\"sunsky\">\n</emitter>", "sunsky", "sunsky", "no counterpart");
     refused(
-        "<shape type=\"sphere\"><emitter type=\"area\"/></shape>",
-        "type=\"sphere\"",
-        "sphere",
-        "not supported yet",
+        "<emitter type=\"envmap\"><string name=\"filename\" value=\"sky.exr\"/>\n\
+         <transform name=\"to_world\"><scale value=\"2\"/></transform></emitter>",
+        "sky.exr",
+        "envmap",
+        "rotation",
+    );
+    refused(
+        "<emitter type=\"directional\"><vector name=\"direction\" x=\"1\" y=\"0\" z=\"0\"/>\n\
+         <transform name=\"to_world\"><rotate x=\"1\" angle=\"20\"/></transform></emitter>",
+        "directional",
+        "directional",
+        "not both",
     );
     refused("<shape type=\"hair\"/>", "hair", "shape type=\"hair\"", "not supported");
     refused(

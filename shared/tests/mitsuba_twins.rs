@@ -10,7 +10,7 @@ use photonfarm::accumulation::Accumulator;
 use photonfarm::color::luminance_f64;
 use photonfarm::light::Light;
 use photonfarm::render::{Engine, Method, RenderSettings};
-use photonfarm::scene::Scene;
+use photonfarm::scene::{MitsubaOptions, Scene};
 use std::path::Path;
 
 fn scenes_dir() -> std::path::PathBuf {
@@ -19,8 +19,9 @@ fn scenes_dir() -> std::path::PathBuf {
 
 /// The Mitsuba twin `name` at `width` × `height` pixels, through its `resx` and `resy` parameters.
 fn xml_at(name: &str, width: u32, height: u32) -> Scene {
-    let defines = [("resx".to_string(), width.to_string()), ("resy".to_string(), height.to_string())];
-    Scene::load_with_defines(&scenes_dir().join("mitsuba").join(name), &defines).unwrap_or_else(|e| panic!("{e}"))
+    let defines = vec![("resx".to_string(), width.to_string()), ("resy".to_string(), height.to_string())];
+    let options = MitsubaOptions { defines, approximate: false };
+    Scene::load_with_options(&scenes_dir().join("mitsuba").join(name), &options).unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// Asserts that both cameras send the same rays through the same pixel positions.

@@ -30,7 +30,7 @@ pub enum JobEvent {
 
 /// Builds the job's scene from its text and the meshes received, and checks it is the coordinator's scene.
 pub fn load_scene(job: &Job, meshes: &BTreeMap<String, Vec<u8>>) -> Result<Scene, String> {
-    let scene = Scene::from_job_files(&job.scene_text, Path::new(&job.scene_name), &job.defines, meshes)
+    let scene = Scene::from_job_files(&job.scene_text, Path::new(&job.scene_name), &job.mitsuba, meshes)
         .map_err(|e| e.to_string())?;
     if scene.hash != job.scene_hash {
         return Err(format!(

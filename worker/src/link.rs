@@ -377,7 +377,7 @@ mod tests {
         let job = Job {
             scene_name: "cornell.toml".into(),
             scene_text: std::fs::read_to_string(&path).unwrap(),
-            defines: Vec::new(),
+            mitsuba: Default::default(),
             files,
             scene_hash: scene.hash.clone(),
             settings: RenderSettings::for_scene(&scene, Method::ThreeLevel, 1),

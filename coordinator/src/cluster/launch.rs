@@ -11,7 +11,7 @@ use photonfarm::protocol::{EngineSpec, FileRef, Job, RayMapRequest, Role, Secret
 use photonfarm::ray_map::Recorder;
 use photonfarm::render::method::Grouping;
 use photonfarm::render::{Method, RenderSettings};
-use photonfarm::scene::Scene;
+use photonfarm::scene::{MitsubaOptions, Scene};
 use std::net::{SocketAddr, TcpListener};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -24,8 +24,8 @@ pub struct LaunchOptions {
     /// A method that runs worker processes: combination or three-level.
     pub method: Method,
     pub scene_path: PathBuf,
-    /// A Mitsuba scene's `--define`s, sent with every job.
-    pub defines: Vec<(String, String)>,
+    /// How a Mitsuba scene is imported (`--define`, `--approximate`), sent with every job.
+    pub mitsuba: MitsubaOptions,
     /// A synthetic description or an hwloc XML file to take the NUMA nodes from instead of this machine's.
     pub topology: Option<String>,
     /// `worker serve` daemons to dial, as HOST:PORT.
@@ -176,7 +176,7 @@ fn remote_transport(options: &LaunchOptions) -> Result<Transport> {
 struct JobTemplate {
     scene_name: String,
     scene_text: String,
-    defines: Vec<(String, String)>,
+    mitsuba: MitsubaOptions,
     files: Vec<FileRef>,
     /// The meshes by content hash, for workers that ask for them.
     store: FileStore,
@@ -216,7 +216,7 @@ impl JobTemplate {
         Ok(JobTemplate {
             scene_name: path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
             scene_text,
-            defines: options.defines.clone(),
+            mitsuba: options.mitsuba.clone(),
             files: scene.mesh_files.iter().map(|(p, h)| FileRef { path: p.clone(), sha256: h.clone() }).collect(),
             store: scene.mesh_files.iter().map(|(p, h)| (h.clone(), base.join(p))).collect(),
             scene_hash: scene.hash.clone(),
@@ -248,7 +248,7 @@ impl JobTemplate {
         Job {
             scene_name: self.scene_name.clone(),
             scene_text: self.scene_text.clone(),
-            defines: self.defines.clone(),
+            mitsuba: self.mitsuba.clone(),
             files: self.files.clone(),
             scene_hash: self.scene_hash.clone(),
             settings: self.settings,

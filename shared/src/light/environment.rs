@@ -24,6 +24,7 @@
 use crate::color::{luminance, Rgb};
 use crate::light::infinite::{check_rotation, is_positive_colour, InfiniteLightError, InfiniteSample};
 use crate::sampling::{uniform_sphere, DistributionError, Piecewise2d};
+use crate::texture::Bitmap;
 use glam::{Mat3, Vec2, Vec3};
 use std::f32::consts::PI;
 
@@ -157,6 +158,13 @@ impl EnvironmentMap {
             distribution,
             radiance_integral: integral * scale,
         })
+    }
+
+    /// The map of a decoded image (row 0 the zenith), as `new` takes texels.
+    pub fn from_bitmap(bitmap: &Bitmap, scale: f32, to_world: Mat3) -> Result<Self, InfiniteLightError> {
+        let (w, h) = (bitmap.width() as usize, bitmap.height() as usize);
+        let texels = (0..w * h).map(|k| bitmap.texel((k % w) as i64, (k / w) as i64)).collect();
+        EnvironmentMap::new(w, h, texels, scale, to_world)
     }
 
     /// The bilinear radiance at (u, v) of the map, times the scale.

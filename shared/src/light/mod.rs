@@ -11,7 +11,7 @@ pub mod shape_sampling;
 
 use crate::camera::RearElement;
 use crate::color::{luminance, Rgb};
-use crate::geometry::{SceneGeometry, SurfaceHit};
+use crate::geometry::{Analytic, SceneGeometry, SurfaceHit};
 use crate::sampling::{concentric_disk, cosine_hemisphere};
 use crate::sampling::{power_heuristic, uniform_cone, uniform_sphere, uniform_triangle, Discrete, Frame};
 use crate::texture::{barycentric, interpolate_uv, Bitmap};
@@ -201,6 +201,19 @@ pub struct Lights {
 pub const AIMED_FRACTION: f32 = 0.5;
 
 impl Light {
+    /// The light of object `object`'s analytic surface emitting `emission`; None for the surfaces that cannot
+    /// emit (lens surfaces and annuli with a hole).
+    pub fn of_analytic(object: u32, shape: &Analytic, emission: Rgb) -> Option<Light> {
+        match *shape {
+            Analytic::Sphere(sp) => Some(Light::Sphere { object, center: sp.center, radius: sp.radius, emission }),
+            // The annulus's surface normal is −axis: a disc emits toward −axis.
+            Analytic::Annulus(a) if a.inner_radius == 0.0 => {
+                Some(Light::Disc { object, center: a.center, normal: -a.axis, radius: a.outer_radius, emission })
+            }
+            _ => None,
+        }
+    }
+
     /// Emitted power in luminance units, the weight that chooses this light (without an emission texture:
     /// `Lights::with_textures` weighs a textured one by the texture's mean over its triangle); an infinite
     /// light's is what it sends through the scene's bounding sphere `scene`, π r² ∫ L dω.

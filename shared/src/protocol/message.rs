@@ -5,6 +5,7 @@ use super::error::ProtocolError;
 use crate::render::method::ParallelMethod;
 use crate::render::settings::RenderSettings;
 use crate::render::totals::RayTotals;
+use crate::scene::MitsubaOptions;
 use serde::{Deserialize, Serialize};
 
 /// Bumped whenever a message changes shape; peers with another version are refused in the handshake.
@@ -65,8 +66,9 @@ pub struct Job {
     /// The scene file's name, for messages.
     pub scene_name: String,
     pub scene_text: String,
-    /// A Mitsuba scene's `$name` parameters (`--define`), which the worker applies as the coordinator did.
-    pub defines: Vec<(String, String)>,
+    /// How a Mitsuba scene is imported (`--define`, `--approximate`), which the worker applies as the
+    /// coordinator did.
+    pub mitsuba: MitsubaOptions,
     /// Meshes the scene references; the worker asks for the ones it does not hold.
     pub files: Vec<FileRef>,
     /// The scene's hash as the coordinator computed it; the worker checks its own against it.

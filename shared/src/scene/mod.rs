@@ -8,6 +8,7 @@ mod loader;
 pub mod mitsuba;
 
 pub use error::SceneError;
+pub use mitsuba::MitsubaOptions;
 
 use crate::bsdf::Bsdf;
 use crate::camera::Camera;
@@ -97,33 +98,30 @@ pub fn is_mitsuba(path: &std::path::Path) -> bool {
 }
 
 impl Scene {
-    /// Reads a scene file of either format; `defines` set a Mitsuba scene's `$name` parameters and are refused
-    /// for a TOML scene, which has none.
-    pub fn load_with_defines(path: &std::path::Path, defines: &[(String, String)]) -> Result<Scene, SceneError> {
+    /// Reads a scene file of either format; `options` say how a Mitsuba scene is imported and are refused for
+    /// a TOML scene, which has no parameters and maps every key exactly.
+    pub fn load_with_options(path: &std::path::Path, options: &MitsubaOptions) -> Result<Scene, SceneError> {
         if is_mitsuba(path) {
-            return Scene::load_mitsuba(path, defines);
+            return Scene::load_mitsuba(path, options);
         }
-        if let Some((name, _)) = defines.first() {
-            return Err(SceneError {
-                file: path.to_path_buf(),
-                line: None,
-                field: None,
-                message: format!("--define {name}=...: only Mitsuba scenes (.xml) take parameters"),
-            });
-        }
-        Scene::load(path)
+        let refused = match (options.defines.first(), options.approximate) {
+            (Some((name, _)), _) => format!("--define {name}=...: only Mitsuba scenes (.xml) take parameters"),
+            (None, true) => "--approximate: only Mitsuba scenes (.xml) are imported".into(),
+            (None, false) => return Scene::load(path),
+        };
+        Err(SceneError { file: path.to_path_buf(), line: None, field: None, message: refused })
     }
 
     /// Builds a job's scene from the scene file's text, its name (whose extension tells the format), the
-    /// Mitsuba defines and the referenced files by the path the scene writes, as a worker does.
+    /// Mitsuba import options and the referenced files by the path the scene writes, as a worker does.
     pub fn from_job_files(
         text: &str,
         name: &std::path::Path,
-        defines: &[(String, String)],
+        options: &MitsubaOptions,
         files: &std::collections::BTreeMap<String, Vec<u8>>,
     ) -> Result<Scene, SceneError> {
         if is_mitsuba(name) {
-            Scene::from_mitsuba_with_files(text, name, defines, files)
+            Scene::from_mitsuba_with_files(text, name, options, files)
         } else {
             Scene::from_toml_with_meshes(text, name, files)
         }

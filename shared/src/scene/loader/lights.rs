@@ -62,9 +62,7 @@ impl Loader<'_> {
                     (Some(name), None) => {
                         let field = f("filename");
                         let bitmap = self.bitmap(name, Some(s.clone()), &field, Encoding::Linear)?;
-                        let (w, h) = (bitmap.width() as usize, bitmap.height() as usize);
-                        let texels = (0..w * h).map(|k| bitmap.texel((k % w) as i64, (k / w) as i64)).collect();
-                        let map = EnvironmentMap::new(w, h, texels, scale, rotation)
+                        let map = EnvironmentMap::from_bitmap(&bitmap, scale, rotation)
                             .map_err(|e| self.error(Some(s.clone()), field, format!("{name}: {e}")))?;
                         InfiniteLight::Map(Arc::new(map))
                     }

@@ -33,7 +33,7 @@ impl Scene {
     /// resolved relative to its folder.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
         if super::is_mitsuba(path) {
-            return Scene::load_mitsuba(path, &[]);
+            return Scene::load_mitsuba(path, &crate::scene::MitsubaOptions::default());
         }
         let text = std::fs::read_to_string(path).map_err(|e| SceneError {
             file: path.to_path_buf(),

@@ -99,7 +99,7 @@ impl Loader<'_> {
             None => {
                 let shape = self.analytic(obj, &field)?;
                 if let Some(le) = emission.filter(|&e| e != Rgb::ZERO) {
-                    let light = Self::analytic_emitter(id, &shape, le).ok_or_else(|| {
+                    let light = Light::of_analytic(id, &shape, le).ok_or_else(|| {
                         self.error(
                             obj.emission.as_ref().map(|e| e.span()),
                             field("emission"),
@@ -252,19 +252,6 @@ impl Loader<'_> {
             ));
         }
         Ok(())
-    }
-
-    /// The light of object `object`'s analytic surface emitting `emission`; None for the surfaces that cannot
-    /// emit (lens surfaces and annuli with a hole).
-    fn analytic_emitter(object: u32, shape: &Analytic, emission: Rgb) -> Option<Light> {
-        match *shape {
-            Analytic::Sphere(sp) => Some(Light::Sphere { object, center: sp.center, radius: sp.radius, emission }),
-            // The annulus's surface normal is −axis: a disc emits toward −axis.
-            Analytic::Annulus(a) if a.inner_radius == 0.0 => {
-                Some(Light::Disc { object, center: a.center, normal: -a.axis, radius: a.outer_radius, emission })
-            }
-            _ => None,
-        }
     }
 
     /// The analytic shape of an object that has one (a sphere, an annulus or a lens surface).

@@ -21,3 +21,14 @@ pub use error::{MitsubaError, SourcePos};
 pub use files::FileSource;
 pub use spectrum::{Spectrum, SpectrumUse};
 pub use xml::{read_file, read_str, read_str_from};
+
+use serde::{Deserialize, Serialize};
+
+/// How a Mitsuba scene file is imported: its `$name` parameters (Mitsuba's `-D name=value`), and whether what
+/// photonfarm has no exact counterpart for is imported as the nearest thing it renders, each substitution
+/// noted, instead of refused (`--approximate`). Both are part of the scene, so both go into its hash.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct MitsubaOptions {
+    pub defines: Vec<(String, String)>,
+    pub approximate: bool,
+}

@@ -93,6 +93,10 @@ impl Importer<'_> {
                 };
                 Material::new(front_surface, back, None)
             }
+            "bumpmap" | "normalmap" => {
+                let inner = self.unperturbed(&p)?;
+                return self.wrapped(&inner);
+            }
             // A family reads and checks its own parameters.
             _ => return Ok(Material::new(self.surface(bsdf)?, Back::Black, None)),
         };
@@ -164,21 +168,20 @@ impl Importer<'_> {
             }
             "principled" => self.principled(&p)?,
             "bumpmap" | "normalmap" => {
-                return Err(p.error(format!(
-                    "`{}` is not supported: photonfarm shades with the geometry's own normals (remove the wrapper to \
-                     render the BSDF inside it without the perturbed normals)",
-                    bsdf.kind
-                )))
+                let inner = self.unperturbed(&p)?;
+                return self.surface(&inner);
             }
             "twosided" | "mask" => {
                 return Err(p.error(format!("a `{}` is not supported at this depth of nesting", bsdf.kind)))
             }
             other => {
-                return Err(p.error(format!(
+                let refusal = p.error(format!(
                     "the BSDF `{other}` has no counterpart in photonfarm (diffuse, conductor, roughconductor, \
                      dielectric, roughdielectric, thindielectric, plastic, roughplastic, principled, twosided and mask \
                      do)"
-                )))
+                ));
+                self.approximate(refusal, "as Mitsuba's default BSDF, diffuse of reflectance 0.5")?;
+                return Ok(Surface::Diffuse { reflectance: Texture::grey(0.5) });
             }
         };
         p.finish()?;
@@ -283,6 +286,20 @@ fn single_bsdf(p: &Params) -> Result<Arc<Plugin>, MitsubaError> {
     match inner.as_slice() {
         [one] => Ok(one.plugin.clone()),
         _ => Err(p.error(format!("{} holds exactly one BSDF, found {}", p.plugin.element(), inner.len()))),
+    }
+}
+
+impl Importer<'_> {
+    /// The BSDF inside a `bumpmap` or `normalmap`, which `--approximate` renders with the geometry's own normals;
+    /// refused otherwise.
+    fn unperturbed(&mut self, p: &Params) -> Result<Arc<Plugin>, MitsubaError> {
+        let refusal = p.error(format!(
+            "`{}` is not supported: photonfarm shades with the geometry's own normals (remove the wrapper to render \
+             the BSDF inside it without the perturbed normals)",
+            p.plugin.kind
+        ));
+        self.approximate(refusal, "as the BSDF inside it, with the geometry's own normals")?;
+        single_bsdf(p)
     }
 }
 

@@ -15,7 +15,7 @@ mod shapes;
 mod textures;
 
 use super::files::{relative_key, FileSource};
-use super::{Document, MitsubaError, Plugin, SourcePos};
+use super::{Document, MitsubaError, MitsubaOptions, Plugin, SourcePos};
 use crate::color::Rgb;
 use crate::geometry::{Analytic, MeshTriangle, SceneGeometry};
 use crate::light::{EmissionTexture, Light, Lights};
@@ -23,6 +23,7 @@ use crate::material::Material;
 use crate::scene::{Scene, SceneError, SceneObject, SceneRenderSettings};
 use crate::texture::{Bitmap, Encoding};
 use glam::Vec2;
+use meshes::IndexedMesh;
 use params::Params;
 use sha2::{Digest, Sha256};
 use std::collections::{BTreeMap, HashMap};
@@ -30,17 +31,16 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 impl Scene {
-    /// Reads a Mitsuba 3 scene file and everything it references; `defines` set its `$name` parameters, as
-    /// Mitsuba's `-D name=value` does.
-    pub fn load_mitsuba(path: &Path, defines: &[(String, String)]) -> Result<Scene, SceneError> {
+    /// Reads a Mitsuba 3 scene file and everything it references, as `options` say.
+    pub fn load_mitsuba(path: &Path, options: &MitsubaOptions) -> Result<Scene, SceneError> {
         let text = std::fs::read_to_string(path).map_err(|e| SceneError {
             file: path.to_path_buf(),
             line: None,
             field: None,
             message: format!("cannot read the scene file: {e}"),
         })?;
-        let document = super::read_file(path, defines).map_err(scene_error)?;
-        Importer::new(&document, &text, defines, FileSource::Disk).import().map_err(scene_error)
+        let document = super::read_file(path, &options.defines).map_err(scene_error)?;
+        Importer::new(&document, &text, options, FileSource::Disk).import().map_err(scene_error)
     }
 
     /// Builds a Mitsuba scene from its text and the files a job sent, keyed by their path relative to the scene
@@ -48,12 +48,12 @@ impl Scene {
     pub fn from_mitsuba_with_files(
         text: &str,
         name: &Path,
-        defines: &[(String, String)],
+        options: &MitsubaOptions,
         files: &BTreeMap<String, Vec<u8>>,
     ) -> Result<Scene, SceneError> {
         let source = FileSource::Memory(files);
-        let document = super::read_str_from(text, name, defines, source).map_err(scene_error)?;
-        Importer::new(&document, text, defines, source).import().map_err(scene_error)
+        let document = super::read_str_from(text, name, &options.defines, source).map_err(scene_error)?;
+        Importer::new(&document, text, options, source).import().map_err(scene_error)
     }
 }
 
@@ -76,11 +76,15 @@ struct Importer<'d> {
     files: Vec<(String, String)>,
     /// Keys already hashed: a mesh or texture used twice is sent once.
     hashed: HashMap<PathBuf, String>,
+    /// `--approximate`: what has no exact counterpart is substituted (`Importer::approximate`) instead of refused.
+    approximating: bool,
     bitmaps: HashMap<(PathBuf, Encoding), Arc<Bitmap>>,
     notes: Vec<String>,
     materials: Vec<Material>,
     /// The material of each BSDF plugin already mapped (by address: a referenced BSDF is mapped once).
     material_of: HashMap<*const Plugin, u32>,
+    /// The mesh of each mesh shape already read (by address: an instanced shape is read once).
+    meshes: HashMap<*const Plugin, Arc<IndexedMesh>>,
     objects: Vec<SceneObject>,
     triangles: Vec<(u32, MeshTriangle)>,
     triangle_uvs: Vec<Option<[Vec2; 3]>>,
@@ -90,13 +94,16 @@ struct Importer<'d> {
 }
 
 impl<'d> Importer<'d> {
-    /// The mapping of `doc`, read from `text` with `defines`: both go into the hash, since the same text with
-    /// other defines is another scene.
-    fn new(doc: &'d Document, text: &str, defines: &[(String, String)], source: FileSource<'d>) -> Self {
+    /// The mapping of `doc`, read from `text` with `options`: both go into the hash, since the same text with
+    /// other defines, or approximated, is another scene.
+    fn new(doc: &'d Document, text: &str, options: &MitsubaOptions, source: FileSource<'d>) -> Self {
         let mut hasher = Sha256::new();
         hasher.update(text.as_bytes());
-        for (name, value) in defines {
+        for (name, value) in &options.defines {
             hasher.update(format!("\0{name}={value}").as_bytes());
+        }
+        if options.approximate {
+            hasher.update(b"\0--approximate");
         }
         Importer {
             doc,
@@ -104,10 +111,12 @@ impl<'d> Importer<'d> {
             hasher,
             files: Vec::new(),
             hashed: HashMap::new(),
+            approximating: options.approximate,
             bitmaps: HashMap::new(),
             notes: Vec::new(),
             materials: Vec::new(),
             material_of: HashMap::new(),
+            meshes: HashMap::new(),
             objects: Vec::new(),
             triangles: Vec::new(),
             triangle_uvs: Vec::new(),
@@ -125,11 +134,12 @@ impl<'d> Importer<'d> {
             self.hash_file(path, &start)?;
         }
         let render = self.integrator()?;
-        if let Some(other) = self.doc.others.first() {
-            return Err(other.error(format!(
+        for other in &self.doc.others {
+            let refusal = other.error(format!(
                 "a top-level {} is not supported (photonfarm renders surfaces in vacuum)",
                 other.element()
-            )));
+            ));
+            self.approximate(refusal, "without it")?;
         }
         // BSDFs and textures declared at the top level and referenced by no shape are unused, as in Mitsuba.
         for shape in &self.doc.shapes {
@@ -157,8 +167,23 @@ impl<'d> Importer<'d> {
             return Ok(render);
         };
         let p = Params::new(&plugin);
+        let exact = matches!(plugin.kind.as_str(), "path" | "volpath" | "direct");
+        if !exact {
+            let refusal = p.error(format!(
+                "the integrator `{}` has no counterpart (photonfarm renders what `path` computes); give \
+                 <integrator type=\"path\"> or, where the file reads `$integrator`, --define integrator=path",
+                plugin.kind
+            ));
+            self.approximate(refusal, "as `path` with its max_depth, its other parameters ignored")?;
+        }
         match plugin.kind.as_str() {
-            "path" | "volpath" => {
+            "direct" => {
+                // Emitters seen directly and light reflected once: paths of at most two segments.
+                render.max_depth = 2;
+                p.ignore(&["emitter_samples", "bsdf_samples", "shading_samples"]);
+                self.notes.push(format!("{} is rendered as paths of at most two segments", plugin.element()));
+            }
+            _ => {
                 let depth = p.integer("max_depth")?.unwrap_or(-1);
                 match depth {
                     -1 => self.notes.push(format!(
@@ -172,29 +197,30 @@ impl<'d> Importer<'d> {
                         return Err(p.error_at(param, format!("must be −1 or 1..=1024, got {depth}")));
                     }
                 }
+                if !exact {
+                    // Another integrator's parameters mean what it makes of them: only the depth carries over.
+                    return Ok(render);
+                }
                 if p.integer("rr_depth")?.is_some() {
                     self.notes.push("the integrator's rr_depth is ignored (photonfarm chooses its own)".into());
                 }
-                p.ignore(&["hide_emitters"]);
                 if p.boolean("hide_emitters", false)? {
-                    return Err(p.error("hide_emitters = true is not supported"));
+                    self.approximate(p.error("hide_emitters = true is not supported"), "with the emitters seen")?;
                 }
-            }
-            "direct" => {
-                // Emitters seen directly and light reflected once: paths of at most two segments.
-                render.max_depth = 2;
-                p.ignore(&["emitter_samples", "bsdf_samples", "shading_samples"]);
-                self.notes.push(format!("{} is rendered as paths of at most two segments", plugin.element()));
-            }
-            other => {
-                return Err(p.error(format!(
-                    "the integrator `{other}` has no counterpart (photonfarm renders what `path` computes); give \
-                     <integrator type=\"path\"> or, where the file reads `$integrator`, --define integrator=path"
-                )))
             }
         }
         p.finish()?;
         Ok(render)
+    }
+
+    /// Under `--approximate`, notes that the element `refusal` names is rendered `instead` and lets the mapping
+    /// go on; otherwise `refusal` is the error.
+    fn approximate(&mut self, refusal: MitsubaError, instead: &str) -> Result<(), MitsubaError> {
+        if !self.approximating {
+            return Err(refusal);
+        }
+        self.notes.push(format!("approximated: {refusal}; rendered {instead}"));
+        Ok(())
     }
 
     /// Reads a file the scene references (relative to the scene's folder as Mitsuba resolves it), adds it to
@@ -260,8 +286,8 @@ impl<'d> Importer<'d> {
         if !lights.any() {
             return Err(MitsubaError::in_file(
                 start,
-                "the scene has no light photonfarm renders: give a shape an <emitter type=\"area\"> or add a point \
-                 or spot emitter",
+                "the scene has no light photonfarm renders: give a shape an <emitter type=\"area\"> or add a point, \
+                 spot, envmap, constant or directional emitter",
             ));
         }
         let has_delta_surfaces = self.objects.iter().any(|o| self.materials[o.material as usize].has_delta());

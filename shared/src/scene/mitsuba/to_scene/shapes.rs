@@ -1,6 +1,5 @@
 //! Shapes: `obj`, `ply`, `serialized`, `rectangle` and `cube` as triangles, `sphere` and `disk` as analytic
-//! surfaces, each with its BSDF (Mitsuba's diffuse default when it names none) and, on triangles, an `area`
-//! emitter.
+//! surfaces, each with its BSDF (Mitsuba's diffuse default when it names none) and an `area` emitter.
 
 use super::meshes::{read_obj, read_ply, read_serialized, IndexedMesh, Placement};
 use super::params::Params;
@@ -10,12 +9,60 @@ use crate::geometry::{Analytic, Annulus, MeshTriangle, Sphere};
 use crate::light::Light;
 use crate::scene::mitsuba::{Category, MitsubaError, Plugin, SpectrumUse};
 use crate::scene::SceneObject;
-use glam::{DMat3, DVec3, Vec2, Vec3};
+use glam::{DMat3, DMat4, DVec3, Vec2, Vec3};
 use std::sync::Arc;
 
 impl Importer<'_> {
-    /// One top-level shape with its material and emission.
+    /// One top-level shape: a shape with its material and emission, or an `instance`, the shapes of its
+    /// `shapegroup` moved by its to_world. A group itself is drawn only where an instance places it, as in Mitsuba.
     pub(super) fn shape(&mut self, plugin: &Arc<Plugin>) -> Result<(), MitsubaError> {
+        match plugin.kind.to_ascii_lowercase().as_str() {
+            "shapegroup" => self.group_shapes(plugin).map(|_| ()),
+            "instance" => self.instance(plugin),
+            _ => self.placed_shape(plugin, DMat4::IDENTITY, ""),
+        }
+    }
+
+    /// An instance, expanded: each shape of its group with the instance's to_world applied after the shape's own.
+    fn instance(&mut self, plugin: &Arc<Plugin>) -> Result<(), MitsubaError> {
+        let p = Params::new(plugin);
+        let to_world = p.transform("to_world")?;
+        let group = match p.children_of(Category::Shape).as_slice() {
+            [one] if one.plugin.kind.eq_ignore_ascii_case("shapegroup") => one.plugin.clone(),
+            _ => return Err(p.error("an instance takes one shapegroup (by <ref id=\"…\"/>)")),
+        };
+        p.finish()?;
+        let suffix = format!(" in {} at line {}", plugin.element(), plugin.position.line);
+        for shape in self.group_shapes(&group)? {
+            self.placed_shape(&shape, to_world, &suffix)?;
+        }
+        Ok(())
+    }
+
+    /// The shapes of a group, refused where Mitsuba refuses them: emitters (Mitsuba does not instance them),
+    /// nested groups and instances.
+    fn group_shapes(&self, group: &Plugin) -> Result<Vec<Arc<Plugin>>, MitsubaError> {
+        let p = Params::new(group);
+        let shapes: Vec<Arc<Plugin>> = p.children_of(Category::Shape).into_iter().map(|c| c.plugin.clone()).collect();
+        p.finish()?;
+        for shape in &shapes {
+            let kind = shape.kind.to_ascii_lowercase();
+            if kind == "shapegroup" || kind == "instance" {
+                return Err(shape.error(format!("a {kind} inside a shapegroup is not allowed (nor in Mitsuba)")));
+            }
+            if let Some(e) = shape.children_of(Category::Emitter).next() {
+                return Err(MitsubaError::at(
+                    &e.position,
+                    e.plugin.element(),
+                    "a shape in a shapegroup cannot emit (Mitsuba does not instance emitters)",
+                ));
+            }
+        }
+        Ok(shapes)
+    }
+
+    /// A shape with its material and emission, its to_world followed by `outer`; `suffix` ends its name.
+    fn placed_shape(&mut self, plugin: &Arc<Plugin>, outer: DMat4, suffix: &str) -> Result<(), MitsubaError> {
         let p = Params::new(plugin);
         // Mitsuba's plugin names are lower case; exporters sometimes capitalise them.
         let kind = plugin.kind.to_ascii_lowercase();
@@ -29,13 +76,25 @@ impl Importer<'_> {
         };
         let emission = self.area_emission(&p)?;
         let placement =
-            Placement { to_world: p.transform("to_world")?, flip_normals: p.boolean("flip_normals", false)? };
+            Placement { to_world: outer * p.transform("to_world")?, flip_normals: p.boolean("flip_normals", false)? };
         let id = self.objects.len() as u32;
         let name =
-            plugin.id.clone().unwrap_or_else(|| format!("{} at line {}", plugin.element(), plugin.position.line));
+            plugin.id.clone().unwrap_or_else(|| format!("{} at line {}", plugin.element(), plugin.position.line))
+                + suffix;
         match kind.as_str() {
             "obj" | "ply" | "serialized" | "rectangle" | "cube" => {
-                let mesh = self.shape_mesh(&p, &kind)?;
+                // A mesh instanced many times is read once.
+                let mesh = match self.meshes.get(&Arc::as_ptr(plugin)) {
+                    Some(mesh) => {
+                        p.ignore(&["filename", "flip_tex_coords", "shape_index", "face_normals"]);
+                        mesh.clone()
+                    }
+                    None => {
+                        let mesh = Arc::new(self.shape_mesh(&p, &kind)?);
+                        self.meshes.insert(Arc::as_ptr(plugin), mesh.clone());
+                        mesh
+                    }
+                };
                 let (triangles, skipped) = placement.triangles(&mesh).map_err(|m| p.error(m))?;
                 if skipped > 0 {
                     self.notes.push(format!("{name}: {skipped} degenerate triangles (no area) left out"));
@@ -64,12 +123,6 @@ impl Importer<'_> {
                 }
             }
             "sphere" | "disk" => {
-                if emission.is_some() {
-                    return Err(p.error(format!(
-                        "an area emitter on a {kind} is not supported yet (emitting analytic shapes are being wired); \
-                         a mesh (obj, ply, serialized, rectangle, cube) can emit"
-                    )));
-                }
                 if self.materials[material as usize].uses_uv() {
                     return Err(
                         p.error(format!("its BSDF is textured but photonfarm's {kind} has no texture coordinates"))
@@ -79,16 +132,29 @@ impl Importer<'_> {
                     return Err(p.error(format!("flip_normals on a {kind} is not supported")));
                 }
                 let shape = analytic(&p, &kind, &placement)?;
+                if let Some(le) = emission.filter(|e| *e != Rgb::ZERO) {
+                    // Mitsuba's area emitter radiates from the side the surface normal faces: a sphere's outside,
+                    // a disk's transformed +z, which `analytic` made the disc's emitting side.
+                    let light = Light::of_analytic(id, &shape, le)
+                        .ok_or_else(|| p.error(format!("photonfarm's {kind} cannot emit")))?;
+                    self.lights.push(light);
+                    self.light_textures.push(None);
+                }
                 self.analytic.push((id, shape));
-            }
-            "shapegroup" | "instance" => {
-                return Err(p.error(format!("`{kind}` is not supported yet: write the shapes out in place")))
             }
             other => {
                 return Err(p.error(format!(
                     "the shape `{other}` is not supported (obj, ply, serialized, rectangle, cube, sphere and disk are)"
                 )))
             }
+        }
+        for medium in p.children_of(Category::Medium) {
+            let refusal = MitsubaError::at(
+                &medium.position,
+                medium.plugin.element(),
+                "participating media are not supported (photonfarm renders surfaces in vacuum)",
+            );
+            self.approximate(refusal, "without it")?;
         }
         p.finish()?;
         self.objects.push(SceneObject { name, material, emission: emission.filter(|e| *e != Rgb::ZERO) });
