@@ -32,6 +32,7 @@ const DEFAULT_TIME_S: f64 = 30.0;
 const CHECKPOINT: &str = "checkpoint.bin";
 
 pub fn run(args: RenderArgs) -> Result<()> {
+    let launched = Instant::now();
     let stop = stop_rule(&args)?;
     let scene = Scene::load_with_options(&args.scene, &mitsuba_options(&args))?;
     check_method_options(&args)?;
@@ -85,6 +86,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         notes,
         session,
         elapsed_before: Duration::from_secs_f64(checkpoint.as_ref().map_or(0.0, |c| c.elapsed_s)),
+        launched,
         start: Instant::now(),
     };
     let mut history = checkpoint.map(|c| c.history).unwrap_or_default();
@@ -554,6 +556,8 @@ struct Outputs<'a> {
     session: u32,
     /// Rendering time of the earlier sessions.
     elapsed_before: Duration,
+    /// When the command started, and when this session's rendering did.
+    launched: Instant,
     start: Instant,
 }
 
@@ -590,6 +594,7 @@ impl Outputs<'_> {
             totals: engine.totals(),
             stage_seconds: engine.stage_seconds(),
             wall_time_s: self.elapsed_s(),
+            started_s: Some(self.start.duration_since(self.launched).as_secs_f64()),
             peak_memory_bytes: memory::peak_rss_bytes(),
             bytes_per_pixel: engine.bytes_per_pixel(),
             error: engine.sums().error(self.lit),
@@ -651,7 +656,9 @@ fn run_until_stop(
     mut feed: Option<&mut LiveFeed>,
 ) -> Result<StopReason> {
     let save_interval = Duration::from_secs_f64(outputs.args.save_interval.max(0.5));
-    let mut last_save = Instant::now();
+    // The first step is saved at once: on a large image it comes a phase or so into the run, and the preview
+    // and δ should not wait a whole interval more.
+    let mut last_save: Option<Instant> = None;
     let mut save_error: Option<anyhow::Error> = None;
     let stop = outputs.stop;
     let tracking = Tracking { lit: outputs.lit, forecast, elapsed_before: outputs.elapsed_before, tiles };
@@ -665,8 +672,10 @@ fn run_until_stop(
         if let Some(f) = feed.as_deref_mut() {
             f.after_merge(engine, history, outputs.elapsed_s(), forecast.latest());
         }
-        if last_save.elapsed() >= save_interval && save_error.is_none() {
-            last_save = Instant::now();
+        // A step that ends at the deadline is saved by the run's final save, which follows at once.
+        let over = stop.time.is_some_and(|t| outputs.elapsed_s() >= t.as_secs_f64());
+        if !over && last_save.is_none_or(|t| t.elapsed() >= save_interval) && save_error.is_none() {
+            last_save = Some(Instant::now());
             if let Err(e) = outputs.save(engine, history, StopReason::Running, forecast) {
                 save_error = Some(e);
             }

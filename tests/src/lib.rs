@@ -1,5 +1,7 @@
 //! Helpers for the end-to-end tests in `tests/tests/`: they start the real programs, built by cargo.
 
+pub mod room;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::OnceLock;

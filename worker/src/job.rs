@@ -4,13 +4,14 @@
 
 use crate::machine;
 use crate::memory_binding::{self, MemoryBinding};
+use crate::parallel::engine::RoundTiming;
 use crate::parallel::{EngineConfig, ParallelEngine};
 use photonfarm::accumulation::delta::{encode_delta, Compression};
 use photonfarm::pbpm::ProcessShare;
 use photonfarm::protocol::{Job, Share, Snapshot, WorkerInfo};
 use photonfarm::ray_map::{self, PortionSink, Recorder};
 use photonfarm::render::light_balance::LightBalance;
-use photonfarm::render::session::{self, Progressive};
+use photonfarm::render::session::{self, Deadline, Progressive};
 use photonfarm::render::ActiveTiles;
 use photonfarm::scene::Scene;
 use std::collections::BTreeMap;
@@ -100,6 +101,9 @@ pub type PendingTiles = std::sync::Mutex<Option<(u32, Vec<bool>)>>;
 /// The latest share of the image's phases the coordinator announced and the engine has not taken yet.
 pub type PendingShare = std::sync::Mutex<Option<Share>>;
 
+/// When the coordinator said the run stops, and the engine has not taken yet.
+pub type PendingDeadline = std::sync::Mutex<Option<Deadline>>;
+
 /// What the link changes while a job runs.
 pub struct Control<'a> {
     /// Set to end the job after its current round.
@@ -110,6 +114,8 @@ pub struct Control<'a> {
     pub tiles: &'a PendingTiles,
     /// The processes rendering the image, announced since the last round.
     pub share: &'a PendingShare,
+    /// When a timed run stops, announced since the last round.
+    pub deadline: &'a PendingDeadline,
     /// Where the portions of the job's ray map go (the link), when the job asks for one.
     pub ray_map: Option<Box<dyn PortionSink>>,
 }
@@ -201,8 +207,13 @@ pub fn run(
     let mut base = engine.sums().clone();
     let mut seq = 0;
     let mut last = Instant::now();
-    let Control { stop, interval_ms, tiles, share, .. } = control;
+    let Control { stop, interval_ms, tiles, share, deadline, .. } = control;
+    let mut finish_by = None;
+    let mut sent_phases = 0;
     loop {
+        if let Some(d) = deadline.lock().unwrap_or_else(|e| e.into_inner()).take() {
+            finish_by = Some(d);
+        }
         let announced = share.lock().unwrap_or_else(|e| e.into_inner()).take();
         if let Some(announced) = announced {
             // `base` holds what this worker has sent, which the coordinator's merged phases include (or will).
@@ -232,13 +243,27 @@ pub fn run(
                 }
             }
         }
+        if finish_by.is_some_and(|d| Instant::now() >= d.at) {
+            // Past the run's deadline nothing more is rendered: the coordinator's stop follows.
+            while !stop.load(Ordering::Acquire) {
+                std::thread::sleep(Duration::from_millis(5));
+            }
+        }
         let stopping = stop.load(Ordering::Acquire);
         if !stopping {
             let round = Instant::now();
             if let Some(b) = &balance {
                 session::set_balance(&mut engine, b);
             }
-            engine.run_round(stop, None);
+            // A round ends when the next snapshot is due, so that a large image, whose phases last seconds,
+            // is sent after its first phase and then at every interval, not after K phases.
+            let interval = Duration::from_millis(interval_ms.load(Ordering::Relaxed).max(1));
+            let timing = RoundTiming {
+                cut_at: finish_by.map(|d: Deadline| d.at),
+                wind_down_at: Some(last + interval),
+                finish_by,
+            };
+            engine.run_timed_round(stop, timing);
             if let Some(b) = &mut balance {
                 let comparing = b.is_comparing_depths();
                 b.observe(engine.sums(), engine.totals());
@@ -257,7 +282,11 @@ pub fn run(
         }
         let stopping = stop.load(Ordering::Acquire);
         let interval = Duration::from_millis(interval_ms.load(Ordering::Relaxed).max(1));
-        if stopping || last.elapsed() >= interval {
+        // A snapshot without a new phase would cost a pass over every pixel (seconds on a large image) and
+        // add nothing, also at the stop, unless it is the worker's first.
+        let news = engine.totals().phases > sent_phases;
+        if (stopping && (news || seq == 0)) || (news && last.elapsed() >= interval) {
+            sent_phases = engine.totals().phases;
             seq += 1;
             let current = engine.sums();
             let delta = encode_delta(current, &base, compression);

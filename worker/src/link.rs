@@ -6,6 +6,7 @@ use photonfarm::accumulation::delta::Compression;
 use photonfarm::protocol::auth::{handshake, Peer};
 use photonfarm::protocol::{Connection, Job, Message, ProtocolError, RayMapPortion, Role, Secret};
 use photonfarm::ray_map::{Portion, PortionSink};
+use photonfarm::render::session::Deadline;
 use sha2::{Digest, Sha256};
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -78,7 +79,9 @@ pub async fn serve_job(
     let tiles: Arc<job::PendingTiles> = Arc::default();
     // The processes rendering the image, as the coordinator announces them, likewise.
     let share: Arc<job::PendingShare> = Arc::default();
-    if fetch_files(&mut conn, &job, cache, &tiles).await? == Fetched::Stopped {
+    // When a timed run stops, likewise.
+    let deadline: Arc<job::PendingDeadline> = Arc::default();
+    if fetch_files(&mut conn, &job, cache, &tiles, &deadline).await? == Fetched::Stopped {
         // The run ended while this worker was still being set up: nothing rendered, nothing lost.
         conn.write(&Message::Finished).await?;
         drain_until_closed(&mut conn).await;
@@ -94,9 +97,18 @@ pub async fn serve_job(
     let job = Arc::new(*job);
     let scene = {
         let job = job.clone();
-        tokio::task::spawn_blocking(move || job::load_scene(&job, &meshes))
-            .await
-            .map_err(|e| LinkError::Job(format!("the scene loader panicked: {e}")))?
+        let mut load = tokio::task::spawn_blocking(move || job::load_scene(&job, &meshes));
+        // A large mesh takes longer to read and build than the coordinator waits for a silent worker: the
+        // heartbeats go on meanwhile. What the coordinator sends waits in the link until the engine runs.
+        let mut tick = tokio::time::interval(opts.heartbeat);
+        loop {
+            tokio::select! {
+                loaded = &mut load => {
+                    break loaded.map_err(|e| LinkError::Job(format!("the scene loader panicked: {e}")))?;
+                }
+                _ = tick.tick() => conn.write(&Message::Heartbeat).await?,
+            }
+        }
     };
     let scene = match scene {
         Ok(s) => s,
@@ -124,7 +136,7 @@ pub async fn serve_job(
     };
     let engine = {
         let (job, stop, interval_ms, slowdown) = (job.clone(), stop.clone(), interval_ms.clone(), opts.slowdown);
-        let (tiles, share) = (tiles.clone(), share.clone());
+        let (tiles, share, deadline) = (tiles.clone(), share.clone(), deadline.clone());
         // On this machine the link is free and the worker's time is not: compress fast.
         let compression = Compression::for_peer(conn.peer);
         // The engine's events name the job and the worker.
@@ -133,8 +145,14 @@ pub async fn serve_job(
             .name("job".into())
             .spawn(move || {
                 let _span = span.enter();
-                let control =
-                    job::Control { stop: &stop, interval_ms: &interval_ms, tiles: &tiles, share: &share, ray_map };
+                let control = job::Control {
+                    stop: &stop,
+                    interval_ms: &interval_ms,
+                    tiles: &tiles,
+                    share: &share,
+                    deadline: &deadline,
+                    ray_map,
+                };
                 job::run(&scene, &job, control, slowdown, compression, |e| events_tx.send(e).is_ok())
             })
             .map_err(|e| LinkError::Job(format!("cannot start the engine thread: {e}")))?
@@ -217,9 +235,12 @@ pub async fn serve_job(
                     Some(Ok(Message::Share(s))) => {
                         *share.lock().unwrap_or_else(|e| e.into_inner()) = Some(s);
                     }
+                    Some(Ok(Message::StopAt { in_ms, slack_ms })) => {
+                        *deadline.lock().unwrap_or_else(|e| e.into_inner()) = Some(stop_at(in_ms, slack_ms));
+                    }
                     Some(Ok(Message::Heartbeat)) => {}
                     Some(Ok(other)) => {
-                        break Err(ProtocolError::Unexpected { expected: "Ack, Stop, ActiveTiles, Share or Heartbeat", got: other.kind().into() }.into())
+                        break Err(ProtocolError::Unexpected { expected: "Ack, Stop, StopAt, ActiveTiles, Share or Heartbeat", got: other.kind().into() }.into())
                     }
                     // After `Finished` the coordinator may close once it has what it needs.
                     Some(Err(ProtocolError::Closed)) | None if finished => break Ok(()),
@@ -316,11 +337,20 @@ async fn drain_until_closed(conn: &mut Connection) {
 
 /// Asks for the job's files that are not in `cache` and checks every one against its hash. A stop request
 /// that arrives first ends the job normally; active tiles that arrive meanwhile are kept in `tiles`.
+/// The deadline of a `StopAt` received now. Milliseconds beyond any real run (a forged or corrupt message)
+/// saturate to no deadline a run would reach.
+fn stop_at(in_ms: u64, slack_ms: u64) -> Deadline {
+    let ms = |m: u64| Duration::from_millis(m.min(u32::MAX as u64));
+    let now = std::time::Instant::now();
+    Deadline { at: now + ms(in_ms), slack: ms(slack_ms) }
+}
+
 async fn fetch_files(
     conn: &mut Connection,
     job: &Job,
     cache: &mut FileCache,
     tiles: &job::PendingTiles,
+    deadline: &job::PendingDeadline,
 ) -> Result<Fetched, ProtocolError> {
     let mut missing: Vec<String> =
         job.files.iter().map(|f| f.sha256.clone()).filter(|h| !cache.contains_key(h)).collect();
@@ -346,6 +376,9 @@ async fn fetch_files(
             Message::Stop => return Ok(Fetched::Stopped),
             Message::ActiveTiles { tile, flags } => {
                 *tiles.lock().unwrap_or_else(|e| e.into_inner()) = Some((tile, flags));
+            }
+            Message::StopAt { in_ms, slack_ms } => {
+                *deadline.lock().unwrap_or_else(|e| e.into_inner()) = Some(stop_at(in_ms, slack_ms));
             }
             Message::Heartbeat => {}
             Message::Refused { reason } => return Err(ProtocolError::Refused(reason)),

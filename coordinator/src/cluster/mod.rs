@@ -12,7 +12,7 @@ use photonfarm::accumulation::delta::apply_delta;
 use photonfarm::accumulation::{Accumulator, AuxLayout};
 use photonfarm::protocol::{Share, Snapshot};
 use photonfarm::render::record::{WorkerRecord, WorkerState};
-use photonfarm::render::session::Progressive;
+use photonfarm::render::session::{Deadline, Progressive};
 use photonfarm::render::{ActiveTiles, RayTotals, RenderSettings};
 use std::net::IpAddr;
 use std::process::Child;
@@ -49,6 +49,8 @@ pub struct Cluster {
     accepts_joins: bool,
     /// `collect` ran: the workers were stopped and may exit on their own.
     collected: bool,
+    /// The deadline the workers were told.
+    announced_deadline: Option<Deadline>,
     started: Instant,
 }
 
@@ -129,6 +131,7 @@ impl Cluster {
             blocklist,
             accepts_joins,
             collected: false,
+            announced_deadline: None,
             started: Instant::now(),
         })
     }
@@ -354,8 +357,15 @@ impl Drop for Cluster {
 
 impl Progressive for Cluster {
     /// Waits for snapshots: returns once one was merged, or at the deadline, on interruption, or when every
-    /// worker has ended.
-    fn step(&mut self, interrupted: &AtomicBool, deadline: Option<Instant>) {
+    /// worker has ended. The workers are told the deadline, so that they start no phase that would end past it.
+    fn step(&mut self, interrupted: &AtomicBool, deadline: Option<Deadline>) {
+        if deadline != self.announced_deadline {
+            if let Some(d) = deadline {
+                self.send(Control::StopAt(d));
+            }
+            self.announced_deadline = deadline;
+        }
+        let deadline = deadline.map(|d| d.at);
         loop {
             if interrupted.load(Ordering::Relaxed) || deadline.is_some_and(|d| Instant::now() >= d) {
                 return;

@@ -9,6 +9,7 @@ use photonfarm::protocol::{
 };
 use photonfarm::ray_map::format::PortionHeader;
 use photonfarm::ray_map::{Portion, Recorder};
+use photonfarm::render::session::Deadline;
 use std::collections::BTreeMap;
 use std::net::{IpAddr, SocketAddr};
 use std::path::PathBuf;
@@ -78,6 +79,8 @@ pub enum Control {
         worker: usize,
         share: Share,
     },
+    /// Every worker, and every worker that starts later, stops at this deadline (a timed run).
+    StopAt(Deadline),
 }
 
 /// Failures of worker links per host address in this job, as render-farm managers keep them: a host whose
@@ -195,6 +198,8 @@ pub async fn run(
     let mut stopping = false;
     // The latest active tiles, for workers whose link starts after they were decided.
     let mut tiles: Option<(u32, Arc<Vec<bool>>)> = None;
+    // The timed run's deadline, likewise.
+    let mut stop_at: Option<Deadline> = None;
     // Shares announced before the worker's link was registered here.
     let mut shares: BTreeMap<usize, Share> = BTreeMap::new();
     // Remote daemons: dial them.
@@ -303,6 +308,12 @@ pub async fn run(
                     }
                     tiles = Some((tile, flags));
                 }
+                Some(Control::StopAt(d)) => {
+                    for l in links.values() {
+                        let _ = l.send(Control::StopAt(d));
+                    }
+                    stop_at = Some(d);
+                }
                 Some(Control::Share { worker, share }) => match links.get(&worker) {
                     Some(l) => {
                         let _ = l.send(Control::Share { worker, share });
@@ -322,6 +333,9 @@ pub async fn run(
                     }
                     if let Some(share) = shares.remove(&worker) {
                         let _ = tx.send(Control::Share { worker, share });
+                    }
+                    if let Some(d) = stop_at {
+                        let _ = tx.send(Control::StopAt(d));
                     }
                 }
                 links.insert(worker, tx);
@@ -444,6 +458,11 @@ async fn drive(
                         Some(Control::StopAll) => Message::Stop,
                         Some(Control::ActiveTiles { tile, flags }) => Message::ActiveTiles { tile, flags: flags.to_vec() },
                         Some(Control::Share { share, .. }) => Message::Share(share),
+                        // In milliseconds from now: the worker's clock need not agree with this one.
+                        Some(Control::StopAt(d)) => Message::StopAt {
+                            in_ms: d.at.saturating_duration_since(Instant::now()).as_millis() as u64,
+                            slack_ms: d.slack.as_millis() as u64,
+                        },
                         Some(Control::Drop { reason, .. }) => {
                             let _ = writer.write(&Message::Refused { reason: reason.clone() }).await;
                             break Err(reason);

@@ -2,10 +2,12 @@
 //! follow every specular branch and look for an emitter, or for an environment where they leave the scene.
 
 use crate::accumulation::lit_mask::{LitMask, LIT_MASK_SAMPLES};
+use crate::camera::Lens;
 use crate::color::Rgb;
 use crate::geometry::{ray::offset_origin, Ray};
+use crate::light::Light;
 use crate::scene::Scene;
-use glam::Vec2;
+use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 /// Segments traced per pixel at most. The branches of a pixel's primary rays are followed likeliest first: the
@@ -28,13 +30,27 @@ impl LitMask {
     /// points the first four coordinates of a scrambled Sobol sequence (stratified in both), each followed
     /// into every reflection and transmission of the delta surfaces it meets, likeliest branch first, up to
     /// `PIXEL_BUDGET` segments per pixel; the pixels next to those are lit too (`with_neighbours_lit`).
+    ///
+    /// A pinhole camera's pixels whose four corner rays see the same surface, one that neither emits nor has a
+    /// delta lobe, with no emitter's image box over them, are unlit without their sixteen rays
+    /// (`plain_pixels`): the corner rays cost one ray per pixel, so the mask of a large image costs about a
+    /// sixteenth of the full test. A delta surface or an emitter smaller than a pixel that no corner ray and no
+    /// emitter box reveals is what this could miss; every emitter's box is marked, so only the former remains.
     pub fn of_scene(scene: &Scene, max_depth: u32) -> LitMask {
+        Self::decided(scene, max_depth, plain_pixels(scene))
+    }
+
+    /// The mask with the full test at every pixel that `plain` (when given) does not say is unlit.
+    fn decided(scene: &Scene, max_depth: u32, plain: Option<Vec<bool>>) -> LitMask {
         let camera = &scene.camera;
         let w = camera.width as usize;
         let lit: Vec<bool> = (0..camera.pixel_count())
             .into_par_iter()
             .with_min_len(64)
             .map(|i| {
+                if plain.as_ref().is_some_and(|p| p[i]) {
+                    return false;
+                }
                 let (x, y) = ((i % w) as u32, (i / w) as u32);
                 let rays = (0..LIT_MASK_SAMPLES).filter_map(|k| {
                     let u = sobol_burley::sample_4d(k, 0, MASK_SEED ^ i as u32);
@@ -46,6 +62,123 @@ impl LitMask {
             .collect();
         LitMask::from_flags(camera.width, camera.height, lit, LIT_MASK_SAMPLES).with_neighbours_lit()
     }
+}
+
+/// What a corner ray saw: the object of a surface that neither emits nor has a delta lobe, `ESCAPED` for a ray
+/// that left the scene where no infinite light shines, or `COMPLEX` for anything a pixel's full test must look
+/// at (an emitter, a delta surface, an infinite light's radiance).
+const ESCAPED: u32 = u32::MAX;
+const COMPLEX: u32 = u32::MAX - 1;
+
+/// For a pinhole camera, the pixels known to be unlit from their corner rays alone: all four corners saw the
+/// same plain surface (`ESCAPED` included), and no emitter's box projects onto the pixel or its neighbours.
+/// None for other cameras, whose rays start across an aperture.
+fn plain_pixels(scene: &Scene) -> Option<Vec<bool>> {
+    let camera = &scene.camera;
+    if camera.lens != Lens::Pinhole {
+        return None;
+    }
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let corners: Vec<u32> = (0..(w + 1) * (h + 1))
+        .into_par_iter()
+        .with_min_len(256)
+        .map(|c| {
+            let (cx, cy) = (c % (w + 1), c / (w + 1));
+            // The corner (cx, cy) as a position in pixel (cx − 1, cy − 1) where the image ends there.
+            let (x, jx) = if cx == w { (cx - 1, 1.0) } else { (cx, 0.0) };
+            let (y, jy) = if cy == h { (cy - 1, 1.0) } else { (cy, 0.0) };
+            let ray = camera.generate_ray(x as u32, y as u32, Vec2::new(jx, jy), Vec2::ZERO).ray;
+            corner_class(scene, &ray)
+        })
+        .collect();
+    let boxes = emitter_boxes(scene);
+    Some(
+        (0..w * h)
+            .into_par_iter()
+            .with_min_len(256)
+            .map(|i| {
+                let (x, y) = (i % w, i / w);
+                let c = [corners[y * (w + 1) + x], corners[y * (w + 1) + x + 1]];
+                let d = [corners[(y + 1) * (w + 1) + x], corners[(y + 1) * (w + 1) + x + 1]];
+                c[0] != COMPLEX && c.iter().chain(&d).all(|&k| k == c[0]) && !boxes[i]
+            })
+            .collect(),
+    )
+}
+
+fn corner_class(scene: &Scene, ray: &Ray) -> u32 {
+    let Some(hit) = scene.geometry.intersect(ray) else {
+        return if scene.lights.escaped(ray.direction, None) == Rgb::ZERO { ESCAPED } else { COMPLEX };
+    };
+    let wo = -ray.direction;
+    if scene.lights.emitted(&hit, ray.direction) != Rgb::ZERO || !scene.bsdf(&hit, wo).delta_branches(wo).is_empty() {
+        return COMPLEX;
+    }
+    hit.object
+}
+
+/// The pixels onto which some emitter's bounding box projects, grown by a pixel, as one flag per pixel: an
+/// emitter smaller than a pixel falls between the corner rays. An emitter whose box reaches behind the camera
+/// marks the whole image.
+fn emitter_boxes(scene: &Scene) -> Vec<bool> {
+    let camera = &scene.camera;
+    let (w, h) = (camera.width as i64, camera.height as i64);
+    // A two-dimensional difference array: each box adds one rectangle in constant time.
+    let mut marks = vec![0i32; ((w + 1) * (h + 1)) as usize];
+    let mut mark = |x0: i64, y0: i64, x1: i64, y1: i64| {
+        let (x0, y0, x1, y1) = (x0.clamp(0, w), y0.clamp(0, h), x1.clamp(0, w), y1.clamp(0, h));
+        if x0 >= x1 || y0 >= y1 {
+            return;
+        }
+        let at = |x: i64, y: i64| (y * (w + 1) + x) as usize;
+        marks[at(x0, y0)] += 1;
+        marks[at(x1, y0)] -= 1;
+        marks[at(x0, y1)] -= 1;
+        marks[at(x1, y1)] += 1;
+    };
+    for light in scene.lights.all() {
+        let (lo, hi) = match light {
+            Light::Area { triangle, .. } => {
+                let v = scene.geometry.triangle(*triangle).v;
+                (v[0].min(v[1]).min(v[2]), v[0].max(v[1]).max(v[2]))
+            }
+            Light::Sphere { center, radius, .. } | Light::Disc { center, radius, .. } => {
+                (*center - Vec3::splat(*radius), *center + Vec3::splat(*radius))
+            }
+            Light::Point { .. } | Light::Spot { .. } | Light::Infinite(_) => continue,
+        };
+        let mut min = Vec2::splat(f32::INFINITY);
+        let mut max = Vec2::splat(f32::NEG_INFINITY);
+        let mut behind = false;
+        for k in 0..8 {
+            let p = Vec3::new(
+                if k & 1 == 0 { lo.x } else { hi.x },
+                if k & 2 == 0 { lo.y } else { hi.y },
+                if k & 4 == 0 { lo.z } else { hi.z },
+            );
+            match camera.project(p) {
+                Some(q) if q.is_finite() => (min, max) = (min.min(q), max.max(q)),
+                _ => behind = true,
+            }
+        }
+        if behind {
+            mark(0, 0, w, h);
+        } else {
+            mark(min.x.floor() as i64 - 1, min.y.floor() as i64 - 1, max.x.ceil() as i64 + 1, max.y.ceil() as i64 + 1);
+        }
+    }
+    // Prefix sums over rows then columns turn the differences into counts.
+    for y in 0..=h {
+        for x in 1..=w {
+            marks[(y * (w + 1) + x) as usize] += marks[(y * (w + 1) + x - 1) as usize];
+        }
+    }
+    for y in 1..=h {
+        for x in 0..=w {
+            marks[(y * (w + 1) + x) as usize] += marks[((y - 1) * (w + 1) + x) as usize];
+        }
+    }
+    (0..h).flat_map(|y| (0..w).map(move |x| (x, y))).map(|(x, y)| marks[(y * (w + 1) + x) as usize] > 0).collect()
 }
 
 /// A ray of the specular tree still to trace: its segment number and the probability of its branch.
@@ -95,6 +228,21 @@ fn sees_emitter(scene: &Scene, rays: impl Iterator<Item = Ray>, max_depth: u32) 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_corner_rays_leave_every_shipped_pinhole_scene_s_mask_as_the_full_test_decides_it() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+        for name in ["cornell.toml", "caustic.toml", "glossy-room.toml", "materials.toml", "outdoor.toml"] {
+            let scene = Scene::load(&dir.join(name)).unwrap();
+            let plain = plain_pixels(&scene).expect("a pinhole camera");
+            let skipped = plain.iter().filter(|&&p| p).count();
+            let fast = LitMask::of_scene(&scene, 12);
+            let full = LitMask::decided(&scene, 12, None);
+            assert_eq!(fast, full, "{name}");
+            // The shortcut must actually skip pixels, or this test checks nothing.
+            assert!(skipped > scene.camera.pixel_count() / 4, "{name}: {skipped} pixels skipped");
+        }
+    }
 
     #[test]
     fn delta_branches_of_glass_are_a_reflection_and_a_refraction_whose_probabilities_add_to_one() {

@@ -38,6 +38,8 @@ pub struct BackwardStats {
     pub rays: u64,
     /// Backward photons stored.
     pub photons: u64,
+    /// Chunks of pixels left untraced because the pass was abandoned (the phase is then left out whole).
+    pub abandoned_chunks: u64,
 }
 
 impl std::ops::Add for BackwardStats {
@@ -45,7 +47,11 @@ impl std::ops::Add for BackwardStats {
 
     /// The counts of two shares of a backward pass together.
     fn add(self, o: Self) -> Self {
-        BackwardStats { rays: self.rays + o.rays, photons: self.photons + o.photons }
+        BackwardStats {
+            rays: self.rays + o.rays,
+            photons: self.photons + o.photons,
+            abandoned_chunks: self.abandoned_chunks + o.abandoned_chunks,
+        }
     }
 }
 

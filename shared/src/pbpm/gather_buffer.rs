@@ -62,6 +62,11 @@ pub struct GatherBuffer {
 }
 
 impl GatherBuffer {
+    /// Zeroes every value: the light of a phase that is left out instead of closed.
+    pub fn clear(&mut self) {
+        self.values.fill(0.0);
+    }
+
     /// Sizes the buffer for `pixels` local pixels with the auxiliary channels of `aux`, all zero.
     pub fn reset(&mut self, pixels: usize, aux: &AuxLayout) {
         let stride = Stride::of(aux);

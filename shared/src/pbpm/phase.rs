@@ -30,6 +30,7 @@ use crate::scene::Scene;
 use crate::spectrum::{band_values, join, PhaseSpectrum, Wavelength};
 use rayon::iter::Either;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Pixels per unit of work of the camera pass and the close, each with its own photon list.
 pub const PIXEL_CHUNK: usize = 256;
@@ -344,7 +345,8 @@ impl PhaseBuffers {
     /// Stage 1: one camera path per local pixel; `pixels[i]` is local pixel i's image pixel (None: the whole
     /// image, local pixel i being image pixel i), and `next_phase(i)` its phase numbers: the radius's j, and the
     /// j that picks the point and replicate of the pixel's quasi-random sequences (`PixelPhase`). `map` is the
-    /// previous phase's, whose photon buffer a single list takes back. Returns the rays traced and the photons
+    /// previous phase's, whose photon buffer a single list takes back. Once `abandon` is set, the chunks not yet
+    /// started are skipped and counted: the phase must then be left out. Returns the rays traced and the photons
     /// stored.
     pub fn camera_pass(
         &mut self,
@@ -353,6 +355,7 @@ impl PhaseBuffers {
         pixels: Option<&[u32]>,
         next_phase: impl Fn(usize) -> super::PixelPhase + Sync,
         map: &mut PhotonMap,
+        abandon: Option<&AtomicBool>,
     ) -> BackwardStats {
         let count = pixels.map_or(phase.scene.camera.pixel_count(), <[u32]>::len);
         assert_eq!(count, self.camera.len(), "camera pass over pixels the buffers were not sized for");
@@ -375,6 +378,10 @@ impl PhaseBuffers {
             .map(|(chunk, (((values, replicate), (photons, vertices)), mut aux))| {
                 photons.clear();
                 vertices.clear();
+                // A phase cut at a deadline long before its end is left out whole rather than finished late.
+                if abandon.is_some_and(|a| a.load(Ordering::Relaxed)) {
+                    return BackwardStats { abandoned_chunks: 1, ..BackwardStats::default() };
+                }
                 // A camera path stores at most one photon per diffuse vertex it continues from: at full size
                 // from the first phase, a list never grows, and holds what `--memory-limit` assumed.
                 photons.reserve_exact(values.len() * bdd as usize);

@@ -16,7 +16,9 @@ use serde::{Deserialize, Serialize};
 /// 10: the coordinator announces the processes rendering the image when they change (`Share`), jobs carry
 /// `--memory-limit`, and snapshots a CRC-32 of their delta.
 /// 11: jobs may ask for a ray map (`Job::ray_map`), whose portions workers send (`RayMapPortion`).
-pub const PROTOCOL_VERSION: u32 = 11;
+/// 12: the coordinator tells the workers when a timed run stops (`StopAt`), and jobs carry a Mitsuba scene's
+/// import options (`Job::mitsuba`).
+pub const PROTOCOL_VERSION: u32 = 12;
 
 /// Which end of a link a peer is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -209,6 +211,9 @@ pub enum Message {
     /// Worker → coordinator: a portion of the worker's ray map. A worker sends its last portions before
     /// `Finished`.
     RayMapPortion(RayMapPortion),
+    /// Coordinator → worker: the run stops `in_ms` milliseconds after this message was sent; start no phase
+    /// that would end more than `slack_ms` after that. A `Stop` still ends the job.
+    StopAt { in_ms: u64, slack_ms: u64 },
 }
 
 impl Snapshot {
@@ -238,6 +243,7 @@ impl Message {
             Message::ActiveTiles { .. } => "ActiveTiles",
             Message::Share(_) => "Share",
             Message::RayMapPortion(_) => "RayMapPortion",
+            Message::StopAt { .. } => "StopAt",
         }
     }
 }
@@ -278,6 +284,8 @@ mod tests {
         let m = Message::ActiveTiles { tile: 32, flags: vec![true, false, true] };
         assert_eq!(decode(&encode(&m).unwrap()).unwrap(), m);
         let m = Message::RayMapPortion(RayMapPortion { raw_bytes: 9, paths: 1, segments: 2, frame: vec![1, 2, 3] });
+        assert_eq!(decode(&encode(&m).unwrap()).unwrap(), m);
+        let m = Message::StopAt { in_ms: 60_000, slack_ms: 1_200 };
         assert_eq!(decode(&encode(&m).unwrap()).unwrap(), m);
     }
 

@@ -35,6 +35,8 @@ pub struct Engine<'s> {
     recorder: Option<Arc<Recorder>>,
     /// The pixels of the active tiles once some have retired (None: every pixel).
     tiles: Option<TilePixels>,
+    /// How long the latest phase took: a timed run starts no phase it expects to end past its deadline.
+    last_phase: Option<std::time::Duration>,
 }
 
 /// The pixels a phase renders when some tiles have retired, and the phase's sums over them: a phase closes
@@ -84,6 +86,7 @@ impl<'s> Engine<'s> {
             totals: RayTotals::default(),
             recorder: None,
             tiles: None,
+            last_phase: None,
         }
     }
 
@@ -157,6 +160,7 @@ impl<'s> Engine<'s> {
 
     /// Renders one more phase and closes it into the sums.
     pub fn run_phase(&mut self) -> PhaseReport {
+        let started = std::time::Instant::now();
         let report = match self.settings.estimator {
             Estimator::Pbpm => self.pbpm_phase(),
             Estimator::Path => self.path_phase(),
@@ -167,7 +171,13 @@ impl<'s> Engine<'s> {
         self.totals.light_paths += report.light_paths;
         self.totals.map_light_paths += report.light_paths;
         self.totals.merges += report.merges;
+        self.last_phase = Some(started.elapsed());
         report
+    }
+
+    /// How long the latest phase took (None before the first).
+    pub fn last_phase_duration(&self) -> Option<std::time::Duration> {
+        self.last_phase
     }
 
     fn path_phase(&mut self) -> PhaseReport {
@@ -296,7 +306,7 @@ impl<'s> Engine<'s> {
         let rendered = mask.map_or(pixels.len(), <[u32]>::len);
         let mean = mean_phase(rendered, |i| next_phase(i).radius);
         let phase = self.settings.phase(self.scene, number).at_pixel_phase(mean);
-        let backward = self.buffers.camera_pass(exec, &phase, mask, next_phase, &mut self.map);
+        let backward = self.buffers.camera_pass(exec, &phase, mask, next_phase, &mut self.map, None);
         self.buffers.build_map(exec, &mut self.map);
         let (local, rendered) = TilePixels::rendered(&self.tiles, self.scene);
         // Light per rendered pixel: where tiles retired, the phase's light shrinks with its camera paths.

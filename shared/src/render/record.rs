@@ -286,6 +286,11 @@ pub struct RunRecord {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stage_seconds: Option<StageSeconds>,
     pub wall_time_s: f64,
+    /// Seconds from the command's start to the start of rendering (reading the scene, deciding what the run
+    /// needs before it, starting its engine): the command's wall time is this plus this session's share of
+    /// `wall_time_s`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub started_s: Option<f64>,
     pub peak_memory_bytes: Option<u64>,
     pub bytes_per_pixel: f64,
     pub error: ErrorEstimate,

@@ -14,12 +14,42 @@ use crate::pbpm::RadiusSchedule;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+/// When a timed run stops: at `at`, and no phase that would end more than `slack` later is started. A phase
+/// lasts as long as the renderer's previous one, so on a large image a phase is seconds to minutes: one started
+/// just before the deadline would end that much late.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Deadline {
+    pub at: Instant,
+    pub slack: Duration,
+}
+
+impl Deadline {
+    /// The share of `--time` a run may end late by, besides the remainder of a phase cut at the deadline.
+    pub const SLACK_FRACTION: f64 = 0.02;
+
+    /// True when a phase of `duration` started now would end after the deadline's slack.
+    pub fn too_late_for(&self, duration: Duration) -> bool {
+        Instant::now() + duration > self.at + self.slack
+    }
+
+    /// Waits until the deadline or until `interrupted` is set.
+    pub fn wait(&self, interrupted: &AtomicBool) {
+        while !interrupted.load(Ordering::Relaxed) {
+            let left = self.at.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return;
+            }
+            std::thread::sleep(left.min(Duration::from_millis(20)));
+        }
+    }
+}
+
 /// A renderer that improves its running sums step by step: the single-threaded engine (a step is a phase) or a
 /// parallel engine (a step is a synchronisation round).
 pub trait Progressive {
-    /// Renders one more step; a parallel step ends early when `interrupted` is set or `deadline` passes,
-    /// always closing the phases it started.
-    fn step(&mut self, interrupted: &AtomicBool, deadline: Option<Instant>);
+    /// Renders one more step; a parallel step ends early when `interrupted` is set or the deadline passes,
+    /// always closing the phases it started. A phase expected to end past the deadline's slack is not started.
+    fn step(&mut self, interrupted: &AtomicBool, deadline: Option<Deadline>);
     /// The running sums.
     fn sums(&self) -> &Accumulator;
     /// Counts so far.
@@ -62,8 +92,13 @@ pub trait Progressive {
 }
 
 impl Progressive for Engine<'_> {
-    fn step(&mut self, _interrupted: &AtomicBool, _deadline: Option<Instant>) {
-        self.run_phase();
+    fn step(&mut self, interrupted: &AtomicBool, deadline: Option<Deadline>) {
+        match (deadline, self.last_phase_duration()) {
+            (Some(d), Some(last)) if d.too_late_for(last) => d.wait(interrupted),
+            _ => {
+                self.run_phase();
+            }
+        }
     }
     fn sums(&self) -> &Accumulator {
         Engine::sums(self)
@@ -180,7 +215,10 @@ pub fn run<R: Progressive + ?Sized>(
         if stop.phases.is_some_and(|n| stop.phases_done(engine.sums(), adaptive) >= n as f64) {
             return StopReason::Phases;
         }
-        let deadline = stop.time.map(|t| start + t.saturating_sub(elapsed_before));
+        let deadline = stop.time.map(|t| Deadline {
+            at: start + t.saturating_sub(elapsed_before),
+            slack: t.mul_f64(Deadline::SLACK_FRACTION),
+        });
         if let Some(b) = &balance {
             set_balance(engine, b);
         }

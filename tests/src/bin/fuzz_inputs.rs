@@ -333,6 +333,7 @@ fn main() -> Result<()> {
             merged_phases: Share::compress_phases(base.pixels.iter().map(|p| p.phases)),
         }),
         Message::RayMapPortion(RayMapPortion { raw_bytes: 64, paths: 1, segments: 1, frame: vec![0x28, 0xb5, 0x2f] }),
+        Message::StopAt { in_ms: 30_000, slack_ms: 600 },
     ];
     let runtime = tokio::runtime::Builder::new_current_thread().build()?;
     let mut frame_seeds = Vec::new();

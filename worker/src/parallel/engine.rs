@@ -9,7 +9,7 @@ use photonfarm::accumulation::{Accumulator, AuxLayout};
 use photonfarm::pbpm::ProcessShare;
 use photonfarm::ray_map::Recorder;
 use photonfarm::render::record::StageSeconds;
-use photonfarm::render::session::Progressive;
+use photonfarm::render::session::{Deadline, Progressive};
 use photonfarm::render::{ActiveTiles, RayTotals, RenderSettings};
 use photonfarm::scene::Scene;
 use serde::{Deserialize, Serialize};
@@ -139,6 +139,24 @@ impl EngineConfig {
     }
 }
 
+/// How long an in-process round goes on before it winds down, like a worker's round at its default snapshot
+/// interval: on a large image a phase lasts seconds, and rounds of K phases would leave the image unmerged,
+/// without δ or a preview, for K of them.
+pub const ROUND_LENGTH: Duration = Duration::from_secs(1);
+
+/// When a round ends besides its K phases (`ParallelEngine::run_timed_round`).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RoundTiming {
+    /// The groups are cut: they start no phase, and the phases under way stop their light paths once a quarter
+    /// of them are counted.
+    pub cut_at: Option<Instant>,
+    /// The groups finish the phases under way, whole, and start no other once each has rendered one.
+    pub wind_down_at: Option<Instant>,
+    /// A timed run's deadline: no group starts a phase that, lasting as long as its previous one, would end
+    /// past it.
+    pub finish_by: Option<Deadline>,
+}
+
 /// The multi-threaded engine of one process.
 pub struct ParallelEngine<'s> {
     scene: &'s Scene,
@@ -255,6 +273,13 @@ impl<'s> ParallelEngine<'s> {
     /// One synchronisation round: deal masks, run every group until one has finished K phases (or the
     /// deadline passes, or the user interrupts), stop them, add their sums to the whole image.
     pub fn run_round(&mut self, interrupted: &AtomicBool, deadline: Option<Instant>) {
+        self.run_timed_round(interrupted, RoundTiming { cut_at: deadline, ..RoundTiming::default() });
+    }
+
+    /// A synchronisation round that also ends as `timing` says: wound down after a while (each group finishes
+    /// its phase under way), and with no phase started that would end past a timed run's deadline.
+    pub fn run_timed_round(&mut self, interrupted: &AtomicBool, timing: RoundTiming) {
+        let RoundTiming { cut_at: deadline, wind_down_at, finish_by } = timing;
         let threads = self.config.threads() as u64;
         let round_start = Instant::now();
         if let Some(end) = self.last_round_end {
@@ -283,7 +308,7 @@ impl<'s> ParallelEngine<'s> {
                 .collect();
             g.start_deal(m, before, if self.config.masks { 1 } else { self.config.groups as u32 });
         }
-        let (stop, cut) = (AtomicBool::new(false), AtomicBool::new(false));
+        let (stop, cut, wind_down) = (AtomicBool::new(false), AtomicBool::new(false), AtomicBool::new(false));
         let ctx = RoundContext {
             scene: self.scene,
             settings: &self.settings,
@@ -292,6 +317,8 @@ impl<'s> ParallelEngine<'s> {
             sole_foreign_writer: self.config.groups == 2 && self.config.threads_per_group == 1,
             stop: &stop,
             cut: &cut,
+            wind_down: &wind_down,
+            deadline: finish_by,
             deal: self.deals,
             rendered_pixels,
             numbering: self.share.numbering(1, 0),
@@ -320,6 +347,10 @@ impl<'s> ParallelEngine<'s> {
                         if interrupted.load(Ordering::Relaxed) || deadline.is_some_and(|d| Instant::now() >= d) {
                             cut.store(true, Ordering::Release);
                             break;
+                        }
+                        // The groups leave one by one as their phases end; the last one ends the round.
+                        if wind_down_at.is_some_and(|w| Instant::now() >= w) {
+                            wind_down.store(true, Ordering::Release);
                         }
                     }
                 }
@@ -358,8 +389,13 @@ impl<'s> ParallelEngine<'s> {
 }
 
 impl Progressive for ParallelEngine<'_> {
-    fn step(&mut self, interrupted: &AtomicBool, deadline: Option<Instant>) {
-        self.run_round(interrupted, deadline);
+    fn step(&mut self, interrupted: &AtomicBool, deadline: Option<Deadline>) {
+        let timing = RoundTiming {
+            cut_at: deadline.map(|d| d.at),
+            wind_down_at: Some(Instant::now() + ROUND_LENGTH),
+            finish_by: deadline,
+        };
+        self.run_timed_round(interrupted, timing);
     }
 
     fn sums(&self) -> &Accumulator {

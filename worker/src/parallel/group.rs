@@ -10,6 +10,7 @@ use photonfarm::pbpm::{
     PhaseNumbering, PhotonMap,
 };
 use photonfarm::ray_map::{PathKind, RecordedPath, Recorder};
+use photonfarm::render::session::Deadline;
 use photonfarm::render::RenderSettings;
 use photonfarm::scene::Scene;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
@@ -140,6 +141,11 @@ pub struct RoundContext<'a> {
     pub stop: &'a AtomicBool,
     /// The user interrupted or the deadline passed: a group stops even before its first phase of the round.
     pub cut: &'a AtomicBool,
+    /// The round has lasted long enough: a group finishes the phase under way (whole, its light paths not cut
+    /// short) and starts no other, once it has rendered one this round.
+    pub wind_down: &'a AtomicBool,
+    /// A timed run's end: a group starts no phase that, lasting as long as its previous one, would end past it.
+    pub deadline: Option<Deadline>,
     pub deal: u64,
     /// Pixels the round renders over all groups (every pixel unless tiles retired): the light-path quota is
     /// L per rendered pixel.
@@ -183,6 +189,8 @@ pub struct Group {
     groups_per_pixel: u32,
     /// The mask changed since the map's `pixels` lookup was made.
     new_mask: bool,
+    /// How long the group's latest phase took, to start none that would end past a timed run's deadline.
+    last_phase: Option<std::time::Duration>,
     pub stats: GroupStats,
 }
 
@@ -223,6 +231,7 @@ impl Group {
             phases_this_deal: 0,
             groups_per_pixel: 1,
             new_mask: true,
+            last_phase: None,
             stats: GroupStats::default(),
         })
     }
@@ -288,16 +297,30 @@ impl Group {
     pub fn run_round(&mut self, ctx: &RoundContext, phases_per_deal: u64, done: &std::sync::mpsc::Sender<usize>) {
         if self.mask.is_empty() {
             // More groups than tiles: nothing to render this deal.
-            while !ctx.stop.load(Ordering::Acquire) {
+            while !ctx.stop.load(Ordering::Acquire) && !ctx.wind_down.load(Ordering::Acquire) {
                 std::thread::sleep(std::time::Duration::from_millis(1));
             }
             return;
         }
         let pool = self.pool.clone();
         pool.install(|| {
-            while !ctx.cut.load(Ordering::Acquire) && (self.phases_this_deal == 0 || !ctx.stop.load(Ordering::Acquire))
-            {
-                self.run_phase(ctx);
+            let ended = || ctx.stop.load(Ordering::Acquire) || ctx.wind_down.load(Ordering::Acquire);
+            while !ctx.cut.load(Ordering::Acquire) && (self.phases_this_deal == 0 || !ended()) {
+                if let (Some(d), Some(last)) = (ctx.deadline, self.last_phase) {
+                    if d.too_late_for(last) {
+                        // Idle until the deadline cuts the round: a phase started now would end too late.
+                        let wound_down = || self.phases_this_deal > 0 && ctx.wind_down.load(Ordering::Acquire);
+                        while !ctx.cut.load(Ordering::Acquire) && !ctx.stop.load(Ordering::Acquire) && !wound_down() {
+                            std::thread::sleep(std::time::Duration::from_millis(5));
+                        }
+                        break;
+                    }
+                }
+                let started = Instant::now();
+                if !self.run_phase(ctx) {
+                    break;
+                }
+                self.last_phase = Some(started.elapsed());
                 self.phases_this_deal += 1;
                 if self.phases_this_deal == phases_per_deal {
                     let _ = done.send(self.index);
@@ -311,8 +334,8 @@ impl Group {
     }
 
     /// One phase over the mask (the stages of `pbpm::phase`), with the forward pass driven by the light-path
-    /// quota, the other groups' open maps and the round's stop.
-    fn run_phase(&mut self, ctx: &RoundContext) {
+    /// quota, the other groups' open maps and the round's stop; false when a cut left it out whole.
+    fn run_phase(&mut self, ctx: &RoundContext) -> bool {
         let exec = Executor::CurrentPool;
         // Wavelengths per group phase: its camera and light paths join only among themselves.
         let phase = ctx.settings.phase(ctx.scene, self.phase_key(ctx.deal));
@@ -333,10 +356,15 @@ impl Group {
         let number = mean_phase(self.mask.len(), |i| next_phase(i).radius);
         let phase = phase.at_pixel_phase(number);
         let map = &mut slot.data_mut(&mut self.token).photons;
-        let backward = self.buffers.camera_pass(exec, &phase, Some(&self.mask), next_phase, map);
+        let backward = self.buffers.camera_pass(exec, &phase, Some(&self.mask), next_phase, map, Some(ctx.cut));
         self.stats.backward_rays += backward.rays;
         self.stats.backward_photons += backward.photons;
         self.stats.nanos.backward += nanos_since(t0);
+        if backward.abandoned_chunks > 0 {
+            // Cut in its camera pass: the rest of the phase would take most of a phase past the deadline, and the
+            // map was never opened, so leaving the phase out touches nothing another group holds.
+            return false;
+        }
 
         // 2. Build the map while it is closed. The phase's quota counts every light path traced against the map,
         // its own group's and the other groups' (paper §4.2): a light path that gathers into several open maps
@@ -372,6 +400,14 @@ impl Group {
 
         // 4. Close the phase: gathered luminance normalised by every light path traced against the map.
         let counted = slot.light_paths();
+        if ctx.cut.load(Ordering::Acquire) && counted < minimum_paths(required) {
+            // Cut before it had the light a stopped phase keeps: left out whole, its light discarded.
+            for t in &mut self.threads {
+                thread_mut(t).gathered.clear();
+            }
+            self.stats.nanos.closing += nanos_since(t0);
+            return false;
+        }
         self.stats.light_paths_counted += counted;
         let data = slot.data_mut(&mut self.token);
         self.stats.merges += tally.own_merges;
@@ -387,6 +423,7 @@ impl Group {
         self.buffers.close(exec, &phase, gathered, counted, &mut self.sums, &mut self.aux_sums);
         self.stats.nanos.closing += nanos_since(t0);
         self.stats.phases += 1;
+        true
     }
 
     /// Stage 3 with the map open: traces the phase's light paths on the group's threads until the quota is met
@@ -398,9 +435,7 @@ impl Group {
         let me = self.index;
         let slot = &ctx.slots[me];
         slot.open(&self.token);
-        // A stop is honoured once `minimum` paths are counted: a phase cut shorter has too few light paths for
-        // its camera paths, and its gathered light's variance grows as 1 / paths (see STOP_FRACTION).
-        let minimum = ((required as f64 * STOP_FRACTION) as u64).max(1);
+        let minimum = minimum_paths(required);
         let own = slot.owner_data(&self.token);
         let rules = GatherRules::of(phase);
         let sole = ctx.sole_foreign_writer;
@@ -439,7 +474,8 @@ impl Group {
             }
             let (mut done, mut own_merges) = (0, 0);
             for index in batch.first..batch.first + batch.count {
-                if index >= batch.stop_from && ctx.stop.load(Ordering::Relaxed) {
+                // A cut does not wait for the minimum: the phase is then closed if it has it, left out if not.
+                if ctx.cut.load(Ordering::Relaxed) || (index >= batch.stop_from && ctx.stop.load(Ordering::Relaxed)) {
                     break;
                 }
                 let kept = ctx.recorder.filter(|r| r.keeps(PathKind::Light, number, index));
@@ -534,6 +570,11 @@ impl Group {
         let mut held: Vec<Option<Guard<'c, GroupMap>>> = Vec::new();
         let mut log = RecordedPath::new(PathKind::Light, 0, 0, 0);
         while !slot.try_close(&self.token) {
+            if ctx.cut.load(Ordering::Relaxed) {
+                // The others leave at the cut too: no path traced now would be counted.
+                std::thread::yield_now();
+                continue;
+            }
             let batch = Batch { first: own.claim_beyond_quota(1), count: 1, stop_from: u64::MAX, closing: true };
             trace_batch(batch, thread, &mut held, &mut tally, &mut log);
         }
@@ -544,6 +585,12 @@ impl Group {
         slot.count_owner_paths(&self.token, tally.traced);
         tally
     }
+}
+
+/// The light paths a stopped phase needs counted to be closed: a phase cut shorter has too few light paths for
+/// its camera paths, and its gathered light's variance grows as 1 / paths (see STOP_FRACTION).
+fn minimum_paths(required: u64) -> u64 {
+    ((required as f64 * STOP_FRACTION) as u64).max(1)
 }
 
 /// A thread's gathers, from a group that holds `&mut` to them (no other thread locks them then).
