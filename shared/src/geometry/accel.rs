@@ -244,7 +244,10 @@ impl SceneGeometry {
             match backend {
                 Backend::Obvhs(preset) => TriangleAccel::Obvhs(build_obvhs(&triangles, preset, extent)),
                 #[cfg(feature = "embree")]
-                Backend::Embree => TriangleAccel::Embree(super::embree::EmbreeTriangles::build(&triangles)?),
+                Backend::Embree => TriangleAccel::Embree(
+                    super::embree::EmbreeTriangles::build(&triangles)
+                        .map_err(|message| AccelError::Build { backend: "embree", message })?,
+                ),
             }
         };
         let edges = SurfaceEdges::find(&triangles);

@@ -1,7 +1,6 @@
 //! The Embree backend (the `embree` feature): one Embree triangle mesh holding every triangle of the scene,
 //! its primitive ids the triangles' indices, traced one ray at a time through the `embree3` crate's safe API.
 
-use super::accel::AccelError;
 use super::mesh::MeshTriangle;
 use super::ray::Ray;
 use embree3::{
@@ -25,25 +24,21 @@ pub(super) struct EmbreeHit {
     pub v: f32,
 }
 
-fn error(message: impl Into<String>) -> AccelError {
-    AccelError::Build { backend: "embree", message: message.into() }
-}
-
 impl EmbreeTriangles {
     /// Builds the BVH over `triangles` (not empty), each triangle's three vertices stored apart so that the
-    /// primitive id is the triangle's index.
-    pub(super) fn build(triangles: &[(u32, MeshTriangle)]) -> Result<Self, AccelError> {
+    /// primitive id is the triangle's index. The error is Embree's reason; the caller names the backend.
+    pub(super) fn build(triangles: &[(u32, MeshTriangle)]) -> Result<Self, String> {
         let count = triangles.len();
         let vertices = count
             .checked_mul(3)
             .filter(|&n| u32::try_from(n).is_ok())
-            .ok_or_else(|| error(format!("{count} triangles are more than a 32-bit vertex index can address")))?;
-        let device = Device::new().map_err(|e| error(format!("no Embree device: {e}")))?;
-        let mut mesh = device.create_geometry(GeometryKind::TRIANGLE).map_err(|e| error(e.to_string()))?;
+            .ok_or_else(|| format!("{count} triangles are more than a 32-bit vertex index can address"))?;
+        let device = Device::new().map_err(|e| format!("no Embree device: {e}"))?;
+        let mut mesh = device.create_geometry(GeometryKind::TRIANGLE).map_err(|e| e.to_string())?;
         {
             let mut buffer = mesh
                 .set_new_buffer::<[f32; 3]>(BufferUsage::VERTEX, 0, Format::FLOAT3, 12, vertices)
-                .map_err(|e| error(format!("vertex buffer of {vertices} vertices: {e}")))?;
+                .map_err(|e| format!("vertex buffer of {vertices} vertices: {e}"))?;
             for (slot, (_, t)) in buffer.chunks_exact_mut(3).zip(triangles) {
                 for (out, v) in slot.iter_mut().zip(t.v) {
                     *out = v.to_array();
@@ -53,14 +48,14 @@ impl EmbreeTriangles {
         {
             let mut buffer = mesh
                 .set_new_buffer::<[u32; 3]>(BufferUsage::INDEX, 0, Format::UINT3, 12, count)
-                .map_err(|e| error(format!("index buffer of {count} triangles: {e}")))?;
+                .map_err(|e| format!("index buffer of {count} triangles: {e}"))?;
             for (i, slot) in buffer.iter_mut().enumerate() {
                 let first = 3 * i as u32;
                 *slot = [first, first + 1, first + 2];
             }
         }
         let mesh = mesh.commit();
-        let mut scene = device.create_scene().map_err(|e| error(format!("no Embree scene: {e}")))?;
+        let mut scene = device.create_scene().map_err(|e| format!("no Embree scene: {e}"))?;
         // Robust traversal and watertight triangle tests: without it, Embree lets rays aimed at the shared
         // edges and vertices of a closed mesh through (`accel`'s tests).
         scene.set_flags(scene.get_flags() | SceneFlags::ROBUST);
@@ -69,7 +64,7 @@ impl EmbreeTriangles {
         // Embree reports failures of the build (out of memory, above all) through the device, not the call.
         match device.get_error() {
             embree3::Error::NONE => Ok(EmbreeTriangles { scene }),
-            e => Err(error(format!("building the BVH over {count} triangles: {e}"))),
+            e => Err(format!("building the BVH over {count} triangles: {e}")),
         }
     }
 
