@@ -79,7 +79,10 @@ fn pbpm_and_the_path_tracer_match_mitsuba_3_on_the_outdoor_scene_within_their_er
             100.0 * rmse_bound
         );
         assert!(mean_z2 <= z2_bound, "{method:?}: mean z² {mean_z2} above {z2_bound}; worst {worst:?}");
-        assert!((mean_ours - mean_theirs).abs() <= 4.0 * sem_means, "{method:?}: image mean {mean_ours} against {mean_theirs}");
+        assert!(
+            (mean_ours - mean_theirs).abs() <= 4.0 * sem_means,
+            "{method:?}: image mean {mean_ours} against {mean_theirs}"
+        );
         assert!(rmse_unlit <= rmse_bound, "{method:?}: unlit relative RMSE {rmse_unlit} above {rmse_bound}");
     }
 }

@@ -145,7 +145,7 @@ fn the_page_serves_the_image_and_state_and_its_stop_ends_the_run_with_every_file
     let dir = scratch_dir("live-page");
     let scene = cornell_at(&dir, 48);
     let out = dir.join("out");
-    // No periodic save before the stop: every file there was written by the stop.
+    // The first step is saved at once and, with a 1000 s interval, no other before the stop.
     let run =
         serve(&scene, &out, "127.0.0.1:0", &["--method", "pbpm", "--time", "120", "--save-interval", "1000"], None);
     let page = http(run.port, "GET", "/", &[], "");
@@ -163,9 +163,9 @@ fn the_page_serves_the_image_and_state_and_its_stop_ends_the_run_with_every_file
     let bad = http(run.port, "GET", "/image.png?layer=beauty", &[], "");
     assert!(bad.status == 400 && bad.text().contains("beauty"), "{}", bad.text());
     assert!(s["history"].as_array().unwrap().len() >= 2 && s["rays_per_s"].as_f64().unwrap() > 0.0);
-    assert_eq!(http(run.port, "GET", "/run.json", &[], "").status, 404, "no run.json before the first save");
+    let first_save: serde_json::Value = http(run.port, "GET", "/run.json", &[], "").json();
     assert_eq!(http(run.port, "GET", "/settings.json", &[], "").json()["method"], "pbpm");
-    assert!(!out.join("image.exr").exists());
+    assert!(out.join("image.exr").exists(), "the first step was saved");
 
     assert_eq!(http(run.port, "POST", "/stop", &[], "").status, 202);
     let end = run.wait_for("end", |s| s["state"] == "finished");
@@ -192,6 +192,13 @@ fn the_page_serves_the_image_and_state_and_its_stop_ends_the_run_with_every_file
         assert_eq!(end[k].as_f64(), record["error"][k].as_f64(), "{k}: the page ends on run.json's δ");
     }
     assert_eq!(end["phases"], record["totals"]["phases"]);
+    let phases = |r: &serde_json::Value| r["totals"]["phases"].as_u64().unwrap();
+    assert!(
+        phases(&first_save) < phases(&record),
+        "the stop saved again: {} phases, then {}",
+        phases(&first_save),
+        phases(&record)
+    );
     let stdout = run.finish();
     assert!(stdout.contains("interrupted: the results of every completed phase were written"), "{stdout}");
     for f in ["image.exr", "preview.png", "run.json"] {
