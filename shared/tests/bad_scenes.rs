@@ -1,5 +1,6 @@
 //! Malformed scene files give an error naming the file, the line and the field, never a panic.
 
+use photonfarm::light::Light;
 use photonfarm::scene::{Scene, SceneError};
 use std::path::Path;
 
@@ -247,6 +248,24 @@ fn environments_and_suns_load() {
         "type = \"directional\"\ndirection = [0.0, -1.0, 0.2]\nirradiance = [3.0, 3.0, 3.0]\nangular_radius_deg = 0.5",
     ] {
         load(&with_light(light)).unwrap_or_else(|e| panic!("{light}: {e}"));
+    }
+}
+
+#[test]
+fn an_environment_map_in_png_is_decoded_from_srgb_as_textures_are() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = std::fs::File::create(dir.path().join("map.png")).unwrap();
+    let mut encoder = png::Encoder::new(std::io::BufWriter::new(file), 4, 3);
+    encoder.set_color(png::ColorType::Rgb);
+    encoder.set_depth(png::BitDepth::Eight);
+    encoder.write_header().unwrap().write_image_data(&[128; 4 * 3 * 3]).unwrap();
+    let t = with_light("type = \"environment\"\nfilename = \"map.png\"");
+    let scene = Scene::from_toml(&t, Path::new("map.toml"), dir.path()).unwrap_or_else(|e| panic!("{e}"));
+    let Light::Infinite(map) = &scene.lights.all()[0] else { panic!("not an environment") };
+    // sRGB 128/255 is linear ((128/255 + 0.055)/1.055)^2.4 = 0.2158; read linearly it would be 0.502.
+    let l = map.radiance(glam::Vec3::new(0.3, 0.8, -0.5).normalize());
+    for c in l.to_array() {
+        assert!((c - 0.2158).abs() < 1e-3, "{l:?}");
     }
 }
 

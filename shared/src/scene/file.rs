@@ -253,7 +253,8 @@ pub struct AnnulusSection {
 pub enum LightSection {
     /// Light from every direction: an equirectangular map (`filename`) or a constant `radiance`.
     Environment {
-        /// An OpenEXR, Radiance HDR or PFM file of linear radiance, relative to the scene file.
+        /// An OpenEXR, Radiance HDR or PFM file of linear radiance (PNG and JPEG are decoded from sRGB), relative
+        /// to the scene file.
         filename: Option<String>,
         /// A constant radiance instead of a map.
         radiance: Option<[f32; 3]>,

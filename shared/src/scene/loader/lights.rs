@@ -61,7 +61,9 @@ impl Loader<'_> {
                 let infinite = match (filename, radiance) {
                     (Some(name), None) => {
                         let field = f("filename");
-                        let bitmap = self.bitmap(name, Some(s.clone()), &field, Encoding::Linear)?;
+                        // 8-bit images hold sRGB values, as textures and Mitsuba's maps do; HDR formats are linear whatever
+                        // the encoding says.
+                        let bitmap = self.bitmap(name, Some(s.clone()), &field, Encoding::Srgb)?;
                         let map = EnvironmentMap::from_bitmap(&bitmap, scale, rotation)
                             .map_err(|e| self.error(Some(s.clone()), field, format!("{name}: {e}")))?;
                         InfiniteLight::Map(Arc::new(map))
