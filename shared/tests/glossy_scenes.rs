@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{settings, shipped_at};
+use common::{mean_z2, settings, shipped_at};
 use photonfarm::accumulation::Accumulator;
 use photonfarm::color::luminance_f64;
 use photonfarm::integrator::Layer;
@@ -31,15 +31,7 @@ fn render_both(scene: &Scene, pbpm_phases: usize, path_phases: usize) -> (Accumu
 /// deviations of 1, z² having variance 2) and over the image, layer by layer.
 fn assert_converge(name: &str, pbpm: &Accumulator, path: &Accumulator) {
     let pixels = pbpm.pixels.len();
-    let z2: Vec<f64> = (0..pixels)
-        .filter(|&i| pbpm.sem2(i) + path.sem2(i) > 0.0)
-        .map(|i| {
-            let d = luminance_f64(pbpm.mean_total(i)) - luminance_f64(path.mean_total(i));
-            d * d / (pbpm.sem2(i) + path.sem2(i))
-        })
-        .collect();
-    let n = z2.len() as f64;
-    let mean_z2 = z2.iter().sum::<f64>() / n;
+    let (mean_z2, n) = mean_z2(pbpm, path);
     let bound = 1.0 + 4.0 * (2.0 / n).sqrt();
     eprintln!("{name}: mean z² {mean_z2:.3} over {n} pixels (bound {bound:.3})");
     assert!(n > 0.9 * pixels as f64, "{name}: only {n} of {pixels} pixels have light");

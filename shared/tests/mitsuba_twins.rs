@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{mean_sem, regions_phase_means, settings, shipped_at};
+use common::{mean_sem, mean_z2, regions_phase_means, settings, shipped_at};
 use glam::{Vec2, Vec3};
 use photonfarm::accumulation::Accumulator;
 use photonfarm::color::luminance_f64;
@@ -89,20 +89,6 @@ fn render(scene: &Scene, like: &RenderSettings, seed: u64, phases: usize) -> Ren
     let all: Vec<usize> = (0..(scene.camera.width * scene.camera.height) as usize).collect();
     let phase_means = regions_phase_means(&mut engine, phases, &[(&all, None)]).remove(0);
     Render { sums: engine.sums().clone(), phase_means }
-}
-
-/// The mean over pixels of z² = (a − b)² / (SEM_a² + SEM_b²) of the total luminance with eq. 7's per-pixel SEMs,
-/// and the number of pixels with an error to divide by.
-fn mean_z2(a: &Accumulator, b: &Accumulator) -> (f64, f64) {
-    let z2: Vec<f64> = (0..a.pixels.len())
-        .filter(|&i| a.sem2(i) + b.sem2(i) > 0.0)
-        .map(|i| {
-            let d = luminance_f64(a.mean_total(i)) - luminance_f64(b.mean_total(i));
-            d * d / (a.sem2(i) + b.sem2(i))
-        })
-        .collect();
-    let n = z2.len() as f64;
-    (z2.iter().sum::<f64>() / n, n)
 }
 
 /// Renders both twins side by side and asserts that they converge to the same image: the mean over pixels of

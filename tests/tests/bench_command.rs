@@ -2,7 +2,7 @@
 //! render process, and the bench folder gets one results row per run, the runs' error against time, and the
 //! report with its tables and comparisons.
 
-use end_to_end::{binary, repo_root, scratch_dir};
+use end_to_end::{binary, cornell_at, repo_root, scratch_dir};
 use std::process::Command;
 
 fn csv_rows(path: &std::path::Path) -> (Vec<String>, Vec<Vec<String>>) {
@@ -101,10 +101,15 @@ fn bench_refuses_bad_arguments_with_a_message() {
 
 #[test]
 fn reference_command_keeps_the_image_and_how_to_remake_it_and_never_overwrites_by_accident() {
-    let out = scratch_dir("reference");
+    let dir = scratch_dir("reference");
+    // A small image: a loaded machine still renders the phases that δ needs within the second.
+    let scene = cornell_at(&dir, 32);
+    let out = dir.join("references");
     let reference = |extra: &[&str]| {
         Command::new(binary("coordinator"))
-            .args(["reference", "scenes/cornell.toml", "--time", "1", "--out"])
+            .arg("reference")
+            .arg(&scene)
+            .args(["--time", "1", "--out"])
             .arg(&out)
             .args(extra)
             .current_dir(repo_root())
@@ -116,7 +121,8 @@ fn reference_command_keeps_the_image_and_how_to_remake_it_and_never_overwrites_b
     assert!(out.join("cornell-path.exr").is_file());
     let record: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("cornell-path.json")).unwrap()).unwrap();
-    assert_eq!(record["command"], "coordinator render scenes/cornell.toml --method path --time 1 --seed 1000");
+    let command = format!("coordinator render {} --method path --time 1 --seed 1000", scene.display());
+    assert_eq!(record["command"], command.as_str());
     assert!(record.get("history").is_none() && record["error"]["delta_unlit"].as_f64().unwrap() > 0.0);
 
     let again = reference(&[]);

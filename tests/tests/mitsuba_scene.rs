@@ -105,45 +105,35 @@ fn coordinator(scene: &Path, out: &Path, args: &[&str]) -> std::process::Output 
     o
 }
 
+/// Renders `scene` with `pbpm` in one process (seed `seed`) and with three-level over two worker processes (seed
+/// `seed + 1`), `phases` each, and checks that both read the same scene and that both workers finished: a worker
+/// that could not rebuild the scene from the files it was sent would have failed its job. Returns both folders.
+fn one_process_and_two_workers(scene: &Path, dir: &Path, args: &[&str], phases: &str, seed: u64) -> (PathBuf, PathBuf) {
+    let (single, three) = (dir.join("single"), dir.join("three"));
+    let (seed1, seed3) = (seed.to_string(), (seed + 1).to_string());
+    coordinator(scene, &single, &[args, &["--method", "pbpm", "--phases", phases, "--seed", &seed1]].concat());
+    let three_level = ["--method", "three-level", "--topology", TWO_NODES, "--group-size", "1"];
+    coordinator(scene, &three, &[args, &three_level, &["--phases", phases, "--seed", &seed3]].concat());
+    let (r, r3) = (record(&single), record(&three));
+    assert_eq!(r3["scene_hash"], r["scene_hash"]);
+    let workers = r3["workers"].as_array().unwrap();
+    assert_eq!(workers.len(), 2, "{workers:?}");
+    for w in workers {
+        assert_eq!(w["state"], "finished", "{w}");
+    }
+    (single, three)
+}
+
 #[test]
 fn an_xml_scene_renders_on_every_method_and_three_level_workers_render_the_image_of_one_process() {
     let dir = scratch_dir("mitsuba-scene");
     let scene = xml_scene(&dir);
     let define = ["--define", "radiance=8"];
-    let (single, three) = (dir.join("single"), dir.join("three"));
-    coordinator(&scene, &single, &[&define[..], &["--method", "pbpm", "--phases", "100", "--seed", "3"]].concat());
+    let (single, three) = one_process_and_two_workers(&scene, &dir, &define, "100", 3);
     let r = record(&single);
     assert_eq!((r["width"].as_u64(), r["height"].as_u64()), (Some(24), Some(18)));
     let flags: Vec<&str> = r["flags"].as_array().unwrap().iter().filter_map(|f| f.as_str()).collect();
     assert!(flags.iter().any(|f| f.starts_with("scene import:") && f.contains("gaussian")), "{flags:?}");
-    coordinator(
-        &scene,
-        &three,
-        &[
-            &define[..],
-            &[
-                "--method",
-                "three-level",
-                "--topology",
-                TWO_NODES,
-                "--group-size",
-                "1",
-                "--phases",
-                "100",
-                "--seed",
-                "4",
-            ],
-        ]
-        .concat(),
-    );
-    let r3 = record(&three);
-    assert_eq!(r3["scene_hash"], r["scene_hash"]);
-    let workers = r3["workers"].as_array().unwrap();
-    assert_eq!(workers.len(), 2, "{workers:?}");
-    // A worker that could not rebuild the scene from the files it was sent would have failed its job.
-    for w in workers {
-        assert_eq!(w["state"], "finished", "{w}");
-    }
     assert_same_image(&single, &three, "XML scene, three-level against one process");
     for method in ["path", "sync", "async", "two-level", "combination"] {
         let out = dir.join(method);
@@ -161,36 +151,7 @@ fn the_shipped_mitsuba_cornell_box_renders_over_two_worker_processes_to_the_imag
     let dir = scratch_dir("mitsuba-cornell");
     let scene = repo_root().join("scenes/mitsuba/cornell.xml");
     let small = ["--define", "resx=32", "--define", "resy=32"];
-    let (single, three) = (dir.join("single"), dir.join("three"));
-    coordinator(&scene, &single, &[&small[..], &["--method", "pbpm", "--phases", "300", "--seed", "5"]].concat());
-    coordinator(
-        &scene,
-        &three,
-        &[
-            &small[..],
-            &[
-                "--method",
-                "three-level",
-                "--topology",
-                TWO_NODES,
-                "--group-size",
-                "1",
-                "--phases",
-                "300",
-                "--seed",
-                "6",
-            ],
-        ]
-        .concat(),
-    );
-    let (r, r3) = (record(&single), record(&three));
-    assert_eq!((r3["width"].as_u64(), r3["height"].as_u64()), (Some(32), Some(32)));
-    assert_eq!(r3["scene_hash"], r["scene_hash"]);
-    let workers = r3["workers"].as_array().unwrap();
-    assert_eq!(workers.len(), 2, "{workers:?}");
-    // Each worker rebuilt the scene from the XML and the eight PLY files it was sent, or its job would have failed.
-    for w in workers {
-        assert_eq!(w["state"], "finished", "{w}");
-    }
+    let (single, three) = one_process_and_two_workers(&scene, &dir, &small, "300", 5);
+    assert_eq!((record(&three)["width"].as_u64(), record(&three)["height"].as_u64()), (Some(32), Some(32)));
     assert_same_image(&single, &three, "shipped cornell.xml, three-level against one process");
 }

@@ -3,6 +3,8 @@
 #![allow(dead_code, clippy::needless_range_loop)]
 
 use glam::Vec3;
+use photonfarm::accumulation::Accumulator;
+use photonfarm::color::luminance_f64;
 use photonfarm::integrator::Layer;
 use photonfarm::render::{Engine, Method, RenderSettings};
 use photonfarm::scene::Scene;
@@ -120,4 +122,18 @@ pub fn direction(rng: &mut Pcg32) -> Vec3 {
     let r = (1.0 - z * z).max(0.0).sqrt();
     let phi = std::f32::consts::TAU * uniform(rng);
     Vec3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+/// The mean over pixels of z² = (a − b)² / (SEM_a² + SEM_b²) of the total luminance with eq. 7's per-pixel SEMs,
+/// and the number of pixels with an error to divide by.
+pub fn mean_z2(a: &Accumulator, b: &Accumulator) -> (f64, f64) {
+    let z2: Vec<f64> = (0..a.pixels.len())
+        .filter(|&i| a.sem2(i) + b.sem2(i) > 0.0)
+        .map(|i| {
+            let d = luminance_f64(a.mean_total(i)) - luminance_f64(b.mean_total(i));
+            d * d / (a.sem2(i) + b.sem2(i))
+        })
+        .collect();
+    let n = z2.len() as f64;
+    (z2.iter().sum::<f64>() / n, n)
 }
