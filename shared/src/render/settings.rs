@@ -80,6 +80,9 @@ impl RenderSettings {
 
     /// The phase whose random streams `key` names, with its wavelengths.
     pub fn phase<'a>(&self, scene: &'a Scene, key: u64) -> Phase<'a> {
+        // The ghost pairs' pilot runs in parallel: here, before the phase's parallel stages, rather than on the
+        // first ghost path inside them.
+        crate::pbpm::ghost_pairs(scene);
         Phase {
             scene,
             seed: self.seed,
@@ -88,8 +91,8 @@ impl RenderSettings {
             backward_diffuse_depth: self.backward_diffuse_depth,
             radius: self.radius_schedule(scene),
             spectrum: self.phase_spectrum(scene, key),
-            sensor_ghosts: crate::ghost::sensor_ghosts(scene),
-            ghost_paths: crate::ghost::ghost_paths(scene),
+            sensor_ghosts: crate::scene::ghost::sensor_ghosts(scene),
+            ghost_paths: crate::scene::ghost::ghost_paths(scene),
             sensor_kernel: crate::pbpm::SensorKernel::POINT,
         }
     }
