@@ -11,6 +11,9 @@ use serde::{Deserialize, Serialize};
 /// is sized for it), and keeps where the comparison cannot tell them apart.
 pub const START_DEPTH: u32 = 2;
 
+/// The light paths per pixel a run that chooses its own (`light_balance`) starts from.
+pub const START_LIGHT_PATHS: f32 = 1.0;
+
 /// Everything that, with the scene, determines a run's result.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RenderSettings {
@@ -52,7 +55,7 @@ impl RenderSettings {
             backward_diffuse_depth: backward_diffuse_depth.unwrap_or(START_DEPTH),
             radius_scale,
             radius_alpha: 2.0 / 3.0,
-            light_paths_per_pixel: light_paths_per_pixel.unwrap_or(super::light_balance::START),
+            light_paths_per_pixel: light_paths_per_pixel.unwrap_or(START_LIGHT_PATHS),
             adaptive_light: light_paths_per_pixel.is_none(),
             adaptive_depth: backward_diffuse_depth.is_none(),
             spectral_bands: 0,
@@ -102,7 +105,7 @@ impl RenderSettings {
     pub fn as_recorded(&self) -> Self {
         let mut s = *self;
         if s.adaptive_light {
-            s.light_paths_per_pixel = super::light_balance::START;
+            s.light_paths_per_pixel = START_LIGHT_PATHS;
         }
         if s.adaptive_depth {
             s.backward_diffuse_depth = START_DEPTH;
