@@ -1,8 +1,8 @@
 //! Ghost paths (docs/estimator.md, "The ghost layer"): light paths that look only for the ghost chains a sensor
 //! camera's lens makes. Each is sent to reflect at one pair of the scene's dielectric surfaces, drawn from a
-//! table the scene keeps (`crate::scene::ghost::GhostPairs`, filled by this file's pilot), as lens-design software traces a lens's ghosts pair by pair: every
-//! chain of a pair then carries nearly the same weight, where a path free to reflect anywhere carries weights
-//! that differ by the number of surfaces it crossed.
+//! table the scene keeps (`crate::scene::ghost::GhostPairs`, filled by this file's pilot), as lens-design
+//! software traces a lens's ghosts pair by pair: every chain of a pair then carries nearly the same weight,
+//! where a path free to reflect anywhere carries weights that differ by the number of surfaces it crossed.
 
 use super::forward_pass::{register_crossing, Crossing, ForwardStats, LightEvent, LightSettings};
 use crate::bsdf::{Bsdf, BsdfSample, Reflection, Transport};
