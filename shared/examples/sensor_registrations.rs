@@ -22,10 +22,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         None => 40,
     };
     let scene = Scene::load(&path)?;
-    if !photonfarm::ghost::sensor_ghosts(&scene) {
+    if !photonfarm::scene::ghost::sensor_ghosts(&scene) {
         return Err(format!("{}: no light registers on this scene's sensor", path.display()).into());
     }
-    if let Some(table) = &scene.ghost_pairs {
+    if let Some(table) = photonfarm::pbpm::ghost_pairs(&scene) {
         // The pairs the pilot found ghosts through: those above the share every pair gets.
         let pairs: Vec<_> = table.iter().collect();
         let even = photonfarm::pbpm::ghost_paths::EVEN_SHARE / pairs.len() as f32;
@@ -39,7 +39,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
     }
     let settings = RenderSettings::for_scene(&scene, Method::Pbpm, 1);
-    let ghost_paths = photonfarm::ghost::ghost_paths(&scene);
+    let ghost_paths = photonfarm::scene::ghost::ghost_paths(&scene);
     let light = LightSettings { max_depth: scene.render.max_depth, sensor: true, vertices: false, ghost_paths };
     let pixels = scene.camera.pixel_count();
     let (mut stats, mut ghost_stats) = (ForwardStats::default(), ForwardStats::default());

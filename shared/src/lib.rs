@@ -17,24 +17,31 @@
 //! (constants, bitmaps and patterns over a surface's texture coordinates) serves materials and lights. `bsdf`
 //! is the scattering interface with one file per family (diffuse, conductor, dielectric, coating, …) and the
 //! lobe classes the estimator reads; `material` is a scene's material (textured parameters, two sides, an
-//! opacity) resolved into a `bsdf::Bsdf` at a surface point; `light` holds emitters and their sampling. They
-//! read `geometry`'s hits and `sampling`'s warps.
+//! opacity) resolved into a `bsdf::Bsdf` at a surface point; `light` holds emitters and their sampling (with
+//! the densities over a lens's front element that ghost paths aim by). They read `geometry`'s hits and
+//! `sampling`'s warps.
 //!
 //! **Scene.** `scene` is the loaded scene the integrators read (objects, materials, geometry, lights, camera)
 //! and, in `scene::loader`, its construction from a TOML file with errors that name the file, line and field;
-//! `scene::mitsuba` reads Mitsuba 3 XML scenes and serialized meshes into a typed document (not yet a scene).
-//! It builds on the two layers below it.
+//! `scene::mitsuba` imports Mitsuba 3 XML scenes and their serialized and PLY meshes into a `Scene`, with notes
+//! on what it ignored or approximated; `scene::ghost` holds what a scene declares about the ghosts its lens
+//! makes (its front element, its ghost settings, the table of surface pairs ghost paths reflect at, which it
+//! keeps once the estimator's pilot has filled it). It builds on the two layers below it.
 //!
-//! **Integrators and the PBPM estimator.** `integrator` holds the image layers, next-event estimation, the
-//! one path walk (`integrator::walk`, a bounce loop with a technique for what each kind of path does) with
-//! its camera technique, and the reference path tracer; `pbpm` the backward pass that stores photons on camera paths, the photon map, the
-//! forward pass that gathers light paths into it, the ghost paths and where on the lens they aim, and the radius
-//! schedule; `ghost` tells which light is ghost light (reflected inside a lens). They read the scene.
+//! **Integrators.** `integrator` holds the image layers, next-event estimation, the one path walk
+//! (`integrator::walk`, a bounce loop with a technique for what each kind of path does) with its camera
+//! technique, the reference path tracer, and which pixels see a light (`integrator::lit_pixels`); `ghost` tells
+//! which light is ghost light (reflected inside a lens); `ray_map` records a share of a run's paths and reads
+//! them back. They read the scene.
 //!
 //! **Accumulation and error.** `accumulation` keeps the running sums of every pixel and layer, the auxiliary
-//! layers (ghost light, wavelength bands), the error estimate δ over the SEM, and `accumulation::delta`, the
-//! exact compressed deltas of the sums that snapshots and checkpoints carry. It reads the layers of
-//! `integrator` and chooses the auxiliary layers from the scene.
+//! layers (ghost light, wavelength bands), the error estimate δ over the SEM, the lit mask δ unlit leaves out,
+//! and `accumulation::delta`, the exact compressed deltas of the sums that snapshots and checkpoints carry. It
+//! reads the layers of `integrator` and chooses the auxiliary layers from the scene.
+//!
+//! **The PBPM estimator.** `pbpm` is the backward pass that stores photons on camera paths, the photon map, the
+//! forward pass that gathers light paths into it, the ghost paths with the pilot that fills the scene's pair
+//! table, and the radius schedule; its phases close into the sums of `accumulation`.
 //!
 //! **Image output.** `image_io` writes multi-layer OpenEXR files (and reads them back, for references) and PNG
 //! previews, each replaced atomically; it imports nothing of the crate.
@@ -44,8 +51,8 @@
 //! sums, checkpoints and the JSON record of a run. It drives the layers below.
 //!
 //! **Protocol.** `protocol` is the coordinator–worker link: frames, messages, the handshake. It reads only
-//! `render::settings` and `render::totals` (what a job asks for, what a worker counted); the sums travel as
-//! `accumulation::delta` bytes.
+//! `render::settings`, `render::method` and `scene::MitsubaOptions` (what a job asks for) and `render::totals`
+//! (what a worker counted); the sums travel as `accumulation::delta` bytes.
 
 pub mod accumulation;
 pub mod bsdf;

@@ -9,11 +9,12 @@ mod common;
 use photonfarm::accumulation::Accumulator;
 use photonfarm::color::luminance_f64;
 use photonfarm::ghost::GHOST_LAYER;
-use photonfarm::pbpm::ghost_aim::{RINGS, SECTORS};
-use photonfarm::pbpm::{trace_ghost_paths, trace_light_path, ForwardStats, GhostPair, LightEvent, LightSettings};
+use photonfarm::light::ghost_aim::{RINGS, SECTORS};
+use photonfarm::pbpm::{ghost_pairs, trace_ghost_paths, trace_light_path, ForwardStats, LightEvent, LightSettings};
 use photonfarm::ray_map::Unrecorded;
 use photonfarm::render::{Engine, Method};
 use photonfarm::sampling::{Frame, Sampler};
+use photonfarm::scene::ghost::GhostPair;
 use photonfarm::scene::Scene;
 use photonfarm::spectrum::PhaseSpectrum;
 
@@ -296,7 +297,7 @@ fn ghost_paths_bring_the_ghost_light_that_light_paths_bring_through_weakly_refle
 #[test]
 fn the_pair_table_gives_every_pair_a_probability_and_most_to_the_pair_that_makes_the_windows_ghost() {
     let scene = scene_with_glass(true, 1.5);
-    let table: Vec<(GhostPair, f32)> = scene.ghost_pairs.as_ref().expect("a table for a sensor scene").iter().collect();
+    let table: Vec<(GhostPair, f32)> = ghost_pairs(&scene).expect("a table for a sensor scene").iter().collect();
     let name = |o: u32| scene.objects[o as usize].name.as_str();
     // Two surfaces: each alone and each ordered pair, the surface twice included.
     assert_eq!(table.len(), 6);
@@ -308,7 +309,7 @@ fn the_pair_table_gives_every_pair_a_probability_and_most_to_the_pair_that_makes
     let (best, _) = table.iter().copied().max_by(|a, b| a.1.total_cmp(&b.1)).unwrap();
     assert_eq!((name(best.first), best.second.map(name)), ("window back", Some("window front")));
     // Decided by fixed seeds: every process that loads the scene draws from the same table.
-    let again: Vec<(GhostPair, f32)> = scene_with_glass(true, 1.5).ghost_pairs.unwrap().iter().collect();
+    let again: Vec<(GhostPair, f32)> = ghost_pairs(&scene_with_glass(true, 1.5)).unwrap().iter().collect();
     assert_eq!(table, again);
 }
 
@@ -324,7 +325,7 @@ material = "black"
 quad = { corner = [-0.5, -0.5, 0.002], edge1 = [0.0, 1.0, 0.0], edge2 = [0.5, 0.0, 0.0] }
 "#;
     let scene = scene_with_glass_and(true, 1.5, 0.0, screen);
-    let pairs = scene.ghost_pairs.as_ref().expect("a table for a sensor scene");
+    let pairs = ghost_pairs(&scene).expect("a table for a sensor scene");
     let (best, _) = pairs.iter().enumerate().max_by(|a, b| a.1 .1.total_cmp(&b.1 .1)).expect("pairs");
     let grid = pairs.aim(best);
     let front = scene.lights.aim().expect("the window's front face");

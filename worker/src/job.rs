@@ -40,6 +40,8 @@ pub fn load_scene(job: &Job, meshes: &BTreeMap<String, Vec<u8>>) -> Result<Scene
             &job.scene_hash[..job.scene_hash.len().min(12)]
         ));
     }
+    // The ghost pairs' pilot, part of building a sensor scene, runs here rather than in the job's first phase.
+    photonfarm::pbpm::ghost_pairs(&scene);
     Ok(scene)
 }
 

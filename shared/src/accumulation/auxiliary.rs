@@ -5,7 +5,8 @@
 
 use super::blur::{BLUR_LAYER, BLUR_SQUARES_LAYER};
 use super::non_finite::sanitize_slice;
-use crate::ghost::{scene_can_make_ghosts, GHOST_LAYER};
+use crate::ghost::GHOST_LAYER;
+use crate::scene::ghost::scene_can_make_ghosts;
 use crate::scene::Scene;
 use crate::spectrum::band_name;
 use serde::{Deserialize, Serialize};

@@ -1,6 +1,8 @@
 //! The pixels that see a light: decided once per scene before the render, so that δ over the other pixels
 //! (δ unlit), the `--target-error` stop and the true error all measure the same pixels from the first phase on.
 
+use crate::integrator::lit_pixels::{lit_pixels, LIT_MASK_SAMPLES};
+use crate::scene::Scene;
 use serde::{Deserialize, Serialize};
 
 /// Which δ a target error refers to.
@@ -12,9 +14,6 @@ pub enum ErrorOver {
     /// Every pixel, the paper's eq. 6.
     All,
 }
-
-/// Primary rays per pixel the mask is decided from (a 4 × 4 stratification of the pixel and of the aperture).
-pub const LIT_MASK_SAMPLES: u32 = 16;
 
 /// Which pixels see an emitter directly or through specular surfaces only (the `visible_lights` layer's
 /// pixels): found from `LIT_MASK_SAMPLES` stratified primary rays per pixel that follow every specular branch,
@@ -48,6 +47,13 @@ pub struct LitMaskRecord {
 pub const LIT_LAYER: &str = "lit";
 
 impl LitMask {
+    /// The mask of `scene`: the pixels that see an emitter directly or through specular surfaces only within
+    /// `max_depth` segments (`crate::integrator::lit_pixels`), and the pixels next to those (`with_neighbours_lit`).
+    pub fn of_scene(scene: &Scene, max_depth: u32) -> LitMask {
+        let (width, height) = (scene.camera.width, scene.camera.height);
+        LitMask::from_flags(width, height, lit_pixels(scene, max_depth), LIT_MASK_SAMPLES).with_neighbours_lit()
+    }
+
     /// A mask from one flag per pixel, row by row.
     pub fn from_flags(width: u32, height: u32, lit: Vec<bool>, samples_per_pixel: u32) -> Self {
         assert_eq!(lit.len(), width as usize * height as usize, "one flag per pixel");

@@ -1,7 +1,7 @@
-//! Deciding the lit-pixel mask (`accumulation::LitMask`) from the scene: stratified primary rays per pixel that
-//! follow every specular branch and look for an emitter, or for an environment where they leave the scene.
+//! Which pixels see a light, for the lit-pixel mask (`crate::accumulation::LitMask::of_scene`): stratified
+//! primary rays per pixel that follow every specular branch and look for an emitter, or for an environment where
+//! they leave the scene.
 
-use crate::accumulation::lit_mask::{LitMask, LIT_MASK_SAMPLES};
 use crate::camera::Lens;
 use crate::color::Rgb;
 use crate::geometry::{ray::offset_origin, Ray};
@@ -9,6 +9,9 @@ use crate::light::Light;
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
+
+/// Primary rays per pixel the mask is decided from (a 4 × 4 stratification of the pixel and of the aperture).
+pub const LIT_MASK_SAMPLES: u32 = 16;
 
 /// Segments traced per pixel at most. The branches of a pixel's primary rays are followed likeliest first: the
 /// main chain of every ray costs a segment per surface (about 14 through the double Gauss lens of `lens.toml`),
@@ -24,44 +27,41 @@ const MIN_BRANCH_PROBABILITY: f32 = 1e-4;
 /// Fixed scrambling of the mask's Sobol points: the mask must not depend on the run's seed.
 const MASK_SEED: u32 = 0x6c69_7431;
 
-impl LitMask {
-    /// Decides which pixels of `scene` see an emitter directly or through specular surfaces only, within
-    /// `max_depth` segments: `LIT_MASK_SAMPLES` primary rays per pixel, their pixel positions and aperture
-    /// points the first four coordinates of a scrambled Sobol sequence (stratified in both), each followed
-    /// into every reflection and transmission of the delta surfaces it meets, likeliest branch first, up to
-    /// `PIXEL_BUDGET` segments per pixel; the pixels next to those are lit too (`with_neighbours_lit`).
-    ///
-    /// A pinhole camera's pixels whose four corner rays see the same surface, one that neither emits nor has a
-    /// delta lobe, with no emitter's image box over them, are unlit without their sixteen rays
-    /// (`plain_pixels`): the corner rays cost one ray per pixel, so the mask of a large image costs about a
-    /// sixteenth of the full test. A delta surface or an emitter smaller than a pixel that no corner ray and no
-    /// emitter box reveals is what this could miss; every emitter's box is marked, so only the former remains.
-    pub fn of_scene(scene: &Scene, max_depth: u32) -> LitMask {
-        Self::decided(scene, max_depth, plain_pixels(scene))
-    }
+/// Decides which pixels of `scene` see an emitter directly or through specular surfaces only, within
+/// `max_depth` segments, as one flag per pixel, row by row: `LIT_MASK_SAMPLES` primary rays per pixel, their
+/// pixel positions and aperture points the first four coordinates of a scrambled Sobol sequence (stratified in
+/// both), each followed into every reflection and transmission of the delta surfaces it meets, likeliest
+/// branch first, up to `PIXEL_BUDGET` segments per pixel.
+///
+/// A pinhole camera's pixels whose four corner rays see the same surface, one that neither emits nor has a
+/// delta lobe, with no emitter's image box over them, are unlit without their sixteen rays
+/// (`plain_pixels`): the corner rays cost one ray per pixel, so the mask of a large image costs about a
+/// sixteenth of the full test. A delta surface or an emitter smaller than a pixel that no corner ray and no
+/// emitter box reveals is what this could miss; every emitter's box is marked, so only the former remains.
+pub fn lit_pixels(scene: &Scene, max_depth: u32) -> Vec<bool> {
+    decided(scene, max_depth, plain_pixels(scene))
+}
 
-    /// The mask with the full test at every pixel that `plain` (when given) does not say is unlit.
-    fn decided(scene: &Scene, max_depth: u32, plain: Option<Vec<bool>>) -> LitMask {
-        let camera = &scene.camera;
-        let w = camera.width as usize;
-        let lit: Vec<bool> = (0..camera.pixel_count())
-            .into_par_iter()
-            .with_min_len(64)
-            .map(|i| {
-                if plain.as_ref().is_some_and(|p| p[i]) {
-                    return false;
-                }
-                let (x, y) = ((i % w) as u32, (i / w) as u32);
-                let rays = (0..LIT_MASK_SAMPLES).filter_map(|k| {
-                    let u = sobol_burley::sample_4d(k, 0, MASK_SEED ^ i as u32);
-                    let r = camera.generate_ray(x, y, Vec2::new(u[0], u[1]), Vec2::new(u[2], u[3]));
-                    (r.weight > 0.0).then_some(r.ray)
-                });
-                sees_emitter(scene, rays, max_depth)
-            })
-            .collect();
-        LitMask::from_flags(camera.width, camera.height, lit, LIT_MASK_SAMPLES).with_neighbours_lit()
-    }
+/// The flags with the full test at every pixel that `plain` (when given) does not say is unlit.
+fn decided(scene: &Scene, max_depth: u32, plain: Option<Vec<bool>>) -> Vec<bool> {
+    let camera = &scene.camera;
+    let w = camera.width as usize;
+    (0..camera.pixel_count())
+        .into_par_iter()
+        .with_min_len(64)
+        .map(|i| {
+            if plain.as_ref().is_some_and(|p| p[i]) {
+                return false;
+            }
+            let (x, y) = ((i % w) as u32, (i / w) as u32);
+            let rays = (0..LIT_MASK_SAMPLES).filter_map(|k| {
+                let u = sobol_burley::sample_4d(k, 0, MASK_SEED ^ i as u32);
+                let r = camera.generate_ray(x, y, Vec2::new(u[0], u[1]), Vec2::new(u[2], u[3]));
+                (r.weight > 0.0).then_some(r.ray)
+            });
+            sees_emitter(scene, rays, max_depth)
+        })
+        .collect()
 }
 
 /// What a corner ray saw: the object of a surface that neither emits nor has a delta lobe, `ESCAPED` for a ray
@@ -228,6 +228,7 @@ fn sees_emitter(scene: &Scene, rays: impl Iterator<Item = Ray>, max_depth: u32) 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::accumulation::LitMask;
 
     #[test]
     fn the_corner_rays_leave_every_shipped_pinhole_scene_s_mask_as_the_full_test_decides_it() {
@@ -236,8 +237,10 @@ mod tests {
             let scene = Scene::load(&dir.join(name)).unwrap();
             let plain = plain_pixels(&scene).expect("a pinhole camera");
             let skipped = plain.iter().filter(|&&p| p).count();
-            let fast = LitMask::of_scene(&scene, 12);
-            let full = LitMask::decided(&scene, 12, None);
+            let mask =
+                |flags| LitMask::from_flags(scene.camera.width, scene.camera.height, flags, 0).with_neighbours_lit();
+            let fast = mask(lit_pixels(&scene, 12));
+            let full = mask(decided(&scene, 12, None));
             assert_eq!(fast, full, "{name}");
             // The shortcut must actually skip pixels, or this test checks nothing.
             assert!(skipped > scene.camera.pixel_count() / 4, "{name}: {skipped} pixels skipped");

@@ -1,8 +1,8 @@
 //! Camera-path pieces shared by the reference path tracer and the PBPM backward pass: the image layers and
-//! next-event estimation of direct light.
+//! next-event estimation of direct light; also which pixels see a light (`lit_pixels`), for the lit mask.
 
 pub mod camera_path;
-mod lit_pixels;
+pub mod lit_pixels;
 pub mod path_tracer;
 pub mod walk;
 

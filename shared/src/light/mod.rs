@@ -2,10 +2,12 @@
 //! lights, spot lights and lights at infinity (environments and the sun), chosen by power both for next-event
 //! estimation and for emitting light paths. Its submodules hold the infinite lights (`environment`: constant and
 //! image-based; `directional`: the sun; `infinite`: the start of their light paths and their power over the
-//! scene) and the sampling of spherical and disc emitters (`shape_sampling`).
+//! scene), the sampling of spherical and disc emitters (`shape_sampling`), and the densities over a lens's front
+//! element that ghost paths aim by (`ghost_aim`).
 
 pub mod directional;
 pub mod environment;
+pub mod ghost_aim;
 pub mod infinite;
 pub mod shape_sampling;
 
@@ -192,7 +194,7 @@ pub struct Lights {
     /// The disc area lights aim part of their light paths at (a lens's front element), if any.
     aim: Option<RearElement>,
     /// Lights whose image through the lens light paths bring to the sensor, parallel to `lights`
-    /// (`crate::ghost::lens_images_by_light_paths`); empty when light paths register ghosts only.
+    /// (`crate::scene::ghost::lens_images_by_light_paths`); empty when light paths register ghosts only.
     lens_image_by_light_paths: Vec<bool>,
 }
 

@@ -102,7 +102,7 @@ pub struct SensorHit<'a> {
     /// The phase's wavelengths.
     pub phase: &'a PhaseSpectrum,
     /// The chain took a reflection at a dielectric: a ghost, for the ghost layer. Otherwise it is the lens image
-    /// of a light whose image light paths bring (`crate::ghost::lens_images_by_light_paths`).
+    /// of a light whose image light paths bring (`crate::scene::ghost::lens_images_by_light_paths`).
     pub ghost: bool,
 }
 

@@ -1,18 +1,19 @@
 //! Ghost paths (docs/estimator.md, "The ghost layer"): light paths that look only for the ghost chains a sensor
 //! camera's lens makes. Each is sent to reflect at one pair of the scene's dielectric surfaces, drawn from a
-//! table the scene keeps (`GhostPairs`), as lens-design software traces a lens's ghosts pair by pair: every
-//! chain of a pair then carries nearly the same weight, where a path free to reflect anywhere carries weights
-//! that differ by the number of surfaces it crossed.
+//! table the scene keeps (`crate::scene::ghost::GhostPairs`, filled by this file's pilot), as lens-design
+//! software traces a lens's ghosts pair by pair: every chain of a pair then carries nearly the same weight,
+//! where a path free to reflect anywhere carries weights that differ by the number of surfaces it crossed.
 
 use super::forward_pass::{register_crossing, Crossing, ForwardStats, LightEvent, LightSettings};
-use super::ghost_aim::{AimGrid, RINGS, SECTORS};
 use crate::bsdf::{Bsdf, BsdfSample, Reflection, Transport};
 use crate::color::{luminance, Rgb};
 use crate::geometry::{ray::offset_origin, Ray, SurfaceHit};
 use crate::integrator::walk::{walk, Technique, Walk};
+use crate::light::ghost_aim::{AimGrid, RINGS, SECTORS};
 use crate::light::{disc_crossing, AimDensity, EmissionSample, UniformAim};
 use crate::ray_map::{PathKind, PathLog, RecordedPath, Recorder, Unrecorded};
-use crate::sampling::{Discrete, Pass, Sampler};
+use crate::sampling::{Pass, Sampler};
+use crate::scene::ghost::{ghost_paths, GhostPair, GhostPairs};
 use crate::scene::Scene;
 use crate::spectrum::{PathSpectrum, PhaseSpectrum};
 use glam::Vec3;
@@ -34,109 +35,60 @@ pub const EVEN_SHARE: f32 = 0.2;
 const PILOT_PATHS: usize = 1 << 17;
 const PILOT_PATHS_PER_PAIR: usize = 256;
 
-/// The dielectric surfaces (scene objects) a ghost path reflects at: `first`, then `second`. A pair without a
-/// second surface stands for the chains that reflect once.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct GhostPair {
-    pub first: u32,
-    pub second: Option<u32>,
-}
-
-impl GhostPair {
-    /// The reflections at dielectrics a chain of this pair has.
-    fn reflections(&self) -> u32 {
-        if self.second.is_some() {
-            2
-        } else {
-            1
-        }
-    }
-
-    /// How a ghost path of this pair that has reflected `reflections` times chooses at a dielectric `object`.
-    ///
-    /// Before its pair's last reflection it reflects only at the surface the pair names next (with probability
-    /// `PAIR_REFLECTION`) and refracts everywhere else, so each chain's first two reflections are sampled by
-    /// exactly one pair; after its second reflection it follows F, so longer chains belong to the pair of
-    /// their first two reflections. A one-reflection pair refracts everywhere after its reflection.
-    fn choice(&self, reflections: u32, object: u32) -> Reflection {
-        let next = match reflections {
-            0 => Some(self.first),
-            1 => match self.second {
-                Some(second) => Some(second),
-                None => return Reflection::Never,
-            },
-            _ => return Reflection::Fresnel,
-        };
-        if next == Some(object) {
-            Reflection::AtLeast(PAIR_REFLECTION)
-        } else {
-            Reflection::Never
-        }
-    }
-}
-
-/// The table ghost paths draw their pair from: every ordered pair of the scene's dielectric surfaces, and every
-/// surface alone, with probabilities and, per pair, where on the front element to aim (`AimGrid`), from a pilot
-/// decided when the scene loads (the same in every process).
+/// How a ghost path of `pair` that has reflected `reflections` times chooses at a dielectric `object`.
 ///
-/// With every pair's probability and every cell's density above zero the estimate is unbiased whatever they
-/// are; the pilot only puts them where ghosts are. It traces ghost paths of each pair aimed evenly and gives
-/// each cell of the pair's grid a weight proportional to the root of the mean square of what a path through it
-/// registers, the density that minimises the sum of the pixels' variances; the pair gets a share proportional
-/// to the root of the mean square one path registers with that density. `EVEN_SHARE` of the table is spread
-/// over all pairs.
-#[derive(Clone, Debug)]
-pub struct GhostPairs {
-    pairs: Vec<GhostPair>,
-    aims: Vec<AimGrid>,
-    choice: Discrete,
+/// Before its pair's last reflection it reflects only at the surface the pair names next (with probability
+/// `PAIR_REFLECTION`) and refracts everywhere else, so each chain's first two reflections are sampled by exactly
+/// one pair; after its second reflection it follows F, so longer chains belong to the pair of their first two
+/// reflections. A one-reflection pair refracts everywhere after its reflection.
+fn pair_choice(pair: &GhostPair, reflections: u32, object: u32) -> Reflection {
+    let next = match reflections {
+        0 => Some(pair.first),
+        1 => match pair.second {
+            Some(second) => Some(second),
+            None => return Reflection::Never,
+        },
+        _ => return Reflection::Fresnel,
+    };
+    if next == Some(object) {
+        Reflection::AtLeast(PAIR_REFLECTION)
+    } else {
+        Reflection::Never
+    }
 }
 
-impl GhostPairs {
-    /// The table of `scene`, from its pilot; None when the scene has no dielectric surface.
-    pub fn for_scene(scene: &Scene) -> Option<GhostPairs> {
-        let dielectric = |o: &u32| scene.materials[scene.objects[*o as usize].material as usize].is_dielectric();
-        let surfaces: Vec<u32> = (0..scene.objects.len() as u32).filter(dielectric).collect();
-        if surfaces.is_empty() {
-            return None;
-        }
-        let pairs: Vec<GhostPair> = surfaces
-            .iter()
-            .flat_map(|&first| {
-                std::iter::once(GhostPair { first, second: None })
-                    .chain(surfaces.iter().map(move |&s| GhostPair { first, second: Some(s) }))
-            })
-            .collect();
-        let pilots = pilot(scene, &pairs);
-        let weights: Vec<f64> = pilots.iter().map(PairPilot::root_mean_square).collect();
-        let aims = pilots.iter().map(PairPilot::aim).collect();
-        let total: f64 = weights.iter().sum();
-        let n = pairs.len() as f64;
-        let probabilities: Vec<f32> = weights
-            .iter()
-            .map(|w| if total > 0.0 { (1.0 - EVEN_SHARE as f64) * w / total + EVEN_SHARE as f64 / n } else { 1.0 / n })
-            .map(|p| p as f32)
-            .collect();
-        let choice = Discrete::new(&probabilities)?;
-        Some(GhostPairs { pairs, aims, choice })
-    }
+/// The ghost pairs of `scene` (`GhostPairs`), from its pilot, run on the first call for the scene and kept
+/// with it; None when the scene traces no ghost paths or has no dielectric surface.
+///
+/// The pilot is decided by the scene alone (the same in every process). It traces ghost paths of each pair
+/// aimed evenly and gives each cell of the pair's grid a weight proportional to the root of the mean square of
+/// what a path through it registers, the density that minimises the sum of the pixels' variances; the pair
+/// gets a share proportional to the root of the mean square one path registers with that density.
+/// `EVEN_SHARE` of the table is spread over all pairs.
+///
+/// The pilot runs in parallel: call this before a stage's parallel work (as `RenderSettings::phase` does),
+/// not first from inside it, where a thread waiting for the table could be the one computing it.
+pub fn ghost_pairs(scene: &Scene) -> Option<&GhostPairs> {
+    scene.ghost_pairs.get_or_init(|| if ghost_paths(scene) > 0 { pilot_table(scene) } else { None }).as_ref()
+}
 
-    /// The pair for the random number `u`, its probability, and where its paths aim.
-    #[inline]
-    pub fn sample(&self, u: f32) -> (GhostPair, f32, &AimGrid) {
-        let (i, p) = self.choice.sample(u);
-        (self.pairs[i], p, &self.aims[i])
+/// The table of `scene` from a fresh pilot; None when the scene has no dielectric surface.
+fn pilot_table(scene: &Scene) -> Option<GhostPairs> {
+    let pairs = GhostPair::all_of(scene);
+    if pairs.is_empty() {
+        return None;
     }
-
-    /// Every pair with its probability, in the table's order.
-    pub fn iter(&self) -> impl Iterator<Item = (GhostPair, f32)> + '_ {
-        self.pairs.iter().enumerate().map(|(i, &pair)| (pair, self.choice.pmf(i)))
-    }
-
-    /// Where the paths of the table's `i`-th pair aim.
-    pub fn aim(&self, i: usize) -> &AimGrid {
-        &self.aims[i]
-    }
+    let pilots = pilot(scene, &pairs);
+    let weights: Vec<f64> = pilots.iter().map(PairPilot::root_mean_square).collect();
+    let aims = pilots.iter().map(PairPilot::aim).collect();
+    let total: f64 = weights.iter().sum();
+    let n = pairs.len() as f64;
+    let probabilities: Vec<f32> = weights
+        .iter()
+        .map(|w| if total > 0.0 { (1.0 - EVEN_SHARE as f64) * w / total + EVEN_SHARE as f64 / n } else { 1.0 / n })
+        .map(|p| p as f32)
+        .collect();
+    GhostPairs::new(pairs, aims, &probabilities)
 }
 
 /// Cells of a pair's grid over the front element.
@@ -227,7 +179,7 @@ fn emit(scene: &Scene, density: &impl AimDensity, sampler: &mut Sampler) -> Opti
 ///
 /// A ghost path draws its pair of reflecting surfaces from the scene's table and counts 1 / (the pair's
 /// probability); its light leaves toward the front element with probability `GHOST_AIMED_FRACTION`; it takes
-/// its pair's reflections (`GhostPair::choice`, each choice weighted so that the chain keeps its value) and
+/// its pair's reflections (`pair_choice`, each choice weighted so that the chain keeps its value) and
 /// registers where it crosses the sensor once it has them; it ends at its first diffuse vertex. It has no
 /// roulette: all-specular chains are short and `max_depth` bounds them.
 ///
@@ -245,8 +197,11 @@ pub fn trace_ghost_paths(
     visit: &mut impl FnMut(&LightEvent),
     record: Option<(&Recorder, u64)>,
 ) {
-    let Some(pairs) = &scene.ghost_pairs else { return };
     let k = settings.ghost_paths as u64;
+    if k == 0 {
+        return;
+    }
+    let Some(pairs) = ghost_pairs(scene) else { return };
     let mut log = record.map(|(_, phase)| RecordedPath::new(PathKind::Light, phase as u32, index as u32, 0));
     for j in 0..k {
         let ghost = index * k + j;
@@ -361,7 +316,7 @@ impl<const S: bool, V: FnMut(&LightEvent)> Technique<S> for GhostPath<'_, V> {
 
     #[inline(always)]
     fn choice(&self, hit: &SurfaceHit) -> Reflection {
-        self.pair.choice(self.reflections, hit.object)
+        pair_choice(&self.pair, self.reflections, hit.object)
     }
 
     #[inline(always)]
@@ -385,13 +340,13 @@ mod tests {
     #[test]
     fn a_pair_reflects_only_at_the_surface_it_names_next_and_follows_fresnel_after_two_reflections() {
         let pair = GhostPair { first: 3, second: Some(5) };
-        assert_eq!(pair.choice(0, 3), Reflection::AtLeast(PAIR_REFLECTION));
-        assert_eq!(pair.choice(0, 5), Reflection::Never, "the second surface is crossed on the way in");
-        assert_eq!(pair.choice(1, 5), Reflection::AtLeast(PAIR_REFLECTION));
-        assert_eq!(pair.choice(1, 3), Reflection::Never);
-        assert_eq!(pair.choice(2, 3), Reflection::Fresnel);
+        assert_eq!(pair_choice(&pair, 0, 3), Reflection::AtLeast(PAIR_REFLECTION));
+        assert_eq!(pair_choice(&pair, 0, 5), Reflection::Never, "the second surface is crossed on the way in");
+        assert_eq!(pair_choice(&pair, 1, 5), Reflection::AtLeast(PAIR_REFLECTION));
+        assert_eq!(pair_choice(&pair, 1, 3), Reflection::Never);
+        assert_eq!(pair_choice(&pair, 2, 3), Reflection::Fresnel);
         let single = GhostPair { first: 3, second: None };
-        assert_eq!(single.choice(1, 3), Reflection::Never, "a one-reflection pair reflects once");
+        assert_eq!(pair_choice(&single, 1, 3), Reflection::Never, "a one-reflection pair reflects once");
         assert_eq!((pair.reflections(), single.reflections()), (2, 1));
     }
 }

@@ -2,15 +2,15 @@
 //! backward photons, builds a map of them, traces light paths that gather into the map, and closes the phase
 //! into the running sums. `phase` puts the stages together once, for the single-threaded engine and the
 //! worker's groups alike; the other files are the stages' parts (camera and light paths, the photon and its
-//! map, the area a photon gathers over and the inner disc that measures its blur, the buffers gathered light waits in, the light vertices waiting for a
-//! gather in bucket order, the ghost paths and where they aim, the radius schedule) and where the stages run (`executor`).
+//! map, the area a photon gathers over and the inner disc that measures its blur, the buffers gathered light
+//! waits in, the light vertices waiting for a gather in bucket order, the ghost paths and the pilot that
+//! decides their pairs and aims, the radius schedule) and where the stages run (`executor`).
 
 pub mod backward_pass;
 pub mod executor;
 pub mod forward_pass;
 pub mod gather_buffer;
 pub mod gather_disc;
-pub mod ghost_aim;
 pub mod ghost_paths;
 pub mod inner_disc;
 pub mod phase;
@@ -27,7 +27,7 @@ pub use forward_pass::{
     LightSettings, LightVertex, SensorHit,
 };
 pub use gather_buffer::{AtomicGatherBuffer, AtomicSink, GatherBuffer};
-pub use ghost_paths::{trace_ghost_paths, GhostPair, GhostPairs};
+pub use ghost_paths::{ghost_pairs, trace_ghost_paths};
 pub use phase::{LocalPixels, Phase, PhaseBuffers};
 pub use photon::{BackwardPhoton, PhotonKind};
 pub use photon_map::PhotonMap;

@@ -50,9 +50,9 @@ pub struct Phase<'a> {
     /// The phase's wavelengths: its camera and light paths share them, so their joins are at one wavelength.
     pub spectrum: PhaseSpectrum,
     /// Light paths register ghost chains on the sensor and camera paths leave those chains to them
-    /// (`crate::ghost::sensor_ghosts`).
+    /// (`crate::scene::ghost::sensor_ghosts`).
     pub sensor_ghosts: bool,
-    /// Ghost paths per light path (`crate::ghost::ghost_paths`).
+    /// Ghost paths per light path (`crate::scene::ghost::ghost_paths`).
     pub ghost_paths: u32,
     /// The disc each ghost chain's registration is spread over on the sensor (`Phase::at_pixel_phase`).
     pub sensor_kernel: SensorKernel,

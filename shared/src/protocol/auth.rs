@@ -10,6 +10,9 @@ use sha2::Sha256;
 use std::path::Path;
 use std::time::Duration;
 
+/// The shared secret's file in a key folder, which `keys init` writes beside the certificates (`super::tls`).
+pub const SECRET_FILE: &str = "secret";
+
 /// The environment variable a secret may come from.
 pub const SECRET_ENV: &str = "PHOTONFARM_SECRET";
 
@@ -75,7 +78,7 @@ impl Secret {
         if let Some(s) = Self::from_env()? {
             return Ok(s);
         }
-        if let Some(path) = tls_dir.map(|d| d.join(super::tls::SECRET_FILE)).filter(|p| p.exists()) {
+        if let Some(path) = tls_dir.map(|d| d.join(SECRET_FILE)).filter(|p| p.exists()) {
             return Self::from_file(&path);
         }
         if insecure_allowed {
@@ -194,7 +197,7 @@ mod tests {
         let dir = tempfile::Builder::new().prefix("pf-secret-").tempdir().unwrap();
         let file = dir.path().join("given");
         std::fs::write(&file, "the secret of the file given").unwrap();
-        std::fs::write(dir.path().join(super::super::tls::SECRET_FILE), "the secret of the tls folder").unwrap();
+        std::fs::write(dir.path().join(SECRET_FILE), "the secret of the tls folder").unwrap();
         let tls = Some(dir.path());
         // The one test of this process that sets the variable, and it removes it before any other resolve.
         std::env::set_var(SECRET_ENV, "the secret of the environment");

@@ -8,6 +8,7 @@
 //! a `secret` for the handshake. The CA's private key is not kept: no one can issue another certificate of
 //! the job, and a new folder is a new job CA.
 
+use super::auth::{Secret, SECRET_FILE};
 use super::connection::Connection;
 use super::error::ProtocolError;
 use super::message::Role;
@@ -20,8 +21,6 @@ use tokio::net::TcpStream;
 
 /// The certificate of the job CA.
 pub const CA_FILE: &str = "ca.pem";
-/// The shared secret `keys init` writes beside the certificates.
-pub const SECRET_FILE: &str = "secret";
 
 /// The DNS name in the certificate of `role`, which the dialling side checks.
 fn role_name(role: Role) -> &'static str {
@@ -85,7 +84,7 @@ pub fn init_keys(dir: &Path) -> Result<Vec<PathBuf>, TlsError> {
         files.push((format!("{}.pem", role_file(role)), cert.pem(), false));
         files.push((format!("{}.key", role_file(role)), key.serialize_pem(), true));
     }
-    let secret = super::auth::Secret::random();
+    let secret = Secret::random();
     files.push((SECRET_FILE.to_string(), String::from_utf8_lossy(secret.expose_for_child()).into_owned(), true));
     std::fs::create_dir_all(dir).map_err(|source| TlsError::Write { path: dir.display().to_string(), source })?;
     let mut written = Vec::new();

@@ -191,7 +191,7 @@ impl<'s> Engine<'s> {
         // Ghost chains come from light paths, as in PBPM. Spectral output reads a pixel's bands at its camera
         // path's own wavelength, which light paths of other wavelengths would not match: with it the camera
         // paths keep the ghost chains.
-        let sensor_ghosts = crate::ghost::sensor_ghosts(scene) && self.settings.spectral_bands == 0;
+        let sensor_ghosts = crate::scene::ghost::sensor_ghosts(scene) && self.settings.spectral_bands == 0;
         let light = if sensor_ghosts { self.sensor_light_paths(phase) } else { ForwardStats::default() };
         let closing = Closing::new(light.light_paths, &aux, self.gathered.visible_offset());
         let stride = self.gathered.stride();

@@ -29,9 +29,6 @@ use crate::integrator::Layer;
 pub const LIGHT_RAY_COST: f64 = 0.63;
 pub const MERGE_COST: f64 = 0.33;
 
-/// The L a run that chooses its own starts from.
-pub const START: f32 = 1.0;
-
 /// The two trial L of a step pair lie this factor above and below the current L.
 pub const SPREAD: f64 = std::f64::consts::SQRT_2;
 

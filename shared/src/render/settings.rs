@@ -11,6 +11,9 @@ use serde::{Deserialize, Serialize};
 /// is sized for it), and keeps where the comparison cannot tell them apart.
 pub const START_DEPTH: u32 = 2;
 
+/// The light paths per pixel a run that chooses its own (`light_balance`) starts from.
+pub const START_LIGHT_PATHS: f32 = 1.0;
+
 /// Everything that, with the scene, determines a run's result.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RenderSettings {
@@ -52,7 +55,7 @@ impl RenderSettings {
             backward_diffuse_depth: backward_diffuse_depth.unwrap_or(START_DEPTH),
             radius_scale,
             radius_alpha: 2.0 / 3.0,
-            light_paths_per_pixel: light_paths_per_pixel.unwrap_or(super::light_balance::START),
+            light_paths_per_pixel: light_paths_per_pixel.unwrap_or(START_LIGHT_PATHS),
             adaptive_light: light_paths_per_pixel.is_none(),
             adaptive_depth: backward_diffuse_depth.is_none(),
             spectral_bands: 0,
@@ -80,6 +83,9 @@ impl RenderSettings {
 
     /// The phase whose random streams `key` names, with its wavelengths.
     pub fn phase<'a>(&self, scene: &'a Scene, key: u64) -> Phase<'a> {
+        // The ghost pairs' pilot runs in parallel: here, before the phase's parallel stages, rather than on the
+        // first ghost path inside them.
+        crate::pbpm::ghost_pairs(scene);
         Phase {
             scene,
             seed: self.seed,
@@ -88,8 +94,8 @@ impl RenderSettings {
             backward_diffuse_depth: self.backward_diffuse_depth,
             radius: self.radius_schedule(scene),
             spectrum: self.phase_spectrum(scene, key),
-            sensor_ghosts: crate::ghost::sensor_ghosts(scene),
-            ghost_paths: crate::ghost::ghost_paths(scene),
+            sensor_ghosts: crate::scene::ghost::sensor_ghosts(scene),
+            ghost_paths: crate::scene::ghost::ghost_paths(scene),
             sensor_kernel: crate::pbpm::SensorKernel::POINT,
         }
     }
@@ -99,7 +105,7 @@ impl RenderSettings {
     pub fn as_recorded(&self) -> Self {
         let mut s = *self;
         if s.adaptive_light {
-            s.light_paths_per_pixel = super::light_balance::START;
+            s.light_paths_per_pixel = START_LIGHT_PATHS;
         }
         if s.adaptive_depth {
             s.backward_diffuse_depth = START_DEPTH;

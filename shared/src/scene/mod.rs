@@ -1,9 +1,11 @@
 //! Scenes: the loaded scene the renderer reads (objects, materials, geometry, lights, camera), and how it is
 //! built from a TOML file (`file` holds the format, `loader` the validation with precise errors, `error` the
-//! error that points at the file, line and field); `mitsuba` reads Mitsuba 3 scene files into a typed document.
+//! error that points at the file, line and field); `mitsuba` imports Mitsuba 3 scene files into a `Scene`;
+//! `ghost` holds what a scene declares about the ghosts its lens makes.
 
 pub mod error;
 pub mod file;
+pub mod ghost;
 mod loader;
 pub mod mitsuba;
 
@@ -19,6 +21,7 @@ use crate::material::Material;
 use crate::texture::{barycentric, interpolate_uv, uv_tangent};
 use glam::{Vec2, Vec3};
 use std::path::PathBuf;
+use std::sync::OnceLock;
 
 /// One object of the scene.
 #[derive(Clone, Debug)]
@@ -44,7 +47,7 @@ pub struct SceneRenderSettings {
     /// For a lens that can make ghosts: whether light paths bring the all-specular ghost chains to the sensor
     /// (the default), or camera paths alone find them, as they find everything else.
     pub ghost_light_paths: bool,
-    /// Ghost paths traced per light path where light paths bring the ghost chains (`crate::ghost`); 0 leaves
+    /// Ghost paths traced per light path where light paths bring the ghost chains (`ghost::ghost_paths`); 0 leaves
     /// the chains to the light paths themselves.
     pub ghost_paths: u32,
     /// The radius in pixels, at the first phase, of the disc on the sensor each ghost chain's registration is
@@ -60,8 +63,8 @@ impl Default for SceneRenderSettings {
             radius_scale: 3.0,
             light_paths_per_pixel: None,
             ghost_light_paths: true,
-            ghost_paths: crate::ghost::GHOST_PATHS_PER_LIGHT_PATH,
-            ghost_radius: crate::ghost::GHOST_RADIUS,
+            ghost_paths: ghost::GHOST_PATHS_PER_LIGHT_PATH,
+            ghost_radius: ghost::GHOST_RADIUS,
         }
     }
 }
@@ -85,8 +88,10 @@ pub struct Scene {
     pub mesh_files: Vec<(String, String)>,
     /// True when any object has a specular material (then caustics exist).
     pub has_delta_surfaces: bool,
-    /// The pairs of reflecting surfaces ghost paths draw from, where the scene traces ghost paths.
-    pub ghost_pairs: Option<crate::pbpm::GhostPairs>,
+    /// The pairs of reflecting surfaces ghost paths draw from, where the scene traces ghost paths: filled by
+    /// the estimator's pilot on first use (`crate::pbpm::ghost_pairs`), which needs the estimator, and kept
+    /// here so that every phase of the run reads the same table.
+    pub(crate) ghost_pairs: OnceLock<Option<ghost::GhostPairs>>,
     /// What an imported scene's mapping ignored or rendered differently, one sentence each, for the run record
     /// (empty for TOML scenes, whose every key maps exactly).
     pub notes: Vec<String>,

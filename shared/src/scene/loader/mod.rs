@@ -27,6 +27,7 @@ use sha2::Digest;
 use state::{Loader, MeshSource};
 use std::collections::BTreeMap;
 use std::path::Path;
+use std::sync::OnceLock;
 
 impl Scene {
     /// Reads and validates a scene file, TOML or (by the extension `.xml`) Mitsuba 3; meshes and textures are
@@ -78,15 +79,12 @@ impl Loader<'_> {
         lights.extend(self.lights(&parsed.lights)?);
         // After the objects: a sensor camera refers to one of them.
         let camera = self.camera(&parsed.camera, &parts.lens_surfaces)?;
-        let front = crate::ghost::front_element(&camera, parts.lens_surfaces.values().copied());
+        let front = super::ghost::front_element(&camera, parts.lens_surfaces.values().copied());
         let mut scene = self.assemble(render, camera, materials, parts, lights)?;
-        if let Some(front) = front.filter(|_| crate::ghost::sensor_ghosts(&scene)) {
+        if let Some(front) = front.filter(|_| super::ghost::sensor_ghosts(&scene)) {
             scene.lights.aim_at(front);
-            let lens_images = crate::ghost::lens_images_by_light_paths(&scene, &front);
+            let lens_images = super::ghost::lens_images_by_light_paths(&scene, &front);
             scene.lights.set_lens_images_by_light_paths(lens_images);
-        }
-        if crate::ghost::ghost_paths(&scene) > 0 {
-            scene.ghost_pairs = crate::pbpm::GhostPairs::for_scene(&scene);
         }
         Ok(scene)
     }
@@ -142,7 +140,7 @@ impl Loader<'_> {
             hash: format!("{:x}", self.hasher.finalize()),
             mesh_files: self.mesh_files,
             has_delta_surfaces,
-            ghost_pairs: None,
+            ghost_pairs: OnceLock::new(),
             notes: Vec::new(),
         })
     }
@@ -187,17 +185,17 @@ impl Loader<'_> {
             s.ghost_light_paths = b;
         }
         if let Some(k) = &r.ghost_paths {
-            if *k.get_ref() > crate::ghost::MAX_GHOST_PATHS {
+            if *k.get_ref() > super::ghost::MAX_GHOST_PATHS {
                 return Err(self.error(
                     Some(k.span()),
                     "render.ghost_paths",
-                    format!("must be at most {}, got {}", crate::ghost::MAX_GHOST_PATHS, k.get_ref()),
+                    format!("must be at most {}, got {}", super::ghost::MAX_GHOST_PATHS, k.get_ref()),
                 ));
             }
             s.ghost_paths = *k.get_ref();
         }
         if let Some(x) = &r.ghost_radius {
-            let max = crate::ghost::MAX_GHOST_RADIUS;
+            let max = super::ghost::MAX_GHOST_RADIUS;
             s.ghost_radius = self.scalar(
                 *x.get_ref(),
                 &x.span(),

@@ -28,7 +28,7 @@ use params::Params;
 use sha2::{Digest, Sha256};
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 impl Scene {
     /// Reads a Mitsuba 3 scene file and everything it references, as `options` say.
@@ -303,7 +303,7 @@ impl<'d> Importer<'d> {
             hash: format!("{:x}", self.hasher.finalize()),
             mesh_files: self.files,
             has_delta_surfaces,
-            ghost_pairs: None,
+            ghost_pairs: OnceLock::new(),
             notes: self.notes,
         })
     }

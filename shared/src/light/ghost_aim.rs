@@ -3,7 +3,7 @@
 //! or the mounts; the regions of the disc through which the pair's chains reach the sensor get most of its
 //! paths, as lens-design software traces a ghost through the part of the pupil that forms it.
 
-use crate::light::AimDensity;
+use super::AimDensity;
 use crate::sampling::{GridShape, SquareGrid};
 use glam::Vec2;
 use std::f32::consts::TAU;
