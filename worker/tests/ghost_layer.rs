@@ -17,7 +17,7 @@ fn scenes_dir() -> std::path::PathBuf {
 }
 
 /// The uncoated lens at 72 × 48 pixels, lit by its fill light only: the bright light's ghosts are single rare
-/// samples, far too heavy-tailed for an error estimate from a few hundred phases (see shared/tests/lens.rs);
+/// samples, far too heavy-tailed for an error estimate from a few hundred phases (see shared/tests/suite/lens.rs);
 /// the lens's reflections of the lit scene, about 6 % of the image, are not.
 fn fill_lit_lens() -> Scene {
     let text = std::fs::read_to_string(scenes_dir().join("lens.toml")).unwrap();

@@ -9,7 +9,7 @@
 //! uniform value is that value in every channel, unclamped, except in an emitter, where Mitsuba gives it the
 //! sRGB colour of XYZ = (v, v, v), which is not grey. Which use applies follows from the parameter's name and
 //! place (`SpectrumUse::for_parameter`). The test `spectra_convert_to_rgb_as_mitsuba_does`
-//! (shared/tests/mitsuba_reader.rs) checks this against values Mitsuba 3.9 printed
+//! (shared/tests/suite/mitsuba_reader.rs) checks this against values Mitsuba 3.9 printed
 //! (`scripts/mitsuba/spectrum-cases`).
 
 /// A `<spectrum>` value as written.

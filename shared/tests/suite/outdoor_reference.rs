@@ -7,9 +7,7 @@
 //! the calibration of δ against true error (calibration.rs). Pixels that see the sun through the glass ball are
 //! left to the z² test: their heavy-tailed noise dominates a squared error.
 
-mod common;
-
-use common::{scene, settings};
+use crate::common::{scene, settings};
 use photonfarm::accumulation::LitMask;
 use photonfarm::color::luminance_f64;
 use photonfarm::image_io::exr_file::{find_layer, read_exr, LayerImage};

@@ -2,12 +2,9 @@
 //! camera, the same lights and the same path depth, and PBPM renders it, small and with fixed seeds, to the
 //! TOML scene's image, per pixel and over the image.
 
-mod common;
-
-use common::{mean_sem, mean_z2, regions_phase_means, settings, shipped_at};
+use crate::common::{mean_sem, mean_z2, regions_phase_means, settings, shipped_at};
 use glam::{Vec2, Vec3};
 use photonfarm::accumulation::Accumulator;
-use photonfarm::color::luminance_f64;
 use photonfarm::light::Light;
 use photonfarm::render::{Engine, Method, RenderSettings};
 use photonfarm::scene::{MitsubaOptions, Scene};

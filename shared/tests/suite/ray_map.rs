@@ -2,9 +2,7 @@
 //! a brute-force filter and with an analytic scene, and damaged maps give clear errors without losing whole
 //! portions.
 
-mod common;
-
-use common::{scene, settings};
+use crate::common::{scene, settings};
 use photonfarm::ray_map::format::{decode_paths, encode_path, path_views, MapHeader, VERSION};
 use photonfarm::ray_map::reader::{read_all, StreamReader};
 use photonfarm::ray_map::select::{parse, Expr};

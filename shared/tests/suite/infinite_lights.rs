@@ -4,9 +4,7 @@
 //! leave the scene; and the irradiance an emitting sphere or disc and a sun give a plane. Tolerances are 4
 //! standard errors of the per-phase region means, with fixed seeds.
 
-mod common;
-
-use common::{mean_sem, region_phase_means, scene, settings};
+use crate::common::{mean_sem, region_phase_means, scene, settings};
 use glam::Vec2;
 use photonfarm::bsdf::{Reflection, Transport};
 use photonfarm::color::luminance_f64;

@@ -2,9 +2,7 @@
 //! converges per pixel to the path tracer: every glossy vertex is counted once, by the camera side where its
 //! lobe passes and by the gather where it is stored (docs/estimator.md, "Glossy surfaces").
 
-mod common;
-
-use common::{mean_z2, settings, shipped_at};
+use crate::common::{mean_z2, settings, shipped_at};
 use photonfarm::accumulation::Accumulator;
 use photonfarm::color::luminance_f64;
 use photonfarm::integrator::Layer;

@@ -2,9 +2,7 @@
 //! (`tests/data/mitsuba-families/*.toml`) matches its Mitsuba 3 reference (made by `scripts/mitsuba/families`,
 //! committed beside the scene) per pixel, within the reference's own noise plus photonfarm's.
 
-mod common;
-
-use common::settings;
+use crate::common::settings;
 use photonfarm::color::luminance_f64;
 use photonfarm::image_io::exr_file::{find_layer, read_exr};
 use photonfarm::render::{Engine, Method};

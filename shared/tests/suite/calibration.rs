@@ -5,9 +5,7 @@
 
 #![allow(clippy::needless_range_loop)]
 
-mod common;
-
-use common::{settings, shipped};
+use crate::common::{settings, shipped};
 use photonfarm::accumulation::{Accumulator, LitMask};
 use photonfarm::color::luminance_f64;
 use photonfarm::image_io::exr_file::{find_layer, read_exr};

@@ -3,9 +3,7 @@
 //! vertex; the head-up display, an open road scene whose light paths mostly land out of view, goes on to the
 //! second.
 
-mod common;
-
-use common::settings;
+use crate::common::settings;
 use photonfarm::accumulation::LitMask;
 use photonfarm::render::forecast::Forecast;
 use photonfarm::render::session::{self, ErrorOver, StopRule, Tracking};

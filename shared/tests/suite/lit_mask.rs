@@ -1,9 +1,7 @@
 //! The lit-pixel mask is decided before the render from the scene alone: a pixel that sees a light through
 //! glass is lit from the first phase on, whatever its samples, and the mask does not depend on the run.
 
-mod common;
-
-use common::{scene, settings};
+use crate::common::{scene, settings};
 use photonfarm::accumulation::LitMask;
 use photonfarm::image_io::exr_file::{find_layer, read_exr};
 use photonfarm::integrator::Layer;
@@ -119,7 +117,7 @@ struct Comparison {
 }
 
 fn against_reference(scene_file: &str, reference_file: &str) -> Comparison {
-    let sc = common::shipped(scene_file);
+    let sc = crate::common::shipped(scene_file);
     let mask = LitMask::of_scene(&sc, settings(&sc, Method::Pbpm, 1).max_depth);
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/references").join(reference_file);
     let layers = read_exr(&path).unwrap();

@@ -1,11 +1,9 @@
 //! The stress scenes of `scenes/stress/` (see its README): scenes where some rendering method fails, and the
 //! stable behaviour the single-threaded PBPM engine must show there. Seeds are fixed; every tolerance is a
 //! stated number of standard errors (from per-phase region means) or a stated ratio with its measured value
-//! beside it. `cargo test --release -p photonfarm --test stress_scenes -- --nocapture` prints the measured numbers.
+//! beside it. `cargo test --release -p photonfarm --test suite stress_scenes:: -- --nocapture` prints the measured numbers.
 
-mod common;
-
-use common::{mean_sem, regions_phase_means, settings, shipped};
+use crate::common::{mean_sem, regions_phase_means, settings, shipped};
 use glam::{Vec2, Vec3};
 use photonfarm::accumulation::{non_finite_dropped, LitMask};
 use photonfarm::bsdf::Transport;

@@ -1,9 +1,7 @@
 //! The layer partition (docs/estimator.md, "Layers") counts every light path exactly once: on a scene where all four layers
 //! are non-zero, PBPM converges to the path tracer, layer by layer and in total.
 
-mod common;
-
-use common::{scene, settings};
+use crate::common::{scene, settings};
 use photonfarm::accumulation::relative_rmse;
 use photonfarm::color::luminance_f64;
 use photonfarm::integrator::Layer;

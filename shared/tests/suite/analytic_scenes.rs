@@ -2,9 +2,7 @@
 //! slab. Tolerances are a few standard errors of the estimate (SEM from per-phase region means) plus, where
 //! density estimation blurs, a stated bias allowance.
 
-mod common;
-
-use common::{mean_sem, region_phase_means, scene, settings};
+use crate::common::{mean_sem, region_phase_means, scene, settings};
 use photonfarm::bsdf::fresnel::fresnel_dielectric;
 use photonfarm::integrator::Layer;
 use photonfarm::render::{Engine, Method};

@@ -4,8 +4,6 @@
 //! included, on a scene where both halves of the ghost layer carry light; and so they do when light paths also
 //! bring a light's image through the lens.
 
-mod common;
-
 use photonfarm::accumulation::Accumulator;
 use photonfarm::color::luminance_f64;
 use photonfarm::ghost::GHOST_LAYER;
@@ -39,7 +37,7 @@ fn scene_with_glass_and(ghost_light_paths: bool, ior: f32, ghost_radius: f32, mo
     // The lamp's chains reach the sensor from about one light path in 500: enough paths per phase that most
     // pixels get some in every batch of phases, so that their standard errors can be estimated.
     let light_paths = if ghost_light_paths { 16 } else { 1 };
-    common::scene(&format!(
+    crate::common::scene(&format!(
         r#"
 [render]
 max_depth = 16
@@ -125,7 +123,7 @@ fn luminance_sums(sums: &Accumulator) -> (Vec<f64>, Vec<f64>) {
 /// Renders `batches` × `per_batch` phases and estimates each pixel's mean with its standard error from the
 /// spread of the batches' means: the batches are independent, unlike the quasi-random phases of one pixel.
 fn render(scene: &Scene, method: Method, seed: u64, batches: usize, per_batch: usize) -> PixelEstimates {
-    let mut engine = Engine::new(scene, common::settings(scene, method, seed));
+    let mut engine = Engine::new(scene, crate::common::settings(scene, method, seed));
     let pixels = scene.camera.pixel_count();
     let (mut before_t, mut before_g) = (vec![0.0; pixels], vec![0.0; pixels]);
     let (mut means_t, mut means_g) = (vec![Vec::new(); pixels], vec![Vec::new(); pixels]);
@@ -141,8 +139,8 @@ fn render(scene: &Scene, method: Method, seed: u64, batches: usize, per_batch: u
         (before_t, before_g) = (t, g);
     }
     PixelEstimates {
-        total: means_t.iter().map(|m| common::mean_sem(m)).collect(),
-        ghost: means_g.iter().map(|m| common::mean_sem(m)).collect(),
+        total: means_t.iter().map(|m| crate::common::mean_sem(m)).collect(),
+        ghost: means_g.iter().map(|m| crate::common::mean_sem(m)).collect(),
     }
 }
 
@@ -183,7 +181,7 @@ fn light_half(scene: &Scene, paths: u64, ghost_paths: u32) -> ((f64, f64), u64) 
         trace_ghost_paths(scene, settings, &PhaseSpectrum::RGB, index, 5, 1, &mut stats, &mut visit, None);
         values.push(sum);
     }
-    (common::mean_sem(&values), stats.rays)
+    (crate::common::mean_sem(&values), stats.rays)
 }
 
 /// Asserts that ghost paths (two per light path) bring the ghost light that light paths alone bring, within 4
@@ -267,7 +265,7 @@ fn emitted_flux(scene: &Scene, n: u64) -> [(f64, f64); 2] {
         all.push(flux);
         toward.push(if hits { flux } else { 0.0 });
     }
-    [common::mean_sem(&all), common::mean_sem(&toward)]
+    [crate::common::mean_sem(&all), crate::common::mean_sem(&toward)]
 }
 
 #[test]
@@ -365,7 +363,7 @@ fn ghost_chains_spread_over_the_sensors_disc_keep_the_ghost_layers_light_with_le
     // The disc's blur of the lamp's ghost shows in the blur the run measures: Σ blur² over the pixels, and the
     // spread that sum would have without blur.
     let blur = |scene: &Scene| {
-        let mut engine = Engine::new(scene, common::settings(scene, Method::Pbpm, 6));
+        let mut engine = Engine::new(scene, crate::common::settings(scene, Method::Pbpm, 6));
         for _ in 0..100 {
             engine.run_phase();
         }

@@ -4,9 +4,7 @@
 //! instances are their group's shapes written out, a worker rebuilds the same scene from the job's files, and
 //! unsupported or malformed input is refused at its file, line and element.
 
-mod common;
-
-use common::{mean_sem, regions_phase_means, settings};
+use crate::common::{mean_sem, regions_phase_means, settings};
 use glam::{DMat3, DVec3, Vec2, Vec3};
 use photonfarm::bsdf::conductor::ConductorFresnel;
 use photonfarm::bsdf::plastic::Coat;

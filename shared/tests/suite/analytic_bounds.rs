@@ -4,8 +4,6 @@
 //! every surface is solved, and the same occlusion answers. `cargo test --release -p photonfarm --test
 //! analytic_bounds`.
 
-mod common;
-
 use glam::Vec3;
 use photonfarm::geometry::{ray::offset_origin, Analytic, Ray, SceneGeometry, SurfaceHit};
 use photonfarm::scene::Scene;
@@ -22,7 +20,7 @@ fn ring_radius(rng: &mut Pcg32, inner: f32, outer: f32) -> f32 {
     match rng.next_u32() % 8 {
         0 => outer,
         1 => inner,
-        _ => (inner * inner + (outer * outer - inner * inner) * common::uniform(rng)).sqrt(),
+        _ => (inner * inner + (outer * outer - inner * inner) * crate::common::uniform(rng)).sqrt(),
     }
 }
 
@@ -30,12 +28,12 @@ fn ring_radius(rng: &mut Pcg32, inner: f32, outer: f32) -> f32 {
 fn point_on(surface: &Analytic, rng: &mut Pcg32) -> (Vec3, Vec3) {
     let disc = |rng: &mut Pcg32, axis: Vec3, radius: f32| {
         let (u, v) = axis.any_orthonormal_pair();
-        let phi = std::f32::consts::TAU * common::uniform(rng);
+        let phi = std::f32::consts::TAU * crate::common::uniform(rng);
         (u * phi.cos() + v * phi.sin()) * radius
     };
     match surface {
         Analytic::Sphere(s) => {
-            let n = common::direction(rng);
+            let n = crate::common::direction(rng);
             (s.center + n * s.radius, n)
         }
         Analytic::Annulus(a) => {
@@ -134,10 +132,18 @@ fn analytic_culling_returns_every_hit_and_occlusion_that_solving_every_surface_r
                 let (target, n) = point_on(surface, &mut rng);
                 let room = lo
                     + (hi - lo)
-                        * Vec3::new(common::uniform(&mut rng), common::uniform(&mut rng), common::uniform(&mut rng));
+                        * Vec3::new(
+                            crate::common::uniform(&mut rng),
+                            crate::common::uniform(&mut rng),
+                            crate::common::uniform(&mut rng),
+                        );
                 let near = near_lo
                     + (near_hi - near_lo)
-                        * Vec3::new(common::uniform(&mut rng), common::uniform(&mut rng), common::uniform(&mut rng));
+                        * Vec3::new(
+                            crate::common::uniform(&mut rng),
+                            crate::common::uniform(&mut rng),
+                            crate::common::uniform(&mut rng),
+                        );
                 // Leaving another analytic surface as the renderer's rays do, from its offset point.
                 let (other, other_n) = point_on(&surfaces[rng.next_u32() as usize % surfaces.len()].1, &mut rng);
                 let other = offset_origin(other, other_n, target - other);
@@ -155,9 +161,11 @@ fn analytic_culling_returns_every_hit_and_occlusion_that_solving_every_surface_r
                     check_occlusion(&name, &culled, &every, from, target + d * 1e-4 * size, &mut tally);
                 }
                 // Grazing the surface at the target: along its tangent plane, from near and from across the room.
-                let tangent = (common::direction(&mut rng).cross(n)).normalize();
+                let tangent = (crate::common::direction(&mut rng).cross(n)).normalize();
                 if tangent.is_finite() {
-                    for back in [1e-3 * size * common::uniform(&mut rng), size * common::uniform(&mut rng)] {
+                    for back in
+                        [1e-3 * size * crate::common::uniform(&mut rng), size * crate::common::uniform(&mut rng)]
+                    {
                         let from = target - tangent * back;
                         check(&name, &culled, &every, &Ray::new(from, tangent), *object, &mut tally);
                         check_occlusion(&name, &culled, &every, from, target + tangent * back, &mut tally);
@@ -166,11 +174,11 @@ fn analytic_culling_returns_every_hit_and_occlusion_that_solving_every_surface_r
                 // Along the axes, whose zero components (−0 in −axis) make 0 × ∞ in a careless slab test.
                 let axis = [Vec3::X, Vec3::Y, Vec3::Z][rng.next_u32() as usize % 3];
                 for d in [axis, -axis] {
-                    let back = size * common::uniform(&mut rng);
+                    let back = size * crate::common::uniform(&mut rng);
                     check(&name, &culled, &every, &Ray::new(target - d * back, d), *object, &mut tally);
                 }
                 // From the surface itself, as a reflected or refracted ray leaves it.
-                let d = common::direction(&mut rng);
+                let d = crate::common::direction(&mut rng);
                 let from = offset_origin(target, n, d);
                 check(&name, &culled, &every, &Ray::new(from, d), *object, &mut tally);
                 check_occlusion(&name, &culled, &every, from, room, &mut tally);

@@ -1,8 +1,6 @@
 //! The dispersive prism (`scenes/prism.toml`): each wavelength leaves the prism at the deviation Snell's law
 //! gives with the glass's dispersion, and the rendered spectrum's colours land where those deviations put
-//! them. `cargo test --release -p photonfarm --test prism -- --nocapture` prints the measured numbers.
-
-mod common;
+//! them. `cargo test --release -p photonfarm --test suite prism:: -- --nocapture` prints the measured numbers.
 
 use glam::{Vec2, Vec3};
 use photonfarm::bsdf::fresnel::fresnel_dielectric;
@@ -83,7 +81,7 @@ fn angle_deg(a: Vec3, b: Vec3) -> f64 {
 
 #[test]
 fn prism_deviation_per_wavelength_matches_snell_with_the_glass_dispersion() {
-    let scene = common::shipped("prism.toml");
+    let scene = crate::common::shipped("prism.toml");
     assert!(scene.is_spectral(), "a glass with an Abbe number makes the scene spectral");
     let mut previous = f64::NEG_INFINITY;
     for nm in [400.0f32, 450.0, 486.13, 500.0, 550.0, 587.56, 600.0, 656.27, 700.0, 750.0] {
@@ -110,7 +108,7 @@ fn prism_deviation_per_wavelength_matches_snell_with_the_glass_dispersion() {
 
 #[test]
 fn rendered_spectrum_puts_each_colour_where_snell_sends_its_wavelengths() {
-    let scene = common::shipped("prism.toml");
+    let scene = crate::common::shipped("prism.toml");
     let cam = &scene.camera;
     let pixel_y = screen_heights(&scene);
 
@@ -132,7 +130,7 @@ fn rendered_spectrum_puts_each_colour_where_snell_sends_its_wavelengths() {
     let predicted: Vec<f64> = (0..3).map(|c| num[c] / den[c]).collect();
 
     // The rendering, in batches of phases: the spread of the batches' centroids gives their standard error.
-    let mut engine = Engine::new(&scene, common::settings(&scene, Method::Pbpm, 11));
+    let mut engine = Engine::new(&scene, crate::common::settings(&scene, Method::Pbpm, 11));
     let (batches, per_batch) = (8, 60);
     let mut centroids = vec![Vec::new(); 3];
     let mut previous = vec![[0.0f64; 3]; cam.pixel_count()];
@@ -164,7 +162,7 @@ fn rendered_spectrum_puts_each_colour_where_snell_sends_its_wavelengths() {
     // symmetrically.
     let systematic = 1.1e-3;
     for (c, name) in ["red", "green", "blue"].iter().enumerate() {
-        let (mean, sem) = common::mean_sem(&centroids[c]);
+        let (mean, sem) = crate::common::mean_sem(&centroids[c]);
         println!(
             "{name}: centroid at y = {:.2} mm (SEM {:.2} mm), predicted {:.2} mm",
             mean * 1e3,
@@ -178,16 +176,19 @@ fn rendered_spectrum_puts_each_colour_where_snell_sends_its_wavelengths() {
         );
     }
     // Red is deviated least (highest on the screen), blue most.
-    let (r, g, b) =
-        (common::mean_sem(&centroids[0]).0, common::mean_sem(&centroids[1]).0, common::mean_sem(&centroids[2]).0);
+    let (r, g, b) = (
+        crate::common::mean_sem(&centroids[0]).0,
+        crate::common::mean_sem(&centroids[1]).0,
+        crate::common::mean_sem(&centroids[2]).0,
+    );
     assert!(r > g && g > b, "spectrum order red {r}, green {g}, blue {b}");
 }
 
 #[test]
 fn spectral_output_bands_each_land_where_snell_sends_their_wavelengths() {
-    let scene = common::shipped("prism.toml");
+    let scene = crate::common::shipped("prism.toml");
     let bands = 8u32;
-    let mut settings = common::settings(&scene, Method::Pbpm, 5);
+    let mut settings = crate::common::settings(&scene, Method::Pbpm, 5);
     settings.spectral_bands = bands;
     let mut engine = Engine::new(&scene, settings);
     for _ in 0..400 {

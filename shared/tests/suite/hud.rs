@@ -2,9 +2,7 @@
 //! distance and reads upright, the combiner splits energy into exactly its reflectance and transmittance, and
 //! textures decode from sRGB and emit what they show.
 
-mod common;
-
-use common::{mean_sem, region_phase_means, regions_phase_means, scene, settings, shipped};
+use crate::common::{mean_sem, region_phase_means, regions_phase_means, scene, settings, shipped};
 use glam::{Vec2, Vec3};
 use photonfarm::bsdf::{reflect, Transport};
 use photonfarm::camera::Lens;

@@ -7,9 +7,7 @@
 //! the pixels that do not see a light. Divided by πr² instead, the mean over all pixels sits 0.5% low, and the
 //! test fails.
 
-mod common;
-
-use common::{mean_sem, regions_phase_means, scene, settings};
+use crate::common::{mean_sem, regions_phase_means, scene, settings};
 use photonfarm::image_io::exr_file::{find_layer, read_exr};
 use photonfarm::render::images::luminance_of;
 use photonfarm::render::{Engine, Method};

@@ -1,8 +1,6 @@
 //! Same seed, same settings, one thread: bit-identical sums; another seed: different noise.
 
-mod common;
-
-use common::{settings, shipped};
+use crate::common::{settings, shipped};
 use photonfarm::render::{Engine, Method};
 
 #[test]

@@ -1,9 +1,7 @@
 //! The camera-lens scene (`scenes/lens.toml`): its lens surfaces are the published double Gauss, its sensor is
 //! in focus, and both methods render it, ghosts included, with a ghost layer that holds exactly the light
-//! reflected inside the lens. `cargo test --release -p photonfarm --test lens -- --nocapture` prints the
+//! reflected inside the lens. `cargo test --release -p photonfarm --test suite lens:: -- --nocapture` prints the
 //! measured numbers.
-
-mod common;
 
 use glam::{Vec2, Vec3};
 use photonfarm::accumulation::blur::{BLUR_LAYER, BLUR_SQUARES_LAYER};
@@ -240,7 +238,7 @@ fn visible_lights(sums: &Accumulator) -> Vec<f64> {
 }
 
 fn render(scene: &Scene, method: Method, phases: usize) -> Engine<'_> {
-    let mut engine = Engine::new(scene, common::settings(scene, method, 7));
+    let mut engine = Engine::new(scene, crate::common::settings(scene, method, 7));
     for _ in 0..phases {
         engine.run_phase();
     }
@@ -351,7 +349,7 @@ fn image_sums(sums: &Accumulator) -> (f64, f64) {
 /// Renders `phases` phases and returns, per phase, the image's ghost and total luminance sums. Pixels of one
 /// phase share light paths, so an error estimate of the image sum must come from these per-phase values.
 fn phase_image_sums(scene: &Scene, method: Method, seed: u64, phases: usize) -> (Vec<f64>, Vec<f64>) {
-    let mut engine = Engine::new(scene, common::settings(scene, method, seed));
+    let mut engine = Engine::new(scene, crate::common::settings(scene, method, seed));
     let (mut ghost, mut total) = (Vec::with_capacity(phases), Vec::with_capacity(phases));
     let mut before = (0.0, 0.0);
     for _ in 0..phases {
@@ -374,7 +372,7 @@ fn assert_methods_agree_on_the_ghost(scene: &Scene, phases: usize, what: &str) -
             .map(|h| h.join().unwrap())
     });
     let [pbpm, path] = renders.map(|(m, (ghost, total))| {
-        let (g, t) = (common::mean_sem(&ghost), common::mean_sem(&total));
+        let (g, t) = (crate::common::mean_sem(&ghost), crate::common::mean_sem(&total));
         println!(
             "{what}, {m:?}, {phases} phases: ghost {:.4e} ± {:.2e} per phase, {:.2} % of the total {:.4e}",
             g.0,
@@ -460,7 +458,7 @@ fn ghost_light_gathered_into_ghost_photons_reaches_the_ghost_layer_as_the_path_t
     // sensor. Light bounced at least twice (a fraction 0.8² of the room's light) reaches camera paths only
     // through the photons of PBPM's forward pass: without their ghost bit PBPM's ghost layer here falls to half
     // of the path tracer's (measured: 0.289 against 0.577 per phase, 45 times the 4-SEM bound's SEM).
-    let scene = common::shipped("ghost-room.toml");
+    let scene = crate::common::shipped("ghost-room.toml");
     let [(pbpm, pbpm_sem), (path, _)] = assert_methods_agree_on_the_ghost(&scene, 1000, "room behind a window");
     assert!(pbpm_sem < 0.05 * pbpm, "the comparison is too noisy to see a missing half: SEM {pbpm_sem} of {pbpm}");
     println!("room behind a window: PBPM's ghost / the path tracer's = {:.4}", pbpm / path);
@@ -474,7 +472,7 @@ const BLUR_BYTES_PER_PIXEL: f64 = 2.0 * (8.0 + 4.0 + 4.0);
 fn bytes_per_pixel_without_auxiliary_layers(scene: &Scene) -> f64 {
     let pixels = scene.camera.pixel_count();
     let mut map = PhotonMap::new();
-    let depth = common::settings(scene, Method::Pbpm, 1).backward_diffuse_depth;
+    let depth = crate::common::settings(scene, Method::Pbpm, 1).backward_diffuse_depth;
     map.reserve(pixels * depth as usize);
     let per_pixel = std::mem::size_of::<PixelSums>() + std::mem::size_of::<LayerValues>() + 1 + 2 * 12;
     assert_eq!(std::mem::size_of::<[Rgb; 2]>(), 2 * 12);
@@ -486,11 +484,11 @@ fn only_a_sensor_behind_glass_gets_ghost_planes_and_other_scenes_keep_their_byte
     // Pinhole cameras, with (caustic) and without (cornell) glass in the scene: no lens to reflect in, only the
     // two grey blur layers every image keeps.
     for name in ["cornell.toml", "caustic.toml"] {
-        let scene = common::shipped(name);
+        let scene = crate::common::shipped(name);
         let layout = AuxLayout::for_scene(&scene, 0);
         let layers: Vec<&str> = layout.layers().iter().map(|l| l.name.as_str()).collect();
         assert_eq!(layers, [BLUR_LAYER, BLUR_SQUARES_LAYER], "{name}");
-        let engine = Engine::new(&scene, common::settings(&scene, Method::Pbpm, 1));
+        let engine = Engine::new(&scene, crate::common::settings(&scene, Method::Pbpm, 1));
         assert_eq!(engine.sums().aux.values().len(), 2 * scene.camera.pixel_count(), "{name}");
         let expected = bytes_per_pixel_without_auxiliary_layers(&scene) + BLUR_BYTES_PER_PIXEL;
         println!("{name}: {:.1} bytes per pixel", engine.bytes_per_pixel());
@@ -501,7 +499,7 @@ fn only_a_sensor_behind_glass_gets_ghost_planes_and_other_scenes_keep_their_byte
     // sensor (3 × f32) per pixel, nothing else.
     for coated in [false, true] {
         let scene = lens_scene(None, coated);
-        let engine = Engine::new(&scene, common::settings(&scene, Method::Pbpm, 1));
+        let engine = Engine::new(&scene, crate::common::settings(&scene, Method::Pbpm, 1));
         assert_eq!(engine.sums().aux.layout().offset(GHOST_LAYER), Some(0));
         let expected =
             bytes_per_pixel_without_auxiliary_layers(&scene) + BLUR_BYTES_PER_PIXEL + 3.0 * (8.0 + 4.0 + 4.0 + 4.0);
