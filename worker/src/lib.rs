@@ -11,4 +11,4 @@ pub mod machine;
 pub mod memory_binding;
 pub mod parallel;
 
-pub use parallel::{ConfigError, EngineConfig, ParallelEngine, ParallelMethod};
+pub use parallel::{ConfigError, EngineConfig, ParallelEngine, ParallelMethod, PhaseCap};

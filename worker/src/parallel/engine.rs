@@ -144,6 +144,32 @@ impl EngineConfig {
 /// without δ or a preview, for K of them.
 pub const ROUND_LENGTH: Duration = Duration::from_secs(1);
 
+/// How long a group's phase lasts at most, about, on a large image: a phase's light is merged (δ, the preview)
+/// only once it ends, and a timed run can end only between phases.
+pub const PHASE_TARGET: Duration = Duration::from_secs(1);
+
+/// The fewest pixels a round renders under `PhaseCap::Duration`, and the first round's (a pilot that measures the
+/// time per pixel-phase). Every image up to 512 × 512 (every shipped scene) keeps whole-image masks, and so
+/// its images for a fixed seed.
+pub const MIN_CAPPED_ROUND_PIXELS: usize = 512 * 512;
+
+/// How many pixels a group's phase covers at most (docs/parallel-engine.md, "Phase cap"): beyond it a round
+/// renders only the tiles with the fewest phases.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PhaseCap {
+    /// As many as the previous round's time per pixel-phase fits in this duration, and never fewer than
+    /// `MIN_CAPPED_ROUND_PIXELS` per round.
+    Duration(Duration),
+    /// At most this many, whatever a phase costs; tests force the cap on small images with it.
+    Pixels(usize),
+}
+
+impl Default for PhaseCap {
+    fn default() -> Self {
+        PhaseCap::Duration(PHASE_TARGET)
+    }
+}
+
 /// When a round ends besides its K phases (`ParallelEngine::run_timed_round`).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct RoundTiming {
@@ -168,6 +194,9 @@ pub struct ParallelEngine<'s> {
     deals: u64,
     /// The tiles rounds render (adaptive tiles); None renders every tile.
     tiles: Option<ActiveTiles>,
+    phase_cap: PhaseCap,
+    /// A group's wall nanoseconds per pixel-phase in the latest round that closed a phase, for the cap.
+    nanos_per_pixel_phase: Option<f64>,
     /// How this process counts a pixel's phases over every process rendering the image (the radius schedule).
     share: ProcessShare,
     /// Thread-nanoseconds idle at round ends and between rounds.
@@ -215,6 +244,8 @@ impl<'s> ParallelEngine<'s> {
             slots,
             deals: 0,
             tiles: None,
+            phase_cap: PhaseCap::default(),
+            nanos_per_pixel_phase: None,
             share,
             waiting_nanos: 0,
             between_nanos: 0,
@@ -245,6 +276,54 @@ impl<'s> ParallelEngine<'s> {
             "tiles of another image"
         );
         self.tiles = (!tiles.all_active()).then(|| tiles.clone());
+    }
+
+    /// Bounds the pixels of a group's phase with `cap` from the next round on.
+    pub fn set_phase_cap(&mut self, cap: PhaseCap) {
+        self.phase_cap = cap;
+    }
+
+    /// The tiles the next round renders when the phase cap leaves some of the active ones out: the most pixels
+    /// the cap allows, taken from the tiles with the fewest phases, so that over rounds every tile gets the same
+    /// phases. The caller's active tiles (adaptive tiles) choose which tiles need work; the cap, how many of
+    /// them one round renders.
+    fn capped_tiles(&self) -> Option<ActiveTiles> {
+        let (w, h) = (self.scene.camera.width, self.scene.camera.height);
+        // Masks split a round's pixels among the groups; without them every group renders all of them.
+        let groups_per_round = if self.config.masks { self.config.groups } else { 1 };
+        let max_pixels = match self.phase_cap {
+            PhaseCap::Pixels(n) => n.saturating_mul(groups_per_round),
+            PhaseCap::Duration(target) => {
+                let per_group = self.nanos_per_pixel_phase.map_or(0.0, |r| target.as_nanos() as f64 / r);
+                ((per_group * groups_per_round as f64) as usize).max(MIN_CAPPED_ROUND_PIXELS)
+            }
+        };
+        if (w as usize * h as usize) <= max_pixels {
+            return None;
+        }
+        let all;
+        let candidates = match &self.tiles {
+            Some(t) => t,
+            None => {
+                all = ActiveTiles::all(w, h, self.config.tile_size).expect("a tile of at least one pixel");
+                &all
+            }
+        };
+        let pixels = &self.sums.pixels;
+        mask::fewest_phases_first(candidates, |p| pixels[p as usize].phases, max_pixels, self.settings.seed, self.deals)
+    }
+
+    /// Records the round's wall time per pixel-phase of the groups' closed phases from the stats they had
+    /// before it (phases, stage nanoseconds); a round that closed none keeps the previous figure.
+    fn measure_phases(&mut self, before: &[(u64, u64)]) {
+        let (mut nanos, mut pixel_phases) = (0u64, 0u64);
+        for (g, &(phases, spent)) in self.groups.iter().zip(before) {
+            nanos += stage_nanos(&g.stats) - spent;
+            pixel_phases += (g.stats.phases - phases) * g.mask().len() as u64;
+        }
+        if pixel_phases > 0 {
+            self.nanos_per_pixel_phase = Some(nanos as f64 / pixel_phases as f64);
+        }
     }
 
     /// Counts the pixels' phases with `share` from the next round on: the coordinator announced a change of
@@ -289,7 +368,8 @@ impl<'s> ParallelEngine<'s> {
         self.deals += 1;
         let (w, h) = (self.scene.camera.width, self.scene.camera.height);
         let (groups, seed) = (self.config.groups, self.settings.seed);
-        let masks = match (&self.tiles, self.config.masks) {
+        let capped = self.capped_tiles();
+        let masks = match (capped.as_ref().or(self.tiles.as_ref()), self.config.masks) {
             (None, true) => mask::deal(w, h, self.config.tile_size, groups, seed, self.deals),
             (None, false) => vec![mask::whole_image(w, h); groups],
             (Some(t), true) => mask::deal_tiles(t, groups, seed, self.deals),
@@ -308,6 +388,8 @@ impl<'s> ParallelEngine<'s> {
                 .collect();
             g.start_deal(m, before, if self.config.masks { 1 } else { self.config.groups as u32 });
         }
+        let stats_before: Vec<(u64, u64)> =
+            self.groups.iter().map(|g| (g.stats.phases, stage_nanos(&g.stats))).collect();
         let (stop, cut, wind_down) = (AtomicBool::new(false), AtomicBool::new(false), AtomicBool::new(false));
         let ctx = RoundContext {
             scene: self.scene,
@@ -362,6 +444,7 @@ impl<'s> ParallelEngine<'s> {
         for end in ends {
             self.waiting_nanos += per_group * round_end.duration_since(end).as_nanos() as u64;
         }
+        self.measure_phases(&stats_before);
         for g in &self.groups {
             self.sums.merge_local(g.mask(), g.local_sums(), g.local_aux());
         }
@@ -386,6 +469,12 @@ impl<'s> ParallelEngine<'s> {
         }
         s
     }
+}
+
+/// A group's wall nanoseconds in its phases' stages so far.
+fn stage_nanos(stats: &GroupStats) -> u64 {
+    let n = stats.nanos;
+    n.backward + n.build + n.forward + n.closing
 }
 
 impl Progressive for ParallelEngine<'_> {

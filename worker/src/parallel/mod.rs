@@ -12,4 +12,4 @@ pub mod mask;
 pub mod sync_primitives;
 pub mod thread_gathers;
 
-pub use engine::{ConfigError, EngineConfig, ParallelEngine, ParallelMethod};
+pub use engine::{ConfigError, EngineConfig, ParallelEngine, ParallelMethod, PhaseCap};
