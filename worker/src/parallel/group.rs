@@ -393,7 +393,6 @@ impl Group {
         let tally = self.forward_pass(ctx, &phase, required, number);
         self.stats.nanos.forward += nanos_since(t0);
         let t0 = Instant::now();
-        self.stats.light_paths += tally.traced;
         self.stats.forward_rays += tally.stats.rays;
         self.stats.capped_light_paths += tally.stats.capped;
         self.stats.foreign_acquisitions += tally.foreign;
@@ -408,6 +407,9 @@ impl Group {
             self.stats.nanos.closing += nanos_since(t0);
             return false;
         }
+        // A phase left out keeps its rays in the work done but not its light paths, which brought no light: the
+        // light paths traced and those counted in maps then agree wherever a group's map is its own.
+        self.stats.light_paths += tally.traced;
         self.stats.light_paths_counted += counted;
         let data = slot.data_mut(&mut self.token);
         self.stats.merges += tally.own_merges;
