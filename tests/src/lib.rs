@@ -24,7 +24,22 @@ pub fn binary(name: &str) -> PathBuf {
         let profile_dir = exe.parent().and_then(Path::parent).expect("a test program lives in <profile dir>/deps");
         let profile = if profile_dir.ends_with("release") { "release" } else { "test" };
         let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-        let status = Command::new(cargo)
+        let mut build = Command::new(cargo);
+        // Cargo gives a test the variables of the package it belongs to; some build scripts (ring's) rerun
+        // when those change, so passed on they would rebuild half the workspace under the tests' feet.
+        for (name, _) in std::env::vars_os() {
+            let name = name.to_string_lossy();
+            let of_the_test = name.starts_with("CARGO_PKG_")
+                || name.starts_with("CARGO_BIN_EXE_")
+                || ["CARGO_MANIFEST_DIR", "CARGO_MANIFEST_PATH", "CARGO_CRATE_NAME", "CARGO_PRIMARY_PACKAGE"]
+                    .contains(&name.as_ref())
+                || ["CARGO_TARGET_TMPDIR", "CARGO_BIN_NAME", "CARGO_RUSTC_CURRENT_DIR", "OUT_DIR"]
+                    .contains(&name.as_ref());
+            if of_the_test {
+                build.env_remove(name.as_ref());
+            }
+        }
+        let status = build
             .args(["build", "--quiet", "--profile", profile, "--workspace", "--bins", "--tests"])
             .current_dir(repo_root())
             .status()
