@@ -27,16 +27,20 @@ pub fn binary(name: &str) -> PathBuf {
         let mut build = Command::new(cargo);
         // Cargo gives a test the variables of the package it belongs to; some build scripts (ring's) rerun
         // when those change, so passed on they would rebuild half the workspace under the tests' feet.
+        const OF_THE_TEST: [&str; 8] = [
+            "CARGO_MANIFEST_DIR",
+            "CARGO_MANIFEST_PATH",
+            "CARGO_CRATE_NAME",
+            "CARGO_PRIMARY_PACKAGE",
+            "CARGO_TARGET_TMPDIR",
+            "CARGO_BIN_NAME",
+            "CARGO_RUSTC_CURRENT_DIR",
+            "OUT_DIR",
+        ];
         for (name, _) in std::env::vars_os() {
             let name = name.to_string_lossy();
-            let of_the_test = name.starts_with("CARGO_PKG_")
-                || name.starts_with("CARGO_BIN_EXE_")
-                || ["CARGO_MANIFEST_DIR", "CARGO_MANIFEST_PATH", "CARGO_CRATE_NAME", "CARGO_PRIMARY_PACKAGE"]
-                    .contains(&name.as_ref())
-                || ["CARGO_TARGET_TMPDIR", "CARGO_BIN_NAME", "CARGO_RUSTC_CURRENT_DIR", "OUT_DIR"]
-                    .contains(&name.as_ref());
-            if of_the_test {
-                build.env_remove(name.as_ref());
+            if name.starts_with("CARGO_PKG_") || name.starts_with("CARGO_BIN_EXE_") || OF_THE_TEST.contains(&&*name) {
+                build.env_remove(&*name);
             }
         }
         let status = build

@@ -8,18 +8,21 @@ use photonfarm::sampling::{Pass, Sampler};
 /// stay within a small fraction of each other when few tiles are left.
 const UNITS_PER_GROUP: usize = 4;
 
+/// Puts `items` in a random order drawn from `sampler` (Fisher–Yates), the job's stream for a deal.
+fn shuffle<T>(items: &mut [T], sampler: &mut Sampler) {
+    for i in (1..items.len()).rev() {
+        let j = ((sampler.next_f32() * (i + 1) as f32) as usize).min(i);
+        items.swap(i, j);
+    }
+}
+
 /// Deals the tiles of a `width` × `height` image into `groups` masks at random. Each mask lists its pixels
 /// (row-major image indices) tile by tile, so a group's threads walk memory tile-coherently.
 pub fn deal(width: u32, height: u32, tile: u32, groups: usize, seed: u64, deal_index: u64) -> Vec<Vec<u32>> {
     assert!(groups > 0 && tile > 0);
     let (tx, ty) = (width.div_ceil(tile), height.div_ceil(tile));
     let mut tiles: Vec<u32> = (0..tx * ty).collect();
-    // Fisher–Yates with the job's random stream for this deal.
-    let mut s = Sampler::new(seed, Pass::Camera, deal_index, u64::MAX);
-    for i in (1..tiles.len()).rev() {
-        let j = ((s.next_f32() * (i + 1) as f32) as usize).min(i);
-        tiles.swap(i, j);
-    }
+    shuffle(&mut tiles, &mut Sampler::new(seed, Pass::Camera, deal_index, u64::MAX));
     let mut masks = vec![Vec::new(); groups];
     for (k, t) in tiles.iter().enumerate() {
         let (x0, y0) = ((t % tx) * tile, (t / tx) * tile);
@@ -51,11 +54,7 @@ pub fn deal_tiles(tiles: &ActiveTiles, groups: usize, seed: u64, deal_index: u64
             .filter(|&(_, _, w, h)| w > 0 && h > 0)
             .collect();
     }
-    let mut s = Sampler::new(seed, Pass::Camera, deal_index, u64::MAX);
-    for i in (1..units.len()).rev() {
-        let j = ((s.next_f32() * (i + 1) as f32) as usize).min(i);
-        units.swap(i, j);
-    }
+    shuffle(&mut units, &mut Sampler::new(seed, Pass::Camera, deal_index, u64::MAX));
     let mut masks = vec![Vec::new(); groups];
     for (x0, y0, w, h) in units {
         let mask = masks.iter_mut().min_by_key(|m| m.len()).expect("at least one group");
@@ -86,11 +85,7 @@ pub fn fewest_phases_first(
     }
     // Shuffled, then sorted stably by phases: ties fall in a random order, so that no tile is always left for
     // the next round. A stream of its own leaves `deal_tiles`'s draws as they are without a cap.
-    let mut s = Sampler::new(seed, Pass::Camera, deal_index, u64::MAX - 1);
-    for i in (1..order.len()).rev() {
-        let j = ((s.next_f32() * (i + 1) as f32) as usize).min(i);
-        order.swap(i, j);
-    }
+    shuffle(&mut order, &mut Sampler::new(seed, Pass::Camera, deal_index, u64::MAX - 1));
     let mut keyed: Vec<(u32, usize)> =
         order.into_iter().map(|t| (tiles.pixels_of(t).map(&phases).min().unwrap_or(0), t)).collect();
     keyed.sort_by_key(|&(n, _)| n);
