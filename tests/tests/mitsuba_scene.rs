@@ -1,7 +1,8 @@
 //! `coordinator render` on a Mitsuba 3 scene file with real processes: an XML scene with an include, a search
 //! path, PLY and serialized meshes, a bitmap texture and a `$name` parameter renders on every method, and its
 //! three-level workers, which receive the XML, the include and every mesh and texture by hash, render the image
-//! one process does; so do two workers given the shipped `scenes/mitsuba/cornell.xml` and its PLY meshes.
+//! one process does; so do two workers given the shipped `scenes/mitsuba/cornell.xml` and its PLY meshes, and
+//! two workers given a scene that only `--approximate` imports, whose substitutions the run record names.
 
 mod common;
 
@@ -154,4 +155,46 @@ fn the_shipped_mitsuba_cornell_box_renders_over_two_worker_processes_to_the_imag
     let (single, three) = one_process_and_two_workers(&scene, &dir, &small, "300", 5);
     assert_eq!((record(&three)["width"].as_u64(), record(&three)["height"].as_u64()), (Some(32), Some(32)));
     assert_same_image(&single, &three, "shipped cornell.xml, three-level against one process");
+}
+
+#[test]
+fn without_approximate_an_unsupported_element_is_refused_at_its_line_and_with_it_workers_render_the_noted_substitutes()
+{
+    let dir = scratch_dir("mitsuba-approximate");
+    let scene = xml_scene(&dir);
+    // The room with an integrator and a BSDF that have no exact counterpart.
+    let text = std::fs::read_to_string(&scene).unwrap();
+    let text = text
+        .replace(r#"<integrator type="path"><integer name="max_depth" value="4"/></integrator>"#,
+            r#"<integrator type="bdpt"><integer name="max_depth" value="4"/></integrator>"#)
+        .replace("<include", "<shape type=\"sphere\"><float name=\"radius\" value=\"0.3\"/><point name=\"center\" x=\"0\" y=\"0.3\" z=\"0\"/><bsdf type=\"hair\"/></shape>\n    <include");
+    std::fs::write(&scene, &text).unwrap();
+    let line_of = |needle: &str| text.lines().position(|l| l.contains(needle)).unwrap() + 1;
+    let refused = Command::new(binary("coordinator"))
+        .arg("render")
+        .arg(&scene)
+        .args(["--out", dir.join("refused").to_str().unwrap(), "--quiet", "--phases", "2"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success(), "an integrator without a counterpart rendered: {stderr}");
+    assert!(
+        stderr.contains(&format!("room.xml:{}:", line_of("bdpt"))) && stderr.contains("bdpt"),
+        "the refusal names neither the element nor its line: {stderr}"
+    );
+    assert!(!dir.join("refused/image.exr").exists(), "a refused scene left an image");
+    let (single, three) = one_process_and_two_workers(&scene, &dir, &["--approximate"], "100", 7);
+    for out in [&single, &three] {
+        let r = record(out);
+        let flags: Vec<&str> = r["flags"].as_array().unwrap().iter().filter_map(|f| f.as_str()).collect();
+        for (element, line) in [("bdpt", line_of("bdpt")), ("hair", line_of("hair"))] {
+            assert!(
+                flags.iter().any(|f| f.starts_with("scene import: approximated: ")
+                    && f.contains(&format!("room.xml:{line}:"))
+                    && f.contains(element)),
+                "no flag for {element} at line {line}: {flags:?}"
+            );
+        }
+    }
+    assert_same_image(&single, &three, "--approximate, three-level against one process");
 }
