@@ -421,6 +421,7 @@ impl<'a> Builder<'a> {
             geometry,
             lights,
             render: desc.render,
+            description: desc.clone(),
             hash: desc.hash(),
             mesh_files: desc.files.iter().map(|f| (f.path.clone(), f.sha256.clone())).collect(),
             has_delta_surfaces,

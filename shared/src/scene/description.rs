@@ -252,9 +252,59 @@ impl SceneDescription {
         bincode::serde::encode_to_vec(self, bincode::config::standard()).expect("a description always encodes")
     }
 
-    /// SHA-256 (hex) of `to_bytes`: the same description hashes the same on every machine, and a description
-    /// names every file by its content's hash, so this is the hash of the whole scene.
+    /// SHA-256 (hex) of what the description says about the scene: its `to_bytes` without the paths of the
+    /// files it was read from and without its notes, so that the same scene read from another folder (or from
+    /// memory, as tests do) hashes the same. A description names every file by its content's hash, so this is
+    /// the hash of the whole scene.
     pub fn hash(&self) -> String {
-        format!("{:x}", Sha256::digest(self.to_bytes()))
+        format!("{:x}", Sha256::digest(self.without_locations().to_bytes()))
+    }
+
+    /// The description with its path, every source's file and its notes (which name files) left empty.
+    fn without_locations(&self) -> SceneDescription {
+        fn source(s: &mut Source) {
+            s.file = PathBuf::new();
+        }
+        fn image(i: &ImageRef) -> ImageRef {
+            let mut i = i.clone();
+            source(&mut i.source);
+            if let Some(b) = &mut i.bound {
+                source(&mut b.source);
+            }
+            i
+        }
+        let mut texture =
+            |b: &crate::texture::BitmapTexture<ImageRef>| Ok::<_, std::convert::Infallible>(image(&b.image));
+        let mut d = self.clone();
+        d.path = PathBuf::new();
+        d.notes.clear();
+        for m in &mut d.materials {
+            source(&mut m.source);
+            let Ok(front) = m.front.try_map(&mut texture);
+            let Ok(back) = m.back.try_map(&mut texture);
+            (m.front, m.back) = (front, back);
+            if let Some(t) = &m.opacity {
+                let Ok(t) = t.try_map(&mut texture);
+                m.opacity = Some(t);
+            }
+        }
+        for o in &mut d.objects {
+            source(&mut o.source);
+            source(&mut o.material_source);
+            o.emission_texture = o.emission_texture.as_ref().map(image);
+            if let ShapeDesc::Obj { source: s, .. } = &mut o.shape {
+                source(s);
+            }
+        }
+        for l in &mut d.lights {
+            source(&mut l.source);
+            if let LightKind::Map { image: i, .. } = &mut l.kind {
+                *i = image(i);
+            }
+        }
+        if let LensDesc::Sensor { rear_source, .. } = &mut d.camera.lens {
+            source(rear_source);
+        }
+        d
     }
 }

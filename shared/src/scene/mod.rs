@@ -87,7 +87,9 @@ pub struct Scene {
     pub geometry: SceneGeometry,
     pub lights: Lights,
     pub render: SceneRenderSettings,
-    /// SHA-256 over the scene file and every mesh and texture it references, in order.
+    /// The description it was built from (`description::SceneDescription`): what a job carries to workers.
+    pub description: description::SceneDescription,
+    /// SHA-256 of the description (`SceneDescription::hash`), which names every file it references by its own.
     pub hash: String,
     /// Every file the scene references, meshes and textures: its path as written in the scene and its SHA-256
     /// (hex). Jobs send these to workers.
