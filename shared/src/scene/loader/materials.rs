@@ -16,6 +16,9 @@ use std::collections::BTreeMap;
 use std::ops::Range;
 use toml::Spanned;
 
+/// A material's front family, the `back` it names and its opacity.
+type Sides = (Surface<ImageRef>, Option<String>, Option<TextureDesc>);
+
 /// The scene's materials in the order of their names.
 pub(super) struct Materials {
     pub(super) list: Vec<MaterialDesc>,
@@ -59,11 +62,7 @@ impl Loader<'_> {
     }
 
     /// A material's front family, the `back` it names and its opacity.
-    fn material(
-        &mut self,
-        name: &str,
-        m: &Spanned<MaterialSection>,
-    ) -> Result<(Surface<ImageRef>, Option<String>, Option<TextureDesc>), SceneError> {
+    fn material(&mut self, name: &str, m: &Spanned<MaterialSection>) -> Result<Sides, SceneError> {
         let s = m.span();
         let f = |x: &str| format!("materials.{name}.{x}");
         let (opacity, back) = match m.get_ref() {

@@ -218,6 +218,7 @@ impl<'d> Importer<'d> {
     /// time it is named, and gives its reference.
     fn read_file(&mut self, name: &str, at: &SourcePos, element: &str) -> Result<FileRef, MitsubaError> {
         let path = self.doc.resolve_file_in(name, self.source);
+        let bytes = self.source.read(&path).map_err(|m| MitsubaError::at(at, element, m))?;
         let key = match self.source {
             FileSource::Disk => {
                 let folder = self.doc.path.parent().unwrap_or(Path::new(""));
@@ -228,7 +229,6 @@ impl<'d> Importer<'d> {
         if let Some(known) = self.files.iter().find(|f| f.path == key) {
             return Ok(known.clone());
         }
-        let bytes = self.source.read(&path).map_err(|m| MitsubaError::at(at, element, m))?;
         let file = FileRef { path: key.clone(), sha256: format!("{:x}", Sha256::digest(&bytes)) };
         self.bytes.insert(key, bytes.into_owned());
         self.files.push(file.clone());
