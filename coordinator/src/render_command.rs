@@ -518,7 +518,6 @@ fn launch_options(args: &RenderArgs) -> LaunchOptions {
     LaunchOptions {
         method: args.method,
         scene_path: args.scene.clone(),
-        mitsuba: mitsuba_options(args),
         topology: args.topology.clone(),
         remote_workers: args.workers.clone(),
         listen: args.listen,

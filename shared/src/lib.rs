@@ -21,10 +21,12 @@
 //! the densities over a lens's front element that ghost paths aim by). They read `geometry`'s hits and
 //! `sampling`'s warps.
 //!
-//! **Scene.** `scene` is the loaded scene the integrators read (objects, materials, geometry, lights, camera)
-//! and, in `scene::loader`, its construction from a TOML file with errors that name the file, line and field;
-//! `scene::mitsuba` imports Mitsuba 3 XML scenes and their serialized and PLY meshes into a `Scene`, with notes
-//! on what it ignored or approximated; `scene::ghost` holds what a scene declares about the ghosts its lens
+//! **Scene.** `scene` is the loaded scene the integrators read (objects, materials, geometry, lights, camera).
+//! `scene::description` is a scene as its readers describe it, format-free and serialisable (files named by
+//! path and SHA-256, every element by its file, line and element), which jobs carry to workers; `scene::loader`
+//! reads a TOML file into one with errors that name the file, line and field, and `scene::mitsuba` a Mitsuba 3
+//! XML scene, with notes on what it ignored or approximated; `scene::build` is the one step from a description
+//! and its files (meshes, also serialized and PLY, and images) to the `Scene`; `scene::ghost` holds what a scene declares about the ghosts its lens
 //! makes (its front element, its ghost settings, the table of surface pairs ghost paths reflect at, which it
 //! keeps once the estimator's pilot has filled it). It builds on the two layers below it.
 //!
@@ -51,7 +53,7 @@
 //! sums, checkpoints and the JSON record of a run. It drives the layers below.
 //!
 //! **Protocol.** `protocol` is the coordinator–worker link: frames, messages, the handshake. It reads only
-//! `render::settings`, `render::method` and `scene::MitsubaOptions` (what a job asks for) and `render::totals`
+//! `render::settings`, `render::method` and `scene::description` (what a job asks for) and `render::totals`
 //! (what a worker counted); the sums travel as `accumulation::delta` bytes.
 
 pub mod accumulation;

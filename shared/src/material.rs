@@ -15,27 +15,24 @@ use crate::color::Rgb;
 use crate::geometry::SurfaceHit;
 use crate::sampling::Frame;
 use crate::spectrum::RefractiveIndex;
-use crate::texture::Texture;
+use crate::texture::{Bitmap, BitmapTexture, Texture};
 use glam::{Vec2, Vec3};
+use serde::{Deserialize, Serialize};
+use std::sync::Arc;
 
 /// A microfacet roughness that may vary over the surface: α along the shading frame's two tangents.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Roughness {
+/// `I` is the image slot of its textures (see `crate::texture::BitmapTexture`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Roughness<I = Arc<Bitmap>> {
     pub distribution: Distribution,
-    pub alpha_u: Texture,
-    pub alpha_v: Texture,
+    pub alpha_u: Texture<I>,
+    pub alpha_v: Texture<I>,
 }
 
-impl Roughness {
+impl<I: PartialEq> Roughness<I> {
     /// An isotropic roughness α everywhere.
     pub fn isotropic(distribution: Distribution, alpha: f32) -> Self {
         Roughness { distribution, alpha_u: Texture::grey(alpha), alpha_v: Texture::grey(alpha) }
-    }
-
-    /// The distribution at texture coordinates `uv`.
-    #[inline]
-    pub fn at(&self, uv: Vec2) -> Microfacet {
-        Microfacet::new(self.distribution, self.alpha_u.eval_scalar(uv), self.alpha_v.eval_scalar(uv))
     }
 
     fn varies(&self) -> bool {
@@ -46,15 +43,32 @@ impl Roughness {
     pub fn is_anisotropic(&self) -> bool {
         self.alpha_u != self.alpha_v
     }
+
+    /// The same roughness with its textures' images turned by `f` (`Texture::try_map`).
+    pub fn try_map<J, E>(&self, f: &mut impl FnMut(&BitmapTexture<I>) -> Result<J, E>) -> Result<Roughness<J>, E> {
+        Ok(Roughness {
+            distribution: self.distribution,
+            alpha_u: self.alpha_u.try_map(f)?,
+            alpha_v: self.alpha_v.try_map(f)?,
+        })
+    }
 }
 
-/// The scattering family of one side of a surface, with its parameters.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Surface {
+impl Roughness {
+    /// The distribution at texture coordinates `uv`.
+    #[inline]
+    pub fn at(&self, uv: Vec2) -> Microfacet {
+        Microfacet::new(self.distribution, self.alpha_u.eval_scalar(uv), self.alpha_v.eval_scalar(uv))
+    }
+}
+
+/// The scattering family of one side of a surface, with its parameters; `I` is the image slot of its textures.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Surface<I = Arc<Bitmap>> {
     /// Lambertian reflection of `reflectance`.
-    Diffuse { reflectance: Texture },
+    Diffuse { reflectance: Texture<I> },
     /// A metal: smooth, or rough with `roughness`; its Fresnel reflectance times `specular`.
-    Conductor { fresnel: ConductorFresnel, specular: Texture, roughness: Option<Roughness> },
+    Conductor { fresnel: ConductorFresnel, specular: Texture<I>, roughness: Option<Roughness<I>> },
     /// A smooth interface with `ior` behind the surface normal and `ext_ior` in front of it.
     Dielectric { ior: RefractiveIndex, ext_ior: RefractiveIndex, anti_reflection: bool },
     /// A rough interface (Mitsuba's `roughdielectric`): `ior` behind the surface normal, `ext_ior` in front,
@@ -62,50 +76,50 @@ pub enum Surface {
     RoughDielectric {
         ior: RefractiveIndex,
         ext_ior: RefractiveIndex,
-        roughness: Roughness,
-        specular_reflectance: Texture,
-        specular_transmittance: Texture,
+        roughness: Roughness<I>,
+        specular_reflectance: Texture<I>,
+        specular_transmittance: Texture<I>,
     },
     /// A thin pane of index `ior` in `ext_ior` (Mitsuba's `thindielectric`), alike from both sides.
     ThinDielectric {
         ior: RefractiveIndex,
         ext_ior: RefractiveIndex,
-        specular_reflectance: Texture,
-        specular_transmittance: Texture,
+        specular_reflectance: Texture<I>,
+        specular_transmittance: Texture<I>,
     },
     /// A diffuse base under a smooth or rough dielectric coat of relative index `eta` (Mitsuba's `plastic`
     /// and `roughplastic`; `Coat::rough` computes a rough coat's table).
-    Plastic { diffuse_reflectance: Texture, specular_reflectance: Texture, eta: f32, nonlinear: bool, coat: Coat },
+    Plastic { diffuse_reflectance: Texture<I>, specular_reflectance: Texture<I>, eta: f32, nonlinear: bool, coat: Coat },
     /// Mitsuba's `principled`.
-    Principled(Box<PrincipledSurface>),
+    Principled(Box<PrincipledSurface<I>>),
     /// A thin partial reflector that transmits straight through.
     Coating { reflectance: Rgb, transmittance: Rgb },
 }
 
 /// The parameters of a principled surface, each a texture but the index and the sampling rates (as in
 /// Mitsuba); `Default` gives Mitsuba's defaults.
-#[derive(Clone, Debug, PartialEq)]
-pub struct PrincipledSurface {
-    pub base_color: Texture,
-    pub roughness: Texture,
-    pub anisotropic: Texture,
-    pub metallic: Texture,
-    pub spec_trans: Texture,
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PrincipledSurface<I = Arc<Bitmap>> {
+    pub base_color: Texture<I>,
+    pub roughness: Texture<I>,
+    pub anisotropic: Texture<I>,
+    pub metallic: Texture<I>,
+    pub spec_trans: Texture<I>,
     /// Interior over exterior index (`crate::bsdf::principled::eta_of_specular` turns Mitsuba's `specular`
     /// into it).
     pub eta: f32,
-    pub spec_tint: Texture,
-    pub sheen: Texture,
-    pub sheen_tint: Texture,
-    pub flatness: Texture,
-    pub clearcoat: Texture,
-    pub clearcoat_gloss: Texture,
+    pub spec_tint: Texture<I>,
+    pub sheen: Texture<I>,
+    pub sheen_tint: Texture<I>,
+    pub flatness: Texture<I>,
+    pub clearcoat: Texture<I>,
+    pub clearcoat_gloss: Texture<I>,
     pub diffuse_reflectance_sampling_rate: f32,
     pub main_specular_sampling_rate: f32,
     pub clearcoat_sampling_rate: f32,
 }
 
-impl Default for PrincipledSurface {
+impl<I> Default for PrincipledSurface<I> {
     fn default() -> Self {
         let d = PrincipledParams::default();
         PrincipledSurface {
@@ -128,8 +142,8 @@ impl Default for PrincipledSurface {
     }
 }
 
-impl PrincipledSurface {
-    fn textures(&self) -> [&Texture; 11] {
+impl<I> PrincipledSurface<I> {
+    fn textures(&self) -> [&Texture<I>; 11] {
         [
             &self.base_color,
             &self.roughness,
@@ -145,6 +159,32 @@ impl PrincipledSurface {
         ]
     }
 
+    /// The same parameters with their textures' images turned by `f` (`Texture::try_map`).
+    pub fn try_map<J, E>(
+        &self,
+        f: &mut impl FnMut(&BitmapTexture<I>) -> Result<J, E>,
+    ) -> Result<PrincipledSurface<J>, E> {
+        Ok(PrincipledSurface {
+            base_color: self.base_color.try_map(f)?,
+            roughness: self.roughness.try_map(f)?,
+            anisotropic: self.anisotropic.try_map(f)?,
+            metallic: self.metallic.try_map(f)?,
+            spec_trans: self.spec_trans.try_map(f)?,
+            eta: self.eta,
+            spec_tint: self.spec_tint.try_map(f)?,
+            sheen: self.sheen.try_map(f)?,
+            sheen_tint: self.sheen_tint.try_map(f)?,
+            flatness: self.flatness.try_map(f)?,
+            clearcoat: self.clearcoat.try_map(f)?,
+            clearcoat_gloss: self.clearcoat_gloss.try_map(f)?,
+            diffuse_reflectance_sampling_rate: self.diffuse_reflectance_sampling_rate,
+            main_specular_sampling_rate: self.main_specular_sampling_rate,
+            clearcoat_sampling_rate: self.clearcoat_sampling_rate,
+        })
+    }
+}
+
+impl PrincipledSurface {
     /// The parameters at texture coordinates `uv`.
     #[inline]
     pub fn at(&self, uv: Vec2) -> PrincipledParams {
@@ -173,9 +213,9 @@ impl PrincipledSurface {
     }
 }
 
-impl Surface {
+impl<I: PartialEq> Surface<I> {
     /// True when a parameter depends on texture coordinates.
-    fn varies(&self) -> bool {
+    pub fn varies(&self) -> bool {
         match self {
             Surface::Diffuse { reflectance } => reflectance.varies(),
             Surface::Conductor { specular, roughness, .. } => {
@@ -195,6 +235,52 @@ impl Surface {
         }
     }
 
+    /// The same family with its textures' images turned by `f` (`Texture::try_map`).
+    pub fn try_map<J, E>(&self, f: &mut impl FnMut(&BitmapTexture<I>) -> Result<J, E>) -> Result<Surface<J>, E> {
+        Ok(match self {
+            Surface::Diffuse { reflectance } => Surface::Diffuse { reflectance: reflectance.try_map(f)? },
+            Surface::Conductor { fresnel, specular, roughness } => Surface::Conductor {
+                fresnel: *fresnel,
+                specular: specular.try_map(f)?,
+                roughness: match roughness {
+                    Some(r) => Some(r.try_map(f)?),
+                    None => None,
+                },
+            },
+            &Surface::Dielectric { ior, ext_ior, anti_reflection } => {
+                Surface::Dielectric { ior, ext_ior, anti_reflection }
+            }
+            Surface::RoughDielectric { ior, ext_ior, roughness, specular_reflectance, specular_transmittance } => {
+                Surface::RoughDielectric {
+                    ior: *ior,
+                    ext_ior: *ext_ior,
+                    roughness: roughness.try_map(f)?,
+                    specular_reflectance: specular_reflectance.try_map(f)?,
+                    specular_transmittance: specular_transmittance.try_map(f)?,
+                }
+            }
+            Surface::ThinDielectric { ior, ext_ior, specular_reflectance, specular_transmittance } => {
+                Surface::ThinDielectric {
+                    ior: *ior,
+                    ext_ior: *ext_ior,
+                    specular_reflectance: specular_reflectance.try_map(f)?,
+                    specular_transmittance: specular_transmittance.try_map(f)?,
+                }
+            }
+            Surface::Plastic { diffuse_reflectance, specular_reflectance, eta, nonlinear, coat } => Surface::Plastic {
+                diffuse_reflectance: diffuse_reflectance.try_map(f)?,
+                specular_reflectance: specular_reflectance.try_map(f)?,
+                eta: *eta,
+                nonlinear: *nonlinear,
+                coat: *coat,
+            },
+            Surface::Principled(p) => Surface::Principled(Box::new(p.try_map(f)?)),
+            &Surface::Coating { reflectance, transmittance } => Surface::Coating { reflectance, transmittance },
+        })
+    }
+}
+
+impl Surface {
     /// True when the family reads the direction of the shading frame's tangent (anisotropic roughness), which
     /// the surface must then supply. A family with an anisotropic parameter answers here.
     fn needs_tangent(&self) -> bool {
@@ -272,14 +358,26 @@ impl Surface {
 }
 
 /// What the back of a surface does (the side its geometric normal points away from).
-#[derive(Clone, Debug, PartialEq)]
-pub enum Back {
+/// `I` is the image slot of its textures.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Back<I = Arc<Bitmap>> {
     /// Absorbs: a one-sided surface, as Mitsuba's BSDFs are unless wrapped in `twosided`.
     Black,
     /// Scatters as the front does.
     Same,
     /// Scatters with another family.
-    Other(Box<Surface>),
+    Other(Box<Surface<I>>),
+}
+
+impl<I: PartialEq> Back<I> {
+    /// The same back with its textures' images turned by `f` (`Texture::try_map`).
+    pub fn try_map<J, E>(&self, f: &mut impl FnMut(&BitmapTexture<I>) -> Result<J, E>) -> Result<Back<J>, E> {
+        Ok(match self {
+            Back::Black => Back::Black,
+            Back::Same => Back::Same,
+            Back::Other(s) => Back::Other(Box::new(s.try_map(f)?)),
+        })
+    }
 }
 
 /// A material: its front's family, its back, and its opacity (a cut-out's holes let light straight through).

@@ -168,7 +168,7 @@ impl Wavelength {
 
 /// A refractive index that may vary with wavelength: Cauchy's two-term law n(λ) = A + B/λ², written with the
 /// index at the d line, n(λ) = n_d + B (1/λ² − 1/λ_d²).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RefractiveIndex {
     /// Index at the helium d line, 587.56 nm.
     pub d: f32,

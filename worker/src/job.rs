@@ -15,7 +15,6 @@ use photonfarm::render::session::{self, Deadline, Progressive};
 use photonfarm::render::ActiveTiles;
 use photonfarm::scene::Scene;
 use std::collections::BTreeMap;
-use std::path::Path;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
@@ -29,17 +28,18 @@ pub enum JobEvent {
     Failed(String),
 }
 
-/// Builds the job's scene from its text and the meshes received, and checks it is the coordinator's scene.
-pub fn load_scene(job: &Job, meshes: &BTreeMap<String, Vec<u8>>) -> Result<Scene, String> {
-    let scene = Scene::from_job_files(&job.scene_text, Path::new(&job.scene_name), &job.mitsuba, meshes)
-        .map_err(|e| e.to_string())?;
-    if scene.hash != job.scene_hash {
+/// Builds the job's scene from its description and the files received, once the description is checked to be
+/// the coordinator's (the files are checked against the hashes it names as the scene is built).
+pub fn load_scene(job: &Job, files: &BTreeMap<String, Vec<u8>>) -> Result<Scene, String> {
+    let hash = job.scene.hash();
+    if hash != job.scene_hash {
         return Err(format!(
-            "the scene built here hashes to {} but the coordinator's is {}",
-            &scene.hash[..12],
+            "the scene description received hashes to {} but the coordinator's is {}",
+            &hash[..12],
             &job.scene_hash[..job.scene_hash.len().min(12)]
         ));
     }
+    let scene = Scene::from_description(&job.scene, files).map_err(|e| e.to_string())?;
     // The ghost pairs' pilot, part of building a sensor scene, runs here rather than in the job's first phase.
     photonfarm::pbpm::ghost_pairs(&scene);
     Ok(scene)

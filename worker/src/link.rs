@@ -395,6 +395,7 @@ mod tests {
     use photonfarm::protocol::{EngineSpec, FileRef};
     use photonfarm::render::method::ParallelMethod;
     use photonfarm::render::{Method, RenderSettings};
+    use photonfarm::scene::description::SceneDescription;
     use photonfarm::scene::Scene;
     use std::path::Path;
     use tokio::net::{TcpListener, TcpStream};
@@ -409,8 +410,7 @@ mod tests {
         let store = scene.mesh_files.iter().map(|(p, h)| (h.clone(), std::fs::read(scenes.join(p)).unwrap())).collect();
         let job = Job {
             scene_name: "cornell.toml".into(),
-            scene_text: std::fs::read_to_string(&path).unwrap(),
-            mitsuba: Default::default(),
+            scene: scene.description.clone(),
             files,
             scene_hash: scene.hash.clone(),
             settings: RenderSettings::for_scene(&scene, Method::ThreeLevel, 1),
@@ -432,6 +432,79 @@ mod tests {
             ray_map: None,
         };
         (job, store)
+    }
+
+    /// Cornell's job at 16 × 16 pixels, its description read from a copy of the scene and its meshes in a
+    /// folder that is removed before the job is sent: the description and the files it names are all that is
+    /// left of the scene.
+    fn cornell_job_without_its_file() -> (Job, BTreeMap<String, Vec<u8>>) {
+        let scenes = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+        let options = Default::default();
+        let (original, _) = SceneDescription::read(&scenes.join("cornell.toml"), &options).unwrap();
+        let dir = std::env::temp_dir().join(format!("photonfarm-worker-description-{}", std::process::id()));
+        for name in std::iter::once("cornell.toml").chain(original.files.iter().map(|f| f.path.as_str())) {
+            std::fs::create_dir_all(dir.join(name).parent().unwrap()).unwrap();
+            std::fs::copy(scenes.join(name), dir.join(name)).unwrap();
+        }
+        let path = dir.join("cornell.toml");
+        let (mut desc, files) = SceneDescription::read(&path, &options).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert!(!path.exists());
+        (desc.camera.width, desc.camera.height) = (16, 16);
+        let store = desc.files.iter().map(|f| (f.sha256.clone(), files[&f.path].clone())).collect();
+        let (mut job, _) = cornell_job();
+        job.scene_hash = desc.hash();
+        job.files = desc.files.clone();
+        job.scene = desc;
+        job.snapshot_interval_ms = 100;
+        (job, store)
+    }
+
+    #[test]
+    fn a_worker_renders_from_the_description_where_the_scene_file_is_absent() {
+        let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+        runtime.block_on(async {
+            let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
+            let addr = listener.local_addr().unwrap();
+            let (job, store) = cornell_job_without_its_file();
+            let sent = store.len();
+            let coordinator = tokio::spawn(async move {
+                let (s, _) = listener.accept().await.unwrap();
+                let mut c = Connection::new(s).unwrap();
+                handshake(&mut c, Role::Coordinator, "c", &Secret::insecure()).await.unwrap();
+                c.write(&Message::Job(Box::new(job))).await.unwrap();
+                let (mut asked, mut snapshots) = (0, 0);
+                loop {
+                    match c.read().await.unwrap() {
+                        Message::NeedFiles { hashes } => {
+                            for h in hashes {
+                                asked += 1;
+                                let bytes = store[&h].clone();
+                                c.write(&Message::File { sha256: h, bytes }).await.unwrap();
+                            }
+                        }
+                        Message::Snapshot(snapshot) => {
+                            snapshots += 1;
+                            c.write(&Message::Ack { seq: snapshot.seq }).await.unwrap();
+                            if snapshots == 1 {
+                                c.write(&Message::Stop).await.unwrap();
+                            }
+                        }
+                        Message::Started(_) | Message::Heartbeat => {}
+                        Message::Finished => return (asked, snapshots),
+                        Message::Failed { reason } => panic!("the worker failed: {reason}"),
+                        other => panic!("unexpected {}", other.kind()),
+                    }
+                }
+            });
+            let conn = Connection::new(TcpStream::connect(addr).await.unwrap()).unwrap();
+            let opts = LinkOptions::new("w".into(), Secret::insecure());
+            let outcome = serve_job(conn, &opts, &mut FileCache::new()).await.expect("a normal end");
+            let (asked, snapshots) = coordinator.await.unwrap();
+            // Every mesh came from the coordinator, and the worker rendered with them.
+            assert_eq!(asked, sent);
+            assert!(snapshots >= 1 && outcome.snapshots_sent >= 1, "{snapshots} snapshots");
+        });
     }
 
     #[test]
@@ -476,14 +549,8 @@ mod tests {
             let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
             let addr = listener.local_addr().unwrap();
             let (mut job, store) = cornell_job();
-            job.scene_text = job.scene_text.replace("width = 256", "width = 16").replace("height = 256", "height = 16");
-            job.scene_hash = Scene::from_toml_with_meshes(
-                &job.scene_text,
-                Path::new("cornell.toml"),
-                &job.files.iter().map(|f| (f.path.clone(), store[&f.sha256].clone())).collect(),
-            )
-            .unwrap()
-            .hash;
+            (job.scene.camera.width, job.scene.camera.height) = (16, 16);
+            job.scene_hash = job.scene.hash();
             let coordinator = tokio::spawn(async move {
                 let (s, _) = listener.accept().await.unwrap();
                 let mut c = Connection::new(s).unwrap();

@@ -11,7 +11,8 @@ use photonfarm::protocol::{EngineSpec, FileRef, Job, RayMapRequest, Role, Secret
 use photonfarm::ray_map::Recorder;
 use photonfarm::render::method::Grouping;
 use photonfarm::render::{Method, RenderSettings};
-use photonfarm::scene::{MitsubaOptions, Scene};
+use photonfarm::scene::description::SceneDescription;
+use photonfarm::scene::Scene;
 use std::net::{SocketAddr, TcpListener};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -24,8 +25,6 @@ pub struct LaunchOptions {
     /// A method that runs worker processes: combination or three-level.
     pub method: Method,
     pub scene_path: PathBuf,
-    /// How a Mitsuba scene is imported (`--define`, `--approximate`), sent with every job.
-    pub mitsuba: MitsubaOptions,
     /// A synthetic description or an hwloc XML file to take the NUMA nodes from instead of this machine's.
     pub topology: Option<String>,
     /// `worker serve` daemons to dial, as HOST:PORT.
@@ -175,8 +174,7 @@ fn remote_transport(options: &LaunchOptions) -> Result<Transport> {
 /// What every worker's job shares: the scene, its meshes, the settings and the engine of each process.
 struct JobTemplate {
     scene_name: String,
-    scene_text: String,
-    mitsuba: MitsubaOptions,
+    scene: SceneDescription,
     files: Vec<FileRef>,
     /// The meshes by content hash, for workers that ask for them.
     store: FileStore,
@@ -203,7 +201,6 @@ impl JobTemplate {
         ray_map: Option<RayMapRequest>,
     ) -> Result<Self> {
         let path = &options.scene_path;
-        let scene_text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
         let base = path.parent().unwrap_or(Path::new("."));
         let session = resume.map_or(1, |r| r.session);
         let resumed_phases = resume.map_or(0, |r| {
@@ -215,9 +212,8 @@ impl JobTemplate {
         let interval = Duration::from_secs_f64(options.snapshot_interval_s);
         Ok(JobTemplate {
             scene_name: path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
-            scene_text,
-            mitsuba: options.mitsuba.clone(),
-            files: scene.mesh_files.iter().map(|(p, h)| FileRef { path: p.clone(), sha256: h.clone() }).collect(),
+            scene: scene.description.clone(),
+            files: scene.description.files.clone(),
             store: scene.mesh_files.iter().map(|(p, h)| (h.clone(), base.join(p))).collect(),
             scene_hash: scene.hash.clone(),
             settings,
@@ -247,8 +243,7 @@ impl JobTemplate {
     fn job(&self, stream: usize, node: Option<&NumaNode>, interval: Duration) -> Job {
         Job {
             scene_name: self.scene_name.clone(),
-            scene_text: self.scene_text.clone(),
-            mitsuba: self.mitsuba.clone(),
+            scene: self.scene.clone(),
             files: self.files.clone(),
             scene_hash: self.scene_hash.clone(),
             settings: self.settings,

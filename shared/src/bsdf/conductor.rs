@@ -11,7 +11,7 @@ use crate::spectrum::Wavelength;
 use glam::{Vec2, Vec3};
 
 /// How much a conductor reflects at each angle.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum ConductorFresnel {
     /// Everything, at every angle: an ideal mirror.
     Perfect,

@@ -8,7 +8,7 @@ use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 
 /// The shape of a microfacet distribution.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Distribution {
     /// Gaussian random surfaces: short tails.
     Beckmann,

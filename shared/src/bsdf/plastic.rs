@@ -49,6 +49,34 @@ impl Coat {
     }
 }
 
+/// A coat as its parameters, which is how it is written (its table is computed again where it is read).
+#[derive(serde::Serialize, serde::Deserialize)]
+enum CoatParameters {
+    Smooth,
+    Rough { distribution: Distribution, alpha: f32, eta: f32 },
+}
+
+impl serde::Serialize for Coat {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            Coat::Smooth => CoatParameters::Smooth,
+            Coat::Rough { table, .. } => {
+                CoatParameters::Rough { distribution: table.distribution, alpha: table.alpha, eta: table.eta }
+            }
+        }
+        .serialize(s)
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for Coat {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        Ok(match CoatParameters::deserialize(d)? {
+            CoatParameters::Smooth => Coat::Smooth,
+            CoatParameters::Rough { distribution, alpha, eta } => Coat::rough(distribution, alpha, eta),
+        })
+    }
+}
+
 /// A diffuse base of `diffuse` under a coat of relative index `eta` (interior over exterior).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Plastic {

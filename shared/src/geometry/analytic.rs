@@ -5,7 +5,7 @@ use super::ray::Ray;
 use glam::Vec3;
 
 /// A full sphere with outward normals.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Sphere {
     pub center: Vec3,
     pub radius: f32,
@@ -17,7 +17,7 @@ pub struct Sphere {
 /// the point where it crosses the axis; the signed `curvature_radius` puts the centre of curvature at
 /// `vertex + curvature_radius · axis` (lens-design sign convention: positive means convex toward incoming
 /// light); zero means flat. The normal faces the front (−axis) side.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LensSurface {
     pub vertex: Vec3,
     pub axis: Vec3,
@@ -29,7 +29,7 @@ pub struct LensSurface {
 /// lies in [`inner_radius`, `outer_radius`]. With an opaque material it is an aperture stop (the hole is the
 /// opening) or a lens mount that keeps light from going around an element. The normal faces −axis, like a lens
 /// surface's.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Annulus {
     pub center: Vec3,
     pub axis: Vec3,
@@ -38,7 +38,7 @@ pub struct Annulus {
 }
 
 /// Any analytic primitive.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum Analytic {
     Sphere(Sphere),
     Lens(LensSurface),

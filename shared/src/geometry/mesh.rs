@@ -3,7 +3,7 @@
 use glam::Vec3;
 
 /// One triangle with optional per-vertex shading normals.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct MeshTriangle {
     pub v: [Vec3; 3],
     pub n: Option<[Vec3; 3]>,

@@ -5,7 +5,7 @@ use super::error::ProtocolError;
 use crate::render::method::ParallelMethod;
 use crate::render::settings::RenderSettings;
 use crate::render::totals::RayTotals;
-use crate::scene::MitsubaOptions;
+use crate::scene::description::SceneDescription;
 use serde::{Deserialize, Serialize};
 
 /// Bumped whenever a message changes shape; peers with another version are refused in the handshake.
@@ -18,7 +18,8 @@ use serde::{Deserialize, Serialize};
 /// 11: jobs may ask for a ray map (`Job::ray_map`), whose portions workers send (`RayMapPortion`).
 /// 12: the coordinator tells the workers when a timed run stops (`StopAt`), and jobs carry a Mitsuba scene's
 /// import options (`Job::mitsuba`).
-pub const PROTOCOL_VERSION: u32 = 12;
+/// 13: jobs carry the scene's description (`Job::scene`) instead of its file's text and import options.
+pub const PROTOCOL_VERSION: u32 = 13;
 
 /// Which end of a link a peer is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -27,13 +28,9 @@ pub enum Role {
     Worker,
 }
 
-/// A file the scene references, by its path relative to the scene file and its content hash.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct FileRef {
-    pub path: String,
-    /// SHA-256, lower-case hex.
-    pub sha256: String,
-}
+/// A file the scene references, by its path relative to the scene file and its content hash (SHA-256,
+/// lower-case hex).
+pub use crate::scene::description::FileRef;
 
 /// How a worker lays out its threads.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -67,13 +64,11 @@ pub struct EngineSpec {
 pub struct Job {
     /// The scene file's name, for messages.
     pub scene_name: String,
-    pub scene_text: String,
-    /// How a Mitsuba scene is imported (`--define`, `--approximate`), which the worker applies as the
-    /// coordinator did.
-    pub mitsuba: MitsubaOptions,
-    /// Meshes the scene references; the worker asks for the ones it does not hold.
+    /// The scene as the coordinator read it, whichever its format: the worker builds it with the files below.
+    pub scene: SceneDescription,
+    /// The files the scene references (`SceneDescription::files`); the worker asks for the ones it does not hold.
     pub files: Vec<FileRef>,
-    /// The scene's hash as the coordinator computed it; the worker checks its own against it.
+    /// The description's hash as the coordinator computed it; the worker checks the description against it.
     pub scene_hash: String,
     pub settings: RenderSettings,
     /// This worker's random stream: distinct for every worker of a job.

@@ -1,12 +1,18 @@
 //! Scenes: the loaded scene the renderer reads (objects, materials, geometry, lights, camera), and how it is
-//! built from a TOML file (`file` holds the format, `loader` the validation with precise errors, `error` the
-//! error that points at the file, line and field); `mitsuba` imports Mitsuba 3 scene files into a `Scene`;
-//! `ghost` holds what a scene declares about the ghosts its lens makes.
+//! made. A reader turns a scene file into a `SceneDescription` (`description`), which knows nothing of the
+//! format: `loader` reads TOML files (`file` holds the format) and `mitsuba` Mitsuba 3 files. One build step
+//! (`build`) turns a description and the files it references into a `Scene`, on the coordinator and on every
+//! worker alike. `error` holds the error that points at the file, line and field; `ghost` what a scene
+//! declares about the ghosts its lens makes.
 
+pub mod build;
+pub mod description;
 pub mod error;
 pub mod file;
 pub mod ghost;
 mod loader;
+
+pub use loader::SceneFiles;
 pub mod mitsuba;
 
 pub use error::SceneError;
@@ -32,7 +38,7 @@ pub struct SceneObject {
 }
 
 /// Integrator settings a scene carries (the `[render]` table), each overridable from the command line.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SceneRenderSettings {
     /// Longest path in segments over the joined camera and light sub-paths: 1 = emitters seen directly.
     pub max_depth: u32,
@@ -81,7 +87,9 @@ pub struct Scene {
     pub geometry: SceneGeometry,
     pub lights: Lights,
     pub render: SceneRenderSettings,
-    /// SHA-256 over the scene file and every mesh and texture it references, in order.
+    /// The description it was built from (`description::SceneDescription`): what a job carries to workers.
+    pub description: description::SceneDescription,
+    /// SHA-256 of the description (`SceneDescription::hash`), which names every file it references by its own.
     pub hash: String,
     /// Every file the scene references, meshes and textures: its path as written in the scene and its SHA-256
     /// (hex). Jobs send these to workers.
@@ -102,23 +110,40 @@ pub fn is_mitsuba(path: &std::path::Path) -> bool {
     path.extension().is_some_and(|e| e.eq_ignore_ascii_case("xml"))
 }
 
-impl Scene {
-    /// Reads a scene file of either format; `options` say how a Mitsuba scene is imported and are refused for
-    /// a TOML scene, which has no parameters and maps every key exactly.
-    pub fn load_with_options(path: &std::path::Path, options: &MitsubaOptions) -> Result<Scene, SceneError> {
+impl description::SceneDescription {
+    /// Reads a scene file of either format into its description and the files it references; `options` say how
+    /// a Mitsuba scene is imported and are refused for a TOML scene, which has no parameters and maps every key
+    /// exactly.
+    pub fn read(path: &std::path::Path, options: &MitsubaOptions) -> Result<(Self, SceneFiles), SceneError> {
         if is_mitsuba(path) {
-            return Scene::load_mitsuba(path, options);
+            return Self::from_mitsuba(path, options);
         }
         let refused = match (options.defines.first(), options.approximate) {
             (Some((name, _)), _) => format!("--define {name}=...: only Mitsuba scenes (.xml) take parameters"),
             (None, true) => "--approximate: only Mitsuba scenes (.xml) are imported".into(),
-            (None, false) => return Scene::load(path),
+            (None, false) => {
+                let text = std::fs::read_to_string(path).map_err(|e| SceneError {
+                    file: path.to_path_buf(),
+                    line: None,
+                    field: None,
+                    message: format!("cannot read the scene file: {e}"),
+                })?;
+                return Self::from_toml(&text, path, path.parent().unwrap_or(std::path::Path::new(".")));
+            }
         };
         Err(SceneError { file: path.to_path_buf(), line: None, field: None, message: refused })
     }
+}
 
-    /// Builds a job's scene from the scene file's text, its name (whose extension tells the format), the
-    /// Mitsuba import options and the referenced files by the path the scene writes, as a worker does.
+impl Scene {
+    /// Reads a scene file of either format and builds it; `options` as `SceneDescription::read` takes them.
+    pub fn load_with_options(path: &std::path::Path, options: &MitsubaOptions) -> Result<Scene, SceneError> {
+        let (desc, files) = description::SceneDescription::read(path, options)?;
+        Scene::from_description(&desc, &files)
+    }
+
+    /// Builds a scene from a scene file's text, its name (whose extension tells the format), the Mitsuba import
+    /// options and the files it references by the path the scene writes, none of them read from disk.
     pub fn from_job_files(
         text: &str,
         name: &std::path::Path,

@@ -13,7 +13,7 @@ use glam::{Vec2, Vec3};
 use std::ops::{Add, Mul};
 
 /// How a lookup reconstructs the image between texel centres (Mitsuba's `filter_type`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 pub enum Filter {
     /// Blends the four nearest texels by their distance to the point (no prefiltering).
     #[default]
@@ -23,7 +23,7 @@ pub enum Filter {
 }
 
 /// What a lookup reads outside the image (Mitsuba's `wrap_mode`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 pub enum Wrap {
     /// The image tiles the plane.
     #[default]

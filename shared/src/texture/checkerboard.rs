@@ -9,14 +9,14 @@ use glam::Vec2;
 /// Two textures in a checkerboard pattern. Each unit square of the coordinates `to_uv` gives is cut into
 /// four: seen with v upward, `color0` fills the top-left and bottom-right quarters and `color1` the other two.
 /// The colours themselves are read at the point's own coordinates, as Mitsuba reads them.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Checkerboard {
-    pub color0: Texture,
-    pub color1: Texture,
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Checkerboard<I = std::sync::Arc<super::Bitmap>> {
+    pub color0: Texture<I>,
+    pub color1: Texture<I>,
     pub to_uv: UvTransform,
 }
 
-impl Default for Checkerboard {
+impl<I> Default for Checkerboard<I> {
     /// Mitsuba's defaults: greys of 0.4 and 0.2, coordinates untransformed.
     fn default() -> Self {
         Checkerboard { color0: Texture::grey(0.4), color1: Texture::grey(0.2), to_uv: UvTransform::IDENTITY }

@@ -24,7 +24,7 @@ pub const MAX_TEXELS: u64 = 16 << 20;
 const MAX_DECODER_BYTES: u64 = 256 << 20;
 
 /// How the integer samples of a file encode linear values.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
 pub enum Encoding {
     /// The sRGB transfer curve (IEC 61966-2-1), what colour images hold whatever their gAMA or ICC data say,
     /// as Mitsuba reads them.

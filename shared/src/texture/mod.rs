@@ -23,19 +23,20 @@ use glam::Vec2;
 use std::sync::Arc;
 
 /// A bitmap read as a texture: the image, a factor multiplying it, and how it is looked up (Mitsuba's
-/// `bitmap` with its `filter_type`, `wrap_mode` and `to_uv`).
-#[derive(Clone, Debug, PartialEq)]
-pub struct BitmapTexture {
-    pub image: Arc<Bitmap>,
+/// `bitmap` with its `filter_type`, `wrap_mode` and `to_uv`). `I` is the image slot: the decoded image in a
+/// scene, a reference to its file in a scene description (`crate::scene::description::ImageRef`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct BitmapTexture<I = Arc<Bitmap>> {
+    pub image: I,
     pub factor: Rgb,
     pub filter: Filter,
     pub wrap: Wrap,
     pub to_uv: UvTransform,
 }
 
-impl BitmapTexture {
+impl<I> BitmapTexture<I> {
     /// `image` with Mitsuba's defaults: bilinear, repeating, untransformed, times one.
-    pub fn new(image: Arc<Bitmap>) -> Self {
+    pub fn new(image: I) -> Self {
         BitmapTexture {
             image,
             factor: Rgb::ONE,
@@ -45,6 +46,19 @@ impl BitmapTexture {
         }
     }
 
+    /// The same lookup of another image slot, `f` turning this bitmap into its image.
+    pub fn try_map<J, E>(&self, f: &mut impl FnMut(&BitmapTexture<I>) -> Result<J, E>) -> Result<BitmapTexture<J>, E> {
+        Ok(BitmapTexture {
+            image: f(self)?,
+            factor: self.factor,
+            filter: self.filter,
+            wrap: self.wrap,
+            to_uv: self.to_uv,
+        })
+    }
+}
+
+impl BitmapTexture {
     /// The colour at texture coordinates `uv`.
     #[inline]
     pub fn eval(&self, uv: Vec2) -> Rgb {
@@ -63,28 +77,59 @@ impl BitmapTexture {
     }
 }
 
-/// A material parameter that may vary over a surface.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Texture {
+/// A material parameter that may vary over a surface; `I` is the image slot of its bitmaps (see
+/// [`BitmapTexture`]).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub enum Texture<I = Arc<Bitmap>> {
     /// The same value everywhere.
     Constant(Rgb),
     /// A bitmap looked up at the point.
-    Bitmap(BitmapTexture),
+    Bitmap(BitmapTexture<I>),
     /// Two textures in a checkerboard pattern.
-    Checkerboard(Box<Checkerboard>),
+    Checkerboard(Box<Checkerboard<I>>),
 }
 
-impl Texture {
+impl<I> Texture<I> {
     /// A constant grey `v`.
     pub fn grey(v: f32) -> Self {
         Texture::Constant(Rgb::splat(v))
     }
 
     /// `image` times `factor`, looked up as Mitsuba's `bitmap` does by default.
-    pub fn bitmap(image: Arc<Bitmap>, factor: Rgb) -> Self {
+    pub fn bitmap(image: I, factor: Rgb) -> Self {
         Texture::Bitmap(BitmapTexture { factor, ..BitmapTexture::new(image) })
     }
 
+    /// The value, when it is the same everywhere.
+    #[inline]
+    pub fn constant(&self) -> Option<Rgb> {
+        match self {
+            Texture::Constant(c) => Some(*c),
+            _ => None,
+        }
+    }
+
+    /// True when the value depends on texture coordinates.
+    pub fn varies(&self) -> bool {
+        self.constant().is_none()
+    }
+
+    /// The same texture with every bitmap's image turned by `f` into another slot's (a file reference into the
+    /// decoded image), in the order the bitmaps appear.
+    pub fn try_map<J, E>(&self, f: &mut impl FnMut(&BitmapTexture<I>) -> Result<J, E>) -> Result<Texture<J>, E> {
+        Ok(match self {
+            Texture::Constant(c) => Texture::Constant(*c),
+            Texture::Bitmap(b) => Texture::Bitmap(b.try_map(f)?),
+            Texture::Checkerboard(c) => Texture::Checkerboard(Box::new(Checkerboard {
+                color0: c.color0.try_map(f)?,
+                color1: c.color1.try_map(f)?,
+                to_uv: c.to_uv,
+            })),
+        })
+    }
+}
+
+impl Texture {
     /// The value at texture coordinates `uv`.
     #[inline]
     pub fn eval(&self, uv: Vec2) -> Rgb {
@@ -109,20 +154,6 @@ impl Texture {
             Texture::Bitmap(b) => b.eval_scalar(uv),
             Texture::Checkerboard(c) => c.eval_scalar(uv),
         }
-    }
-
-    /// The value, when it is the same everywhere.
-    #[inline]
-    pub fn constant(&self) -> Option<Rgb> {
-        match self {
-            Texture::Constant(c) => Some(*c),
-            _ => None,
-        }
-    }
-
-    /// True when the value depends on texture coordinates.
-    pub fn varies(&self) -> bool {
-        self.constant().is_none()
     }
 
     /// The largest value any channel reaches anywhere, for the checks a scene's values get.

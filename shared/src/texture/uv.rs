@@ -47,7 +47,7 @@ pub fn uv_tangent(v: &[Vec3; 3], uv: &[Vec2; 3]) -> Option<Vec3> {
 
 /// An affine map of texture coordinates, applied before a texture reads them (Mitsuba's `to_uv`): u' = a u +
 /// b v + c, v' = d u + e v + f.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct UvTransform(Affine2);
 
 impl Default for UvTransform {

@@ -32,5 +32,6 @@ mod prism;
 mod protocol_hostile_input;
 mod quasi_random;
 mod ray_map;
+mod scene_description;
 mod stress_scenes;
 mod textures;

@@ -274,8 +274,7 @@ fn main() -> Result<()> {
 
     let job = Job {
         scene_name: "fuzz.toml".into(),
-        scene_text: SCENE.into(),
-        mitsuba: Default::default(),
+        scene: scene.description.clone(),
         files: vec![FileRef { path: "floor.obj".into(), sha256: scene.mesh_files[0].1.clone() }],
         scene_hash: scene.hash.clone(),
         settings,

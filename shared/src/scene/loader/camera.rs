@@ -1,21 +1,14 @@
 //! The `[camera]` table: a pinhole, thin-lens or sensor camera.
 
 use super::state::Loader;
-use crate::camera::{Camera, Lens, RearElement};
-use crate::geometry::LensSurface;
+use crate::scene::description::{CameraDesc, LensDesc};
 use crate::scene::file::CameraSection;
 use crate::scene::SceneError;
-use glam::Vec3;
-use std::collections::BTreeMap;
 use toml::Spanned;
 
 impl Loader<'_> {
-    /// The camera; a sensor camera's rear element is one of `lens_surfaces`, the named lens surfaces.
-    pub(super) fn camera(
-        &self,
-        c: &Spanned<CameraSection>,
-        lens_surfaces: &BTreeMap<String, LensSurface>,
-    ) -> Result<Camera, SceneError> {
+    /// The camera; a sensor camera's rear element, a lens surface of the scene, is found by the build step.
+    pub(super) fn camera(&self, c: &Spanned<CameraSection>) -> Result<CameraDesc, SceneError> {
         let cam = c.get_ref();
         let position = self.vec3(*cam.position.get_ref(), &cam.position.span(), "camera.position")?;
         let look_at = self.vec3(*cam.look_at.get_ref(), &cam.look_at.span(), "camera.look_at")?;
@@ -36,7 +29,10 @@ impl Loader<'_> {
         let kind = cam.kind.get_ref().as_str();
         match kind {
             "pinhole" | "thin_lens" => {}
-            "sensor" => return self.sensor_camera(c, position, look_at, up, lens_surfaces),
+            "sensor" => {
+                let lens = self.sensor_camera(c)?;
+                return Ok(CameraDesc { position, look_at, up, width, height, lens });
+            }
             other => {
                 return Err(self.error(
                     Some(cam.kind.span()),
@@ -59,12 +55,12 @@ impl Loader<'_> {
             |v| v > 0.0 && v < 180.0,
             "between 0 and 180 degrees",
         )?;
-        let lens = if kind == "pinhole" { Lens::Pinhole } else { self.thin_lens(c)? };
-        Ok(Camera::new(position, look_at, up, fov, width, height, lens))
+        let lens = if kind == "pinhole" { LensDesc::Pinhole { fov_y_deg: fov } } else { self.thin_lens(c, fov)? };
+        Ok(CameraDesc { position, look_at, up, width, height, lens })
     }
 
     /// A thin lens: its radius and the distance it focuses at.
-    fn thin_lens(&self, c: &Spanned<CameraSection>) -> Result<Lens, SceneError> {
+    fn thin_lens(&self, c: &Spanned<CameraSection>, fov_y_deg: f32) -> Result<LensDesc, SceneError> {
         let cam = c.get_ref();
         let radius = cam.lens_radius.as_ref().ok_or_else(|| {
             self.error(Some(c.span()), "camera.lens_radius", "a thin_lens camera needs lens_radius (m)")
@@ -72,7 +68,8 @@ impl Loader<'_> {
         let focus = cam.focus_distance.as_ref().ok_or_else(|| {
             self.error(Some(c.span()), "camera.focus_distance", "a thin_lens camera needs focus_distance (m)")
         })?;
-        Ok(Lens::Thin {
+        Ok(LensDesc::Thin {
+            fov_y_deg,
             radius: self.scalar(
                 *radius.get_ref(),
                 &radius.span(),
@@ -92,14 +89,7 @@ impl Loader<'_> {
 
     /// A sensor behind a lens of the scene: `position` is the sensor's centre, `look_at` a point along the
     /// optical axis in front of it, and `rear_element` names the lens surface nearest the sensor.
-    fn sensor_camera(
-        &self,
-        c: &Spanned<CameraSection>,
-        position: Vec3,
-        look_at: Vec3,
-        up: Vec3,
-        lens_surfaces: &BTreeMap<String, LensSurface>,
-    ) -> Result<Camera, SceneError> {
+    fn sensor_camera(&self, c: &Spanned<CameraSection>) -> Result<LensDesc, SceneError> {
         let cam = c.get_ref();
         if let Some(fov) = &cam.fov_y_deg {
             return Err(self.error(
@@ -125,33 +115,10 @@ impl Loader<'_> {
                 "a sensor camera needs rear_element, the name of the lens_surface object nearest the sensor",
             )
         })?;
-        let Some(surface) = lens_surfaces.get(rear_name.get_ref()) else {
-            let known: Vec<&String> = lens_surfaces.keys().collect();
-            return Err(self.error(
-                Some(rear_name.span()),
-                "camera.rear_element",
-                format!("no lens_surface object is named '{}' (named lens surfaces: {known:?})", rear_name.get_ref()),
-            ));
-        };
-        let rear = RearElement {
-            center: surface.vertex + surface.axis * surface.rim_sag(),
-            axis: surface.axis,
-            radius: surface.aperture_radius,
-        };
-        // Every point of the disc must lie in front of the sensor, or some rays would leave it backwards.
-        let forward = (look_at - position).normalize();
-        let depth = (rear.center - position).dot(forward);
-        let tilt = (1.0 - rear.axis.dot(forward).powi(2)).max(0.0).sqrt();
-        if depth <= rear.radius * tilt {
-            return Err(self.error(
-                Some(rear_name.span()),
-                "camera.rear_element",
-                format!(
-                    "the rear element's clear aperture must lie entirely in front of the sensor (toward look_at); \
-                     its centre is {depth} m in front"
-                ),
-            ));
-        }
-        Ok(Camera::sensor(position, look_at, up, sensor_width, *cam.width.get_ref(), *cam.height.get_ref(), rear))
+        Ok(LensDesc::Sensor {
+            sensor_width,
+            rear_element: rear_name.get_ref().clone(),
+            rear_source: self.source(Some(rear_name.span()), "camera.rear_element"),
+        })
     }
 }

@@ -2,29 +2,29 @@
 
 use super::state::Loader;
 use crate::light::directional::Sun;
-use crate::light::environment::{ConstantEnvironment, EnvironmentMap};
-use crate::light::infinite::{InfiniteLight, InfiniteLightError};
-use crate::light::Light;
+use crate::light::environment::ConstantEnvironment;
+use crate::light::infinite::InfiniteLightError;
+use crate::scene::description::{LightDesc, LightKind};
 use crate::scene::file::LightSection;
 use crate::scene::SceneError;
 use crate::texture::Encoding;
 use glam::Mat3;
 use std::ops::Range;
-use std::sync::Arc;
 use toml::Spanned;
 
 impl Loader<'_> {
     /// Every entry of `[[lights]]`, in order.
-    pub(super) fn lights(&mut self, entries: &[Spanned<LightSection>]) -> Result<Vec<Light>, SceneError> {
+    pub(super) fn lights(&mut self, entries: &[Spanned<LightSection>]) -> Result<Vec<LightDesc>, SceneError> {
         entries.iter().enumerate().map(|(i, l)| self.light(l, i)).collect()
     }
 
     /// Entry `i`.
-    fn light(&mut self, l: &Spanned<LightSection>, i: usize) -> Result<Light, SceneError> {
+    fn light(&mut self, l: &Spanned<LightSection>, i: usize) -> Result<LightDesc, SceneError> {
         let s = l.span();
         let f = |x: &str| format!("lights[{i}].{x}");
-        Ok(match l.get_ref() {
-            LightSection::Point { position, intensity } => Light::Point {
+        let mut field = f("type");
+        let kind = match l.get_ref() {
+            LightSection::Point { position, intensity } => LightKind::Point {
                 position: self.vec3(*position, &s, &f("position"))?,
                 intensity: self.colour(*intensity, &s, &f("intensity"), None)?,
             },
@@ -47,7 +47,7 @@ impl Loader<'_> {
                     |v| (0.0..=cone).contains(&v),
                     "between 0 and cone_angle_deg",
                 )?;
-                Light::Spot {
+                LightKind::Spot {
                     position: self.vec3(*position, &s, &f("position"))?,
                     direction: dir.normalize(),
                     intensity: self.colour(*intensity, &s, &f("intensity"), None)?,
@@ -58,15 +58,13 @@ impl Loader<'_> {
             LightSection::Environment { filename, radiance, scale, to_world } => {
                 let scale = self.scalar(scale.unwrap_or(1.0), &s, &f("scale"), |v| v > 0.0, "a positive number")?;
                 let rotation = self.rotation(*to_world, &s, &f("to_world"))?;
-                let infinite = match (filename, radiance) {
+                match (filename, radiance) {
                     (Some(name), None) => {
-                        let field = f("filename");
+                        field = f("filename");
                         // 8-bit images hold sRGB values, as textures and Mitsuba's maps do; HDR formats are linear whatever
                         // the encoding says.
-                        let bitmap = self.bitmap(name, Some(s.clone()), &field, Encoding::Srgb)?;
-                        let map = EnvironmentMap::from_bitmap(&bitmap, scale, rotation)
-                            .map_err(|e| self.error(Some(s.clone()), field, format!("{name}: {e}")))?;
-                        InfiniteLight::Map(Arc::new(map))
+                        let image = self.image(name, Some(s.clone()), &field, Encoding::Srgb)?;
+                        LightKind::Map { image, scale, rotation, mirrored: false }
                     }
                     (None, Some(radiance)) => {
                         if to_world.is_some() {
@@ -76,10 +74,10 @@ impl Loader<'_> {
                                 "a constant environment is the same from every direction: it takes no rotation",
                             ));
                         }
-                        let field = f("radiance");
+                        field = f("radiance");
                         let c = self.colour(*radiance, &s, &field, None)? * scale;
-                        let env = ConstantEnvironment::new(c).map_err(|e| self.light_error(&s, &field, e))?;
-                        InfiniteLight::Constant(env)
+                        ConstantEnvironment::new(c).map_err(|e| self.light_error(&s, &field, e))?;
+                        LightKind::Constant { radiance: c }
                     }
                     (Some(_), Some(_)) => {
                         return Err(self.error(
@@ -95,8 +93,7 @@ impl Loader<'_> {
                             "an environment needs `filename` (an OpenEXR, HDR or PFM map) or a constant `radiance`",
                         ))
                     }
-                };
-                Light::Infinite(infinite)
+                }
             }
             LightSection::Sun { direction, irradiance, angular_radius_deg } => {
                 let dir = self.vec3(*direction, &s, &f("direction"))?;
@@ -112,11 +109,12 @@ impl Loader<'_> {
                     "in [0, 90) degrees",
                 )?;
                 // `direction` is where the light travels; the sun lies the other way.
-                let sun = Sun::new(-dir, irradiance, radius.to_radians())
-                    .map_err(|e| self.light_error(&s, &f("irradiance"), e))?;
-                Light::Infinite(InfiniteLight::Sun(sun))
+                field = f("irradiance");
+                Sun::new(-dir, irradiance, radius.to_radians()).map_err(|e| self.light_error(&s, &field, e))?;
+                LightKind::Sun { toward: -dir, irradiance, angular_radius: radius.to_radians() }
             }
-        })
+        };
+        Ok(LightDesc { kind, source: self.source(Some(s), field) })
     }
 
     /// A `to_world` rotation given as three rows (the identity when absent); refused unless orthonormal with

@@ -6,7 +6,8 @@ use crate::bsdf::microfacet::Distribution;
 use crate::bsdf::plastic::Coat;
 use crate::bsdf::principled::eta_of_specular;
 use crate::color::Rgb;
-use crate::material::{Back, Material, PrincipledSurface, Roughness, Surface};
+use crate::material::{Back, PrincipledSurface, Roughness, Surface};
+use crate::scene::description::{ImageRef, MaterialDesc, TextureDesc};
 use crate::scene::file::MaterialSection;
 use crate::scene::SceneError;
 use crate::spectrum::RefractiveIndex;
@@ -15,9 +16,12 @@ use std::collections::BTreeMap;
 use std::ops::Range;
 use toml::Spanned;
 
+/// A material's front family, the `back` it names and its opacity.
+type Sides = (Surface<ImageRef>, Option<String>, Option<TextureDesc>);
+
 /// The scene's materials in the order of their names.
 pub(super) struct Materials {
-    pub(super) list: Vec<Material>,
+    pub(super) list: Vec<MaterialDesc>,
     /// Index into `list` by name.
     pub(super) index: BTreeMap<String, u32>,
 }
@@ -35,7 +39,7 @@ impl Loader<'_> {
             materials.index.insert(name.clone(), sides.len() as u32);
             sides.push(self.material(name, m)?);
         }
-        let fronts: Vec<Surface> = sides.iter().map(|(front, _, _)| front.clone()).collect();
+        let fronts: Vec<Surface<ImageRef>> = sides.iter().map(|(front, _, _)| front.clone()).collect();
         for ((name, m), (front, back, opacity)) in table.iter().zip(sides) {
             let back = match back.as_deref() {
                 None | Some("same") => Back::Same,
@@ -51,17 +55,14 @@ impl Loader<'_> {
                     }
                 },
             };
-            materials.list.push(Material::new(front, back, opacity));
+            let source = self.source(Some(m.span()), format!("materials.{name}"));
+            materials.list.push(MaterialDesc { name: name.clone(), front, back, opacity, source });
         }
         Ok(materials)
     }
 
     /// A material's front family, the `back` it names and its opacity.
-    fn material(
-        &mut self,
-        name: &str,
-        m: &Spanned<MaterialSection>,
-    ) -> Result<(Surface, Option<String>, Option<Texture>), SceneError> {
+    fn material(&mut self, name: &str, m: &Spanned<MaterialSection>) -> Result<Sides, SceneError> {
         let s = m.span();
         let f = |x: &str| format!("materials.{name}.{x}");
         let (opacity, back) = match m.get_ref() {
@@ -94,10 +95,10 @@ impl Loader<'_> {
                                 Some(a) => self.texture(a, &s, &f("albedo"), Some(1.0))?.constant().unwrap_or(Rgb::ONE),
                                 None => Rgb::ONE,
                             };
-                            let image = self.bitmap(file, Some(s.clone()), &f("albedo_texture"), Encoding::Srgb)?;
-                            let t = Texture::bitmap(image, factor);
+                            let image = self.image(file, Some(s.clone()), &f("albedo_texture"), Encoding::Srgb)?;
+                            let mut t = Texture::bitmap(image, factor);
                             // Integer images stay within [0, 1]; a float one (OpenEXR, HDR, PFM) may not.
-                            self.check_max(&t, &s, &f("albedo_texture"), Some(1.0))?;
+                            self.check_max(&mut t, &s, &f("albedo_texture"), Some(1.0))?;
                             t
                         }
                         (None, None) => return Err(self.error(
@@ -347,7 +348,7 @@ impl Loader<'_> {
         default: f32,
         span: &Range<usize>,
         field: &str,
-    ) -> Result<Texture, SceneError> {
+    ) -> Result<TextureDesc, SceneError> {
         match value {
             Some(v) => self.texture(v, span, field, Some(1.0)),
             None => Ok(Texture::grey(default)),
@@ -369,7 +370,7 @@ impl Loader<'_> {
         distribution: &Option<String>,
         span: &Range<usize>,
         name: &str,
-    ) -> Result<Option<Roughness>, SceneError> {
+    ) -> Result<Option<Roughness<ImageRef>>, SceneError> {
         let f = |x: &str| format!("materials.{name}.{x}");
         let distribution = match distribution.as_deref() {
             None | Some("beckmann") => Distribution::Beckmann,

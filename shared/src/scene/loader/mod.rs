@@ -1,9 +1,9 @@
-//! Building a `Scene` from its TOML file: parsing, checking every field with an error that names the file, line
-//! and field, reading the meshes and textures the scene references, and hashing all of it. The scene is built
-//! in steps, one file each: `materials`, `objects` (with their shapes), `lights` and `camera`; `files` reads the
-//! files a scene references, `values` checks single numbers, vectors and colours, `textures` reads texture
-//! values (constants, bitmaps, checkerboards), and `state` holds what
-//! every step reads and gathers.
+//! Reading a TOML scene file into a `SceneDescription`: parsing, checking every field with an error that names
+//! the file, line and field, and reading the meshes and images the scene references (which the build step,
+//! `crate::scene::build`, parses and decodes). The description is read in steps, one file each: `materials`,
+//! `objects` (with their shapes), `lights` and `camera`; `files` reads the files a scene references, `values`
+//! checks single numbers, vectors and colours, `textures` reads texture values (constants, bitmaps,
+//! checkerboards), and `state` holds what every step reads and gathers.
 
 mod camera;
 mod files;
@@ -14,79 +14,76 @@ mod state;
 mod textures;
 mod values;
 
+use super::description::{SceneDescription, SourceFormat};
 use super::error::line_of;
 use super::file::{RenderSection, SceneFile};
 use super::{Scene, SceneError, SceneRenderSettings};
-use crate::camera::Camera;
-use crate::geometry::SceneGeometry;
-use crate::light::infinite::SceneSphere;
-use crate::light::{Light, Lights};
-use materials::Materials;
-use objects::ObjectParts;
-use sha2::Digest;
 use state::{Loader, MeshSource};
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::sync::OnceLock;
+
+/// The files a reader read, by the path the scene writes: what `Scene::from_description` builds from.
+pub type SceneFiles = BTreeMap<String, Vec<u8>>;
 
 impl Scene {
     /// Reads and validates a scene file, TOML or (by the extension `.xml`) Mitsuba 3; meshes and textures are
     /// resolved relative to its folder.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
-        if super::is_mitsuba(path) {
-            return Scene::load_mitsuba(path, &crate::scene::MitsubaOptions::default());
-        }
-        let text = std::fs::read_to_string(path).map_err(|e| SceneError {
-            file: path.to_path_buf(),
-            line: None,
-            field: None,
-            message: format!("cannot read the scene file: {e}"),
-        })?;
-        let base = path.parent().unwrap_or(Path::new("."));
-        Scene::from_toml(&text, path, base)
+        let (desc, files) = SceneDescription::read(path, &crate::scene::MitsubaOptions::default())?;
+        Scene::from_description(&desc, &files)
     }
 
     /// Parses scene text; `file` names it in errors and `base_dir` resolves mesh paths.
     pub fn from_toml(text: &str, file: &Path, base_dir: &Path) -> Result<Scene, SceneError> {
-        Loader::new(text, file, MeshSource::Folder(base_dir)).load()
+        let (desc, files) = SceneDescription::from_toml(text, file, base_dir)?;
+        Scene::from_description(&desc, &files)
     }
 
-    /// Parses scene text whose meshes and textures are given in memory, keyed by the path the scene writes (a
-    /// worker that received them over the network).
+    /// Parses scene text whose meshes and textures are given in memory, keyed by the path the scene writes.
     pub fn from_toml_with_meshes(
         text: &str,
         file: &Path,
         meshes: &BTreeMap<String, Vec<u8>>,
     ) -> Result<Scene, SceneError> {
-        Loader::new(text, file, MeshSource::Memory(meshes)).load()
+        let (desc, files) = Loader::new(text, file, MeshSource::Memory(meshes)).load()?;
+        Scene::from_description(&desc, &files)
+    }
+}
+
+impl SceneDescription {
+    /// Reads a TOML scene file into its description and the files it references; `file` names it in errors
+    /// and `base_dir` resolves the files' paths.
+    pub fn from_toml(text: &str, file: &Path, base_dir: &Path) -> Result<(SceneDescription, SceneFiles), SceneError> {
+        Loader::new(text, file, MeshSource::Folder(base_dir)).load()
     }
 }
 
 impl Loader<'_> {
-    /// Builds the scene step by step. Errors are reported, and referenced files read and hashed, in this order:
-    /// the render settings, the materials (with their textures), the objects (with their meshes and emission
-    /// textures), the lights, then the camera, which may name an object.
-    fn load(mut self) -> Result<Scene, SceneError> {
-        self.hasher.update(self.text.as_bytes());
+    /// Reads the description step by step. Errors are reported, and referenced files read, in this order: the
+    /// render settings, the materials (with their textures), the objects (with their meshes and emission
+    /// textures), the lights, then the camera.
+    fn load(mut self) -> Result<(SceneDescription, SceneFiles), SceneError> {
         let parsed = self.parse()?;
         let render = self.render_settings(&parsed.render)?;
         let materials = self.materials(&parsed.materials)?;
-        let mut parts = ObjectParts::default();
+        let mut objects = Vec::new();
         for (i, object) in parsed.objects.iter().enumerate() {
-            self.object(i, object, &materials, &mut parts)?;
+            objects.push(self.object(i, object, &materials)?);
         }
-        let mut lights = std::mem::take(&mut parts.area_lights);
-        lights.extend(self.lights(&parsed.lights)?);
-        // After the objects: a sensor camera refers to one of them.
-        let camera = self.camera(&parsed.camera, &parts.lens_surfaces)?;
-        let front = super::ghost::front_element(&camera, parts.lens_surfaces.values().copied());
-        let mut scene = self.assemble(render, camera, materials, parts, lights)?;
-        if let Some(front) = front.filter(|_| super::ghost::sensor_ghosts(&scene)) {
-            scene.lights.aim_at(front);
-            let lens_images = super::ghost::lens_images_by_light_paths(&scene, &front);
-            scene.lights.set_lens_images_by_light_paths(lens_images);
-        }
-        Ok(scene)
+        let lights = self.lights(&parsed.lights)?;
+        let camera = self.camera(&parsed.camera)?;
+        let desc = SceneDescription {
+            path: self.file.to_path_buf(),
+            format: SourceFormat::Toml,
+            render,
+            camera,
+            materials: materials.list,
+            objects,
+            lights,
+            files: self.file_refs,
+            notes: Vec::new(),
+        };
+        Ok((desc, self.bytes))
     }
 
     /// The file's TOML structure; a syntax or schema error names the line and, where the line has one, its key.
@@ -99,49 +96,6 @@ impl Loader<'_> {
                 (!key.is_empty() && src.contains('=')).then(|| key.to_string())
             });
             SceneError { file: self.file.to_path_buf(), line, field, message: e.message().trim().to_string() }
-        })
-    }
-
-    /// The scene from its checked parts: the geometry and the light table built, and at least one light.
-    fn assemble(
-        self,
-        render: SceneRenderSettings,
-        camera: Camera,
-        materials: Materials,
-        parts: ObjectParts,
-        lights: Vec<Light>,
-    ) -> Result<Scene, SceneError> {
-        let geometry = SceneGeometry::build(parts.triangles, parts.analytic).map_err(|e| SceneError {
-            file: self.file.to_path_buf(),
-            line: None,
-            field: None,
-            message: e.to_string(),
-        })?;
-        let sphere = SceneSphere::around(geometry.bounds());
-        let lights = Lights::with_textures(lights, parts.light_textures, geometry.triangle_count(), sphere);
-        if !lights.any() {
-            return Err(SceneError {
-                file: self.file.to_path_buf(),
-                line: None,
-                field: None,
-                message: "the scene has no light: give an object an `emission` or add a [[lights]] entry".into(),
-            });
-        }
-        let has_delta_surfaces = parts.objects.iter().any(|o| materials.list[o.material as usize].has_delta());
-        Ok(Scene {
-            path: self.file.to_path_buf(),
-            camera,
-            materials: materials.list,
-            triangle_uvs: parts.triangle_uvs,
-            objects: parts.objects,
-            geometry,
-            lights,
-            render,
-            hash: format!("{:x}", self.hasher.finalize()),
-            mesh_files: self.mesh_files,
-            has_delta_surfaces,
-            ghost_pairs: OnceLock::new(),
-            notes: Vec::new(),
         })
     }
 

@@ -1,124 +1,62 @@
 //! The `[[objects]]` entries: each object's material, emission and shape (a mesh, quad or box of triangles, or
-//! an analytic sphere, lens surface or annulus), and the area lights of the emitting triangles, spheres and
-//! discs.
+//! an analytic sphere, lens surface or annulus).
 
-use super::files::TriangleUvs;
 use super::materials::Materials;
 use super::state::Loader;
 use crate::color::Rgb;
-use crate::geometry::{Analytic, Annulus, LensSurface, Mesh, MeshTriangle, Sphere};
-use crate::light::{EmissionTexture, Light};
+use crate::geometry::{Analytic, Annulus, LensSurface, Mesh, Sphere};
+use crate::light::Light;
+use crate::scene::description::{ImageRef, ObjectDesc, ShapeDesc};
 use crate::scene::file::{AnnulusSection, LensSurfaceSection, ObjectSection, SphereSection};
-use crate::scene::{SceneError, SceneObject};
-use crate::texture::{quad_uvs, Bitmap, Encoding};
-use glam::Vec2;
-use std::collections::BTreeMap;
-use std::sync::Arc;
+use crate::scene::SceneError;
+use crate::texture::{quad_uvs, Encoding};
 use toml::Spanned;
 
-/// What the objects add to the scene, gathered object by object.
-#[derive(Default)]
-pub(super) struct ObjectParts {
-    pub(super) objects: Vec<SceneObject>,
-    /// Every triangle with the object it belongs to.
-    pub(super) triangles: Vec<(u32, MeshTriangle)>,
-    /// Texture coordinates of each triangle, parallel to `triangles`.
-    pub(super) triangle_uvs: Vec<Option<[Vec2; 3]>>,
-    pub(super) analytic: Vec<(u32, Analytic)>,
-    /// One area light per emitting triangle, and its emission texture.
-    pub(super) area_lights: Vec<Light>,
-    pub(super) light_textures: Vec<Option<EmissionTexture>>,
-    /// Named lens surfaces, for the sensor camera's rear element (the first object of a name wins).
-    pub(super) lens_surfaces: BTreeMap<String, LensSurface>,
-}
-
-impl ObjectParts {
-    /// Adds the triangles of `object`, with an area light for each one that emits.
-    fn add_triangles(
-        &mut self,
-        object: u32,
-        mesh: Mesh,
-        uvs: TriangleUvs,
-        emission: Option<Rgb>,
-        emission_texture: Option<Arc<Bitmap>>,
-    ) {
-        for (k, t) in mesh.triangles.into_iter().enumerate() {
-            let uv = uvs.as_ref().map(|u| u[k]);
-            if let Some(le) = emission {
-                if le != Rgb::ZERO {
-                    let c = t.cross();
-                    self.area_lights.push(Light::Area {
-                        triangle: self.triangles.len() as u32,
-                        emission: le,
-                        area: 0.5 * c.length(),
-                        normal: c.normalize(),
-                    });
-                    self.light_textures.push(match (&emission_texture, uv) {
-                        (Some(texture), Some(uv)) => {
-                            Some(EmissionTexture { texture: texture.clone(), vertices: t.v, uv })
-                        }
-                        _ => None,
-                    });
-                }
-            }
-            self.triangles.push((object, t));
-            self.triangle_uvs.push(uv);
-        }
-    }
-
-    /// Adds the analytic surface of `object`; a lens surface with a name can be a sensor camera's rear element.
-    fn add_analytic(&mut self, object: u32, shape: Analytic, name: Option<&String>) {
-        if let (Analytic::Lens(l), Some(name)) = (&shape, name) {
-            self.lens_surfaces.entry(name.clone()).or_insert(*l);
-        }
-        self.analytic.push((object, shape));
-    }
-}
-
 impl Loader<'_> {
-    /// Object `i`: its material, emission and shape, added to `parts`.
+    /// Object `i`: its material, emission and shape.
     pub(super) fn object(
         &mut self,
         i: usize,
         o: &Spanned<ObjectSection>,
         materials: &Materials,
-        parts: &mut ObjectParts,
-    ) -> Result<(), SceneError> {
+    ) -> Result<ObjectDesc, SceneError> {
         let obj = o.get_ref();
         let field = |f: &str| format!("objects[{i}].{f}");
         let material = self.object_material(obj, materials, &field)?;
         let (emission, emission_texture) = self.emission(obj, &field)?;
         self.check_one_shape(i, o)?;
-        let id = parts.objects.len() as u32;
-        let triangles = self.triangle_shape(obj, &field)?;
-        if triangles.as_ref().is_none_or(|(_, uvs)| uvs.is_none()) {
-            self.check_no_texture_needed(obj, &field, materials.list[material as usize].uses_uv())?;
-        }
-        match triangles {
-            Some((mesh, uvs)) => parts.add_triangles(id, mesh, uvs, emission, emission_texture),
+        let shape = match self.triangle_shape(obj, &field)? {
+            Some(shape) => shape,
             None => {
                 let shape = self.analytic(obj, &field)?;
                 if let Some(le) = emission.filter(|&e| e != Rgb::ZERO) {
-                    let light = Light::of_analytic(id, &shape, le).ok_or_else(|| {
-                        self.error(
+                    if Light::of_analytic(i as u32, &shape, le).is_none() {
+                        return Err(self.error(
                             obj.emission.as_ref().map(|e| e.span()),
                             field("emission"),
                             "of the analytic surfaces only a sphere and a full disc (an annulus with inner_radius = 0) \
                              can emit; use a mesh, quad or box",
-                        )
-                    })?;
-                    parts.area_lights.push(light);
-                    parts.light_textures.push(None);
+                        ));
+                    }
                 }
-                parts.add_analytic(id, shape, obj.name.as_ref());
+                ShapeDesc::Analytic(shape)
             }
+        };
+        // A mesh's texture coordinates are known once the build step has read it.
+        let without_uvs = matches!(&shape, ShapeDesc::Triangles { uvs: None, .. } | ShapeDesc::Analytic(_));
+        if without_uvs {
+            self.check_no_texture_needed(obj, &field, materials.list[material as usize].uses_uv())?;
         }
-        parts.objects.push(SceneObject {
+        Ok(ObjectDesc {
             name: obj.name.clone().unwrap_or_else(|| format!("object {i}")),
+            lens_name: obj.name.clone(),
             material,
             emission,
-        });
-        Ok(())
+            emission_texture,
+            shape,
+            source: self.source(Some(o.span()), format!("objects[{i}]")),
+            material_source: self.source(Some(obj.material.span()), field("material")),
+        })
     }
 
     /// The index of the object's material.
@@ -144,7 +82,7 @@ impl Loader<'_> {
         &mut self,
         obj: &ObjectSection,
         field: &dyn Fn(&str) -> String,
-    ) -> Result<(Option<Rgb>, Option<Arc<Bitmap>>), SceneError> {
+    ) -> Result<(Option<Rgb>, Option<ImageRef>), SceneError> {
         let emission = match &obj.emission {
             Some(e) => Some(self.colour(*e.get_ref(), &e.span(), &field("emission"), None)?),
             // An emission texture alone emits its own values.
@@ -152,7 +90,7 @@ impl Loader<'_> {
             None => None,
         };
         let emission_texture = match &obj.emission_texture {
-            Some(t) => Some(self.bitmap(t.get_ref(), Some(t.span()), &field("emission_texture"), Encoding::Srgb)?),
+            Some(t) => Some(self.image(t.get_ref(), Some(t.span()), &field("emission_texture"), Encoding::Srgb)?),
             None => None,
         };
         Ok((emission, emission_texture))
@@ -180,14 +118,15 @@ impl Loader<'_> {
         Ok(())
     }
 
-    /// The triangles of a mesh, quad or box and their texture coordinates; None for an analytic shape.
+    /// The shape of a mesh, quad or box; None for an analytic shape.
     fn triangle_shape(
         &mut self,
         obj: &ObjectSection,
         field: &dyn Fn(&str) -> String,
-    ) -> Result<Option<(Mesh, TriangleUvs)>, SceneError> {
+    ) -> Result<Option<ShapeDesc>, SceneError> {
         if let Some(m) = &obj.mesh {
-            return self.mesh(m, &field("mesh")).map(Some);
+            let file = self.external_file(m.get_ref(), Some(m.span()), &field("mesh"), "mesh")?;
+            return Ok(Some(ShapeDesc::Obj { file, source: self.source(Some(m.span()), field("mesh")) }));
         }
         if let Some(q) = &obj.quad {
             let s = q.span();
@@ -200,7 +139,8 @@ impl Loader<'_> {
             if e1.cross(e2).length_squared() <= 0.0 {
                 return Err(self.error(Some(s), field("quad"), "edge1 and edge2 are parallel: the quad has no area"));
             }
-            return Ok(Some((Mesh::quad(c, e1, e2), Some(quad_uvs().to_vec()))));
+            let uvs = Some(quad_uvs().to_vec());
+            return Ok(Some(ShapeDesc::Triangles { triangles: Mesh::quad(c, e1, e2).triangles, uvs }));
         }
         if let Some(b) = &obj.box_shape {
             let s = b.span();
@@ -211,7 +151,7 @@ impl Loader<'_> {
             if (hi - lo).min_element() <= 0.0 {
                 return Err(self.error(Some(s), field("box"), "max must exceed min on every axis"));
             }
-            return Ok(Some((Mesh::axis_box(lo, hi), None)));
+            return Ok(Some(ShapeDesc::Triangles { triangles: Mesh::axis_box(lo, hi).triangles, uvs: None }));
         }
         Ok(None)
     }

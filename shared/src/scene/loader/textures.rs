@@ -5,6 +5,7 @@
 
 use super::state::Loader;
 use crate::color::Rgb;
+use crate::scene::description::{bound_images, constant_max, Bound, TextureDesc};
 use crate::scene::SceneError;
 use crate::texture::{BitmapTexture, Checkerboard, Encoding, Filter, Texture, UvTransform, Wrap};
 use std::ops::Range;
@@ -40,9 +41,9 @@ impl Loader<'_> {
         span: &Range<usize>,
         field: &str,
         max: Option<f32>,
-    ) -> Result<Texture, SceneError> {
-        let t = self.texture_of(value, span, field, Kind::Colour)?;
-        self.check_max(&t, span, field, max)?;
+    ) -> Result<TextureDesc, SceneError> {
+        let mut t = self.texture_of(value, span, field, Kind::Colour)?;
+        self.check_max(&mut t, span, field, max)?;
         Ok(t)
     }
 
@@ -54,22 +55,24 @@ impl Loader<'_> {
         span: &Range<usize>,
         field: &str,
         max: Option<f32>,
-    ) -> Result<Texture, SceneError> {
-        let t = self.texture_of(value, span, field, Kind::Scalar)?;
-        self.check_max(&t, span, field, max)?;
+    ) -> Result<TextureDesc, SceneError> {
+        let mut t = self.texture_of(value, span, field, Kind::Scalar)?;
+        self.check_max(&mut t, span, field, max)?;
         Ok(t)
     }
 
-    /// Refuses a texture that exceeds `max` somewhere.
+    /// Refuses a texture whose constants exceed `max` somewhere, and bounds its images by `max` (checked where
+    /// the build step decodes them).
     pub(super) fn check_max(
         &self,
-        t: &Texture,
+        t: &mut TextureDesc,
         span: &Range<usize>,
         field: &str,
         max: Option<f32>,
     ) -> Result<(), SceneError> {
         let Some(max) = max else { return Ok(()) };
-        let top = t.max_value();
+        bound_images(t, &Bound { max, source: self.source(Some(span.clone()), field) });
+        let top = constant_max(t);
         if top > max {
             let what = match t {
                 Texture::Constant(_) => format!("must be at most {max}"),
@@ -87,7 +90,7 @@ impl Loader<'_> {
         span: &Range<usize>,
         field: &str,
         kind: Kind,
-    ) -> Result<Texture, SceneError> {
+    ) -> Result<TextureDesc, SceneError> {
         match value {
             Value::Table(table) => {
                 if table.contains_key("bitmap") {
@@ -141,7 +144,7 @@ impl Loader<'_> {
         span: &Range<usize>,
         field: &str,
         kind: Kind,
-    ) -> Result<Texture, SceneError> {
+    ) -> Result<TextureDesc, SceneError> {
         self.known_keys(table, BITMAP_KEYS, span, field, "a bitmap texture")?;
         let sub = |k: &str| format!("{field}.{k}");
         let Some(Value::String(file)) = table.get("bitmap") else {
@@ -173,7 +176,7 @@ impl Loader<'_> {
             None => Rgb::ONE,
             Some(v) => self.constant(v, span, &sub("factor"), kind)?,
         };
-        let image = self.bitmap(file, Some(span.clone()), &sub("bitmap"), encoding)?;
+        let image = self.image(file, Some(span.clone()), &sub("bitmap"), encoding)?;
         Ok(Texture::Bitmap(BitmapTexture { image, factor, filter, wrap, to_uv }))
     }
 
@@ -183,7 +186,7 @@ impl Loader<'_> {
         span: &Range<usize>,
         field: &str,
         kind: Kind,
-    ) -> Result<Texture, SceneError> {
+    ) -> Result<TextureDesc, SceneError> {
         self.known_keys(table, CHECKERBOARD_KEYS, span, field, "a checkerboard texture")?;
         let sub = |k: &str| format!("{field}.{k}");
         if table.get("checkerboard") != Some(&Value::Boolean(true)) {
@@ -334,7 +337,8 @@ mod tests {
         } else {
             loader.texture(&v, &(0..0), field, max)
         };
-        r.map_err(|e| e.to_string())
+        let t = r.map_err(|e| e.to_string())?;
+        crate::scene::build::decode_texture(&t, &files).map_err(|e| e.to_string())
     }
 
     fn bitmap(t: Texture) -> BitmapTexture {

@@ -9,6 +9,7 @@
 pub mod document;
 pub mod error;
 pub mod files;
+pub(crate) mod meshes;
 pub mod ply;
 pub mod serialized;
 pub mod spectrum;

@@ -4,13 +4,14 @@
 //! are otherwise one-sided, `Back::Black`) and `mask` (the opacity). Other BSDFs are refused.
 
 use super::params::{uniform, Params};
-use super::{rgb, Importer};
+use super::{rgb, source, Importer};
 use crate::bsdf::conductor::ConductorFresnel;
 use crate::bsdf::microfacet::Distribution;
 use crate::bsdf::plastic::Coat;
 use crate::bsdf::principled::eta_of_specular;
-use crate::material::{Back, Material, PrincipledSurface, Roughness, Surface};
-use crate::scene::mitsuba::{Category, MitsubaError, Plugin, SpectrumUse, Value};
+use crate::material::{Back, PrincipledSurface, Roughness, Surface};
+use crate::scene::description::{ImageRef, MaterialDesc, TextureDesc};
+use crate::scene::mitsuba::{Category, MitsubaError, Plugin, SourcePos, SpectrumUse, Value};
 use crate::spectrum::RefractiveIndex;
 use crate::texture::Texture;
 use std::sync::Arc;
@@ -62,13 +63,26 @@ impl Importer<'_> {
     /// The diffuse BSDF Mitsuba gives a shape that names none.
     pub(super) fn default_material(&mut self) -> u32 {
         let index = self.materials.len() as u32;
-        self.materials.push(Material::new(Surface::Diffuse { reflectance: Texture::grey(0.5) }, Back::Black, None));
+        self.materials.push(MaterialDesc {
+            name: "the default diffuse BSDF".into(),
+            front: Surface::Diffuse { reflectance: Texture::grey(0.5) },
+            back: Back::Black,
+            opacity: None,
+            source: source(&SourcePos::file_start(&self.doc.path), "<bsdf type=\"diffuse\">"),
+        });
         index
     }
 
     /// A BSDF with its wrappers: `mask` gives the opacity, `twosided` the back.
-    fn wrapped(&mut self, bsdf: &Plugin) -> Result<Material, MitsubaError> {
+    fn wrapped(&mut self, bsdf: &Plugin) -> Result<MaterialDesc, MitsubaError> {
         let p = Params::new(bsdf);
+        let material = |front, back, opacity| MaterialDesc {
+            name: bsdf.id.clone().unwrap_or_else(|| bsdf.element()),
+            front,
+            back,
+            opacity,
+            source: source(&bsdf.position, bsdf.element()),
+        };
         let material = match bsdf.kind.as_str() {
             "mask" => {
                 let opacity = self.texture_param(&p, "opacity", SpectrumUse::Reflectance, Some(1.0))?;
@@ -78,7 +92,7 @@ impl Importer<'_> {
                 if inner.opacity.is_some() {
                     return Err(p.error("a mask inside a mask is not supported"));
                 }
-                Material::new(inner.front, inner.back, Some(opacity))
+                material(inner.front, inner.back, Some(opacity))
             }
             "twosided" => {
                 let sides = p.children_of(Category::Bsdf);
@@ -91,21 +105,21 @@ impl Importer<'_> {
                     None => Back::Same,
                     Some(back) => Back::Other(Box::new(self.surface(&back.plugin)?)),
                 };
-                Material::new(front_surface, back, None)
+                material(front_surface, back, None)
             }
             "bumpmap" | "normalmap" => {
                 let inner = self.unperturbed(&p)?;
                 return self.wrapped(&inner);
             }
             // A family reads and checks its own parameters.
-            _ => return Ok(Material::new(self.surface(bsdf)?, Back::Black, None)),
+            _ => return Ok(material(self.surface(bsdf)?, Back::Black, None)),
         };
         p.finish()?;
         Ok(material)
     }
 
     /// A BSDF family (no wrapper).
-    fn surface(&mut self, bsdf: &Plugin) -> Result<Surface, MitsubaError> {
+    fn surface(&mut self, bsdf: &Plugin) -> Result<Surface<ImageRef>, MitsubaError> {
         let p = Params::new(bsdf);
         if bsdf.category != Category::Bsdf {
             return Err(p.error(format!("{} is not a BSDF", bsdf.element())));
@@ -207,7 +221,7 @@ impl Importer<'_> {
     }
 
     /// A rough family's `distribution` and `alpha` (or `alpha_u` and `alpha_v` where `anisotropic` ones exist).
-    fn roughness(&mut self, p: &Params, anisotropic: bool) -> Result<Roughness, MitsubaError> {
+    fn roughness(&mut self, p: &Params, anisotropic: bool) -> Result<Roughness<ImageRef>, MitsubaError> {
         let distribution = match p.string("distribution")?.unwrap_or("beckmann") {
             "beckmann" => Distribution::Beckmann,
             "ggx" => Distribution::Ggx,
@@ -215,7 +229,7 @@ impl Importer<'_> {
         };
         // Mitsuba's visible-normal sampling changes how the lobe is sampled, not the image.
         p.ignore(&["sample_visible"]);
-        let alpha = |l: &mut Self, name: &str| -> Result<Option<Texture>, MitsubaError> {
+        let alpha = |l: &mut Self, name: &str| -> Result<Option<TextureDesc>, MitsubaError> {
             let t = l.texture_param(p, name, SpectrumUse::Reflectance, None)?;
             if let Some(c) = t.as_ref().and_then(Texture::constant) {
                 if c.x.is_nan() || c.x <= 0.0 {
@@ -236,7 +250,7 @@ impl Importer<'_> {
     }
 
     /// Mitsuba's `principled`, parameter by parameter.
-    fn principled(&mut self, p: &Params) -> Result<Surface, MitsubaError> {
+    fn principled(&mut self, p: &Params) -> Result<Surface<ImageRef>, MitsubaError> {
         let mut s = PrincipledSurface::default();
         if let Some(t) = self.texture_param(p, "base_color", SpectrumUse::Reflectance, Some(1.0))? {
             s.base_color = t;

@@ -5,7 +5,7 @@
 
 use super::params::Params;
 use super::Importer;
-use crate::camera::{Camera, Lens};
+use crate::scene::description::{CameraDesc, LensDesc};
 use crate::scene::mitsuba::{Category, MitsubaError, SourcePos};
 use glam::{DMat4, DVec3, Vec3};
 
@@ -14,7 +14,7 @@ const DEFAULT_FILM: (i64, i64) = (768, 576);
 
 impl Importer<'_> {
     /// The first sensor (the one Mitsuba renders by default) as photonfarm's camera.
-    pub(super) fn camera(&mut self) -> Result<Camera, MitsubaError> {
+    pub(super) fn camera(&mut self) -> Result<CameraDesc, MitsubaError> {
         let doc = self.doc;
         let Some(sensor) = doc.sensors.first() else {
             return Err(MitsubaError::in_file(
@@ -58,14 +58,14 @@ impl Importer<'_> {
             if !(radius > 0.0 && focus > 0.0) {
                 return Err(p.error("aperture_radius and focus_distance must be positive"));
             }
-            Lens::Thin { radius: radius as f32, focus_distance: focus as f32 }
+            LensDesc::Thin { fov_y_deg: fov_y as f32, radius: radius as f32, focus_distance: focus as f32 }
         } else {
             // A pinhole focuses everywhere: Blender's exporter writes focus_distance anyway.
             p.ignore(&["focus_distance"]);
-            Lens::Pinhole
+            LensDesc::Pinhole { fov_y_deg: fov_y as f32 }
         };
         p.finish()?;
-        Ok(Camera::new(position, look_at, up, fov_y as f32, width, height, lens))
+        Ok(CameraDesc { position, look_at, up, width, height, lens })
     }
 
     /// The film's size in pixels.

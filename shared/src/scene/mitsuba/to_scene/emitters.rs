@@ -2,20 +2,18 @@
 //! Mitsuba's sky models (`sunsky`, …) and the emitters photonfarm has no counterpart for are refused by name.
 
 use super::params::Params;
-use super::{rgb, Importer};
+use super::{rgb, source, Importer};
 use crate::color::Rgb;
 use crate::light::directional::Sun;
-use crate::light::environment::{ConstantEnvironment, EnvironmentMap};
-use crate::light::infinite::InfiniteLight;
-use crate::light::Light;
+use crate::light::environment::ConstantEnvironment;
+use crate::scene::description::{LightDesc, LightKind};
 use crate::scene::mitsuba::{MitsubaError, Plugin, SpectrumUse};
 use crate::texture::Encoding;
 use glam::{DMat3, DMat4, DVec3, Mat3};
-use std::sync::Arc;
 
 impl Importer<'_> {
     /// A top-level emitter as a light.
-    pub(super) fn emitter(&mut self, plugin: &Plugin) -> Result<Light, MitsubaError> {
+    pub(super) fn emitter(&mut self, plugin: &Plugin) -> Result<LightDesc, MitsubaError> {
         let p = Params::new(plugin);
         let to_world = p.transform("to_world")?;
         let light = match plugin.kind.as_str() {
@@ -23,8 +21,8 @@ impl Importer<'_> {
             "constant" => {
                 // Mitsuba reads a constant's to_world and has no use for it: the light is the same every way.
                 let radiance = emission(&p, "radiance")?;
-                let env = ConstantEnvironment::new(radiance).map_err(|e| p.error(e.to_string()))?;
-                Light::Infinite(InfiniteLight::Constant(env))
+                ConstantEnvironment::new(radiance).map_err(|e| p.error(e.to_string()))?;
+                LightKind::Constant { radiance }
             }
             "directional" => {
                 let irradiance = emission(&p, "irradiance")?;
@@ -47,8 +45,8 @@ impl Importer<'_> {
                     }
                 };
                 // photonfarm's sun is named by the way toward it, against the light's travel.
-                let sun = Sun::new(-travel.as_vec3(), irradiance, 0.0).map_err(|e| p.error(e.to_string()))?;
-                Light::Infinite(InfiniteLight::Sun(sun))
+                Sun::new(-travel.as_vec3(), irradiance, 0.0).map_err(|e| p.error(e.to_string()))?;
+                LightKind::Sun { toward: -travel.as_vec3(), irradiance, angular_radius: 0.0 }
             }
             "point" => {
                 let intensity = intensity(&p)?;
@@ -59,7 +57,7 @@ impl Importer<'_> {
                     Some(at) => at,
                     None => to_world.transform_point3(DVec3::ZERO),
                 };
-                Light::Point { position: position.as_vec3(), intensity }
+                LightKind::Point { position: position.as_vec3(), intensity }
             }
             "spot" => {
                 let cutoff = p.float_or("cutoff_angle", 20.0)?;
@@ -82,7 +80,7 @@ impl Importer<'_> {
                     plugin.element(),
                     plugin.position
                 ));
-                Light::Spot {
+                LightKind::Spot {
                     position: to_world.transform_point3(DVec3::ZERO).as_vec3(),
                     direction: direction.as_vec3(),
                     intensity,
@@ -101,12 +99,12 @@ impl Importer<'_> {
             other => return Err(p.error(format!("the emitter `{other}` is not supported"))),
         };
         p.finish()?;
-        Ok(light)
+        Ok(LightDesc { kind: light, source: source(&plugin.position, plugin.element()) })
     }
 
     /// An `envmap`: its image (PNG and JPEG decoded from sRGB, OpenEXR, Radiance HDR and PFM linear, as Mitsuba
     /// reads them) in Mitsuba's latitude-longitude orientation, which is photonfarm's (`light::environment`).
-    fn envmap(&mut self, p: &Params, to_world: DMat4) -> Result<Light, MitsubaError> {
+    fn envmap(&mut self, p: &Params, to_world: DMat4) -> Result<LightKind, MitsubaError> {
         let name = p.string("filename")?.ok_or_else(|| p.error("an envmap needs a filename"))?;
         let scale = p.float_or("scale", 1.0)?;
         if !(scale.is_finite() && scale > 0.0) {
@@ -126,22 +124,16 @@ impl Importer<'_> {
             ));
         }
         let mirrored = linear.determinant() < 0.0;
-        let bitmap = self.bitmap(name, Encoding::Srgb, &p.plugin.position, &p.plugin.element())?;
-        let (w, h) = (bitmap.width() as usize, bitmap.height() as usize);
-        if w < 2 || h < 3 {
-            return Err(p.error(format!("{name}: Mitsuba needs an envmap of at least 2 × 3 texels, it is {w} × {h}")));
-        }
-        let map = if mirrored {
-            // A mirror M = R · diag(−1, 1, 1) turns u into 1 − u: the map read with the rotation R and its columns
-            // in reverse order is Mitsuba's, texel centres and bilinear weights included.
-            let rotation = linear * DMat3::from_diagonal(DVec3::new(-1.0, 1.0, 1.0));
-            let texels = (0..w * h).map(|k| bitmap.texel((w - 1 - k % w) as i64, (k / w) as i64)).collect();
-            EnvironmentMap::new(w, h, texels, scale as f32, mat3(rotation))
+        // The map's size (at least 2 × 3 texels, as Mitsuba needs) is checked where the build step decodes it.
+        let image = self.bitmap(name, Encoding::Srgb, &p.plugin.position, &p.plugin.element())?;
+        let rotation = if mirrored {
+            // A mirror M = R · diag(−1, 1, 1) turns u into 1 − u: the build step reads the map with the rotation R
+            // and its columns in reverse order.
+            linear * DMat3::from_diagonal(DVec3::new(-1.0, 1.0, 1.0))
         } else {
-            EnvironmentMap::from_bitmap(&bitmap, scale as f32, mat3(linear))
+            linear
         };
-        let map = map.map_err(|e| p.error(format!("{name}: {e}")))?;
-        Ok(Light::Infinite(InfiniteLight::Map(Arc::new(map))))
+        Ok(LightKind::Map { image, scale: scale as f32, rotation: mat3(rotation), mirrored })
     }
 }
 

@@ -1,14 +1,14 @@
 //! Shapes: `obj`, `ply`, `serialized`, `rectangle` and `cube` as triangles, `sphere` and `disk` as analytic
 //! surfaces, each with its BSDF (Mitsuba's diffuse default when it names none) and an `area` emitter.
 
-use super::meshes::{read_obj, read_ply, read_serialized, IndexedMesh, Placement};
 use super::params::Params;
-use super::{rgb, Importer};
+use super::{rgb, source, Importer};
 use crate::color::Rgb;
 use crate::geometry::{Analytic, Annulus, MeshTriangle, Sphere};
 use crate::light::Light;
+use crate::scene::description::{MeshFormat, ObjectDesc, ShapeDesc};
+use crate::scene::mitsuba::meshes::{IndexedMesh, Placement};
 use crate::scene::mitsuba::{Category, MitsubaError, Plugin, SpectrumUse};
-use crate::scene::SceneObject;
 use glam::{DMat3, DMat4, DVec3, Vec2, Vec3};
 use std::sync::Arc;
 
@@ -81,20 +81,10 @@ impl Importer<'_> {
         let name =
             plugin.id.clone().unwrap_or_else(|| format!("{} at line {}", plugin.element(), plugin.position.line))
                 + suffix;
-        match kind.as_str() {
-            "obj" | "ply" | "serialized" | "rectangle" | "cube" => {
-                // A mesh instanced many times is read once.
-                let mesh = match self.meshes.get(&Arc::as_ptr(plugin)) {
-                    Some(mesh) => {
-                        p.ignore(&["filename", "flip_tex_coords", "shape_index", "face_normals"]);
-                        mesh.clone()
-                    }
-                    None => {
-                        let mesh = Arc::new(self.shape_mesh(&p, &kind)?);
-                        self.meshes.insert(Arc::as_ptr(plugin), mesh.clone());
-                        mesh
-                    }
-                };
+        let emission = emission.filter(|e| *e != Rgb::ZERO);
+        let shape = match kind.as_str() {
+            "rectangle" | "cube" => {
+                let mesh = if kind == "rectangle" { rectangle() } else { cube() };
                 let (triangles, skipped) = placement.triangles(&mesh).map_err(|m| p.error(m))?;
                 if skipped > 0 {
                     self.notes.push(format!("{name}: {skipped} degenerate triangles (no area) left out"));
@@ -106,21 +96,26 @@ impl Importer<'_> {
                 if self.materials[material as usize].uses_uv() && !has_uvs {
                     return Err(p.error("its BSDF is textured but the shape has no texture coordinates"));
                 }
-                for t in triangles {
-                    let triangle = MeshTriangle { v: t.v, n: t.n };
-                    if let Some(le) = emission.filter(|e| *e != Rgb::ZERO) {
-                        let c = triangle.cross();
-                        self.lights.push(Light::Area {
-                            triangle: self.triangles.len() as u32,
-                            emission: le,
-                            area: 0.5 * c.length(),
-                            normal: c.normalize(),
-                        });
-                        self.light_textures.push(None);
+                let uvs = has_uvs.then(|| triangles.iter().map(|t| t.uv.expect("checked above")).collect());
+                let triangles = triangles.into_iter().map(|t| MeshTriangle { v: t.v, n: t.n }).collect();
+                ShapeDesc::Triangles { triangles, uvs }
+            }
+            "obj" | "ply" | "serialized" => {
+                // The build step reads the mesh, places it, and checks its triangles and texture coordinates.
+                let filename = p.string("filename")?.ok_or_else(|| p.error("the shape needs a filename"))?;
+                let file = self.read_file(filename, &p.plugin.position, &p.plugin.element())?;
+                let format = match kind.as_str() {
+                    "obj" => MeshFormat::Obj { flip_tex_coords: p.boolean("flip_tex_coords", true)? },
+                    "ply" => MeshFormat::Ply,
+                    _ => {
+                        let index = p.integer("shape_index")?.unwrap_or(0);
+                        let index = u32::try_from(index).map_err(|_| p.error("shape_index must not be negative"))?;
+                        MeshFormat::Serialized { shape_index: index }
                     }
-                    self.triangles.push((id, triangle));
-                    self.triangle_uvs.push(if has_uvs { t.uv } else { None });
-                }
+                };
+                let face_normals = p.boolean("face_normals", false)?;
+                let (to_world, flip_normals) = (placement.to_world, placement.flip_normals);
+                ShapeDesc::PlacedMesh { file, format, face_normals, to_world, flip_normals }
             }
             "sphere" | "disk" => {
                 if self.materials[material as usize].uses_uv() {
@@ -132,22 +127,21 @@ impl Importer<'_> {
                     return Err(p.error(format!("flip_normals on a {kind} is not supported")));
                 }
                 let shape = analytic(&p, &kind, &placement)?;
-                if let Some(le) = emission.filter(|e| *e != Rgb::ZERO) {
-                    // Mitsuba's area emitter radiates from the side the surface normal faces: a sphere's outside,
-                    // a disk's transformed +z, which `analytic` made the disc's emitting side.
-                    let light = Light::of_analytic(id, &shape, le)
-                        .ok_or_else(|| p.error(format!("photonfarm's {kind} cannot emit")))?;
-                    self.lights.push(light);
-                    self.light_textures.push(None);
+                // Mitsuba's area emitter radiates from the side the surface normal faces: a sphere's outside, a
+                // disk's transformed +z, which `analytic` made the disc's emitting side.
+                if let Some(le) = emission {
+                    if Light::of_analytic(id, &shape, le).is_none() {
+                        return Err(p.error(format!("photonfarm's {kind} cannot emit")));
+                    }
                 }
-                self.analytic.push((id, shape));
+                ShapeDesc::Analytic(shape)
             }
             other => {
                 return Err(p.error(format!(
                     "the shape `{other}` is not supported (obj, ply, serialized, rectangle, cube, sphere and disk are)"
                 )))
             }
-        }
+        };
         for medium in p.children_of(Category::Medium) {
             let refusal = MitsubaError::at(
                 &medium.position,
@@ -157,7 +151,17 @@ impl Importer<'_> {
             self.approximate(refusal, "without it")?;
         }
         p.finish()?;
-        self.objects.push(SceneObject { name, material, emission: emission.filter(|e| *e != Rgb::ZERO) });
+        let at = source(&plugin.position, plugin.element());
+        self.objects.push(ObjectDesc {
+            name,
+            lens_name: None,
+            material,
+            emission,
+            emission_texture: None,
+            shape,
+            source: at.clone(),
+            material_source: at,
+        });
         Ok(())
     }
 
@@ -181,37 +185,6 @@ impl Importer<'_> {
         }
         e.finish()?;
         Ok(Some(radiance))
-    }
-
-    /// The mesh of a triangle shape, in its own coordinates.
-    fn shape_mesh(&mut self, p: &Params, kind: &str) -> Result<IndexedMesh, MitsubaError> {
-        let mesh = match kind {
-            "rectangle" => rectangle(),
-            "cube" => cube(),
-            _ => {
-                let name = p.string("filename")?.ok_or_else(|| p.error("the shape needs a filename"))?;
-                let (_, bytes) = self.read_file(name, &p.plugin.position, &p.plugin.element())?;
-                let fail = |m: String| p.error(format!("{name}: {m}"));
-                let (mesh, own_face_normals) = match kind {
-                    "obj" => (read_obj(&bytes, p.boolean("flip_tex_coords", true)?).map_err(fail)?, false),
-                    "ply" => (read_ply(&bytes).map_err(fail)?, false),
-                    _ => {
-                        let index = p.integer("shape_index")?.unwrap_or(0);
-                        let index = u32::try_from(index).map_err(|_| p.error("shape_index must not be negative"))?;
-                        read_serialized(&bytes, index).map_err(fail)?
-                    }
-                };
-                let mut mesh = mesh;
-                if p.boolean("face_normals", false)? || own_face_normals {
-                    mesh.normals = None;
-                }
-                mesh
-            }
-        };
-        if mesh.triangles.is_empty() {
-            return Err(p.error("the mesh has no triangles"));
-        }
-        Ok(mesh)
     }
 }
 

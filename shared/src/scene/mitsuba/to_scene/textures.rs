@@ -3,6 +3,7 @@
 
 use super::params::{constant_colour, Params};
 use super::{rgb, Importer};
+use crate::scene::description::{bound_images, constant_max, Bound, TextureDesc};
 use crate::scene::mitsuba::{Category, Child, MitsubaError, SpectrumUse};
 use crate::texture::{BitmapTexture, Checkerboard, Encoding, Filter, Texture, UvTransform, Wrap};
 use glam::DMat4;
@@ -16,7 +17,7 @@ impl Importer<'_> {
         name: &str,
         usage: SpectrumUse,
         max: Option<f32>,
-    ) -> Result<Option<Texture>, MitsubaError> {
+    ) -> Result<Option<TextureDesc>, MitsubaError> {
         if let Some(param) = p.get(name) {
             let c = constant_colour(&param.value, usage).ok_or_else(|| {
                 p.error_at(param, format!("must be a colour or a texture, not a <{}>", param.value.tag()))
@@ -26,8 +27,12 @@ impl Importer<'_> {
             return Ok(Some(t));
         }
         let Some(child) = p.child(name) else { return Ok(None) };
-        let t = self.texture(child, usage)?;
+        let mut t = self.texture(child, usage)?;
         self.check_range(&t, max).map_err(|m| MitsubaError::at(&child.position, child.plugin.element(), m))?;
+        // The images' values are checked where the build step decodes them, at the child.
+        if let Some(max) = max {
+            bound_images(&mut t, &Bound { max, source: super::source(&child.position, child.plugin.element()) });
+        }
         Ok(Some(t))
     }
 
@@ -38,19 +43,19 @@ impl Importer<'_> {
         name: &str,
         default: f32,
         max: Option<f32>,
-    ) -> Result<Texture, MitsubaError> {
+    ) -> Result<TextureDesc, MitsubaError> {
         Ok(self.texture_param(p, name, SpectrumUse::Reflectance, max)?.unwrap_or(Texture::grey(default)))
     }
 
-    /// Refuses negative values and values above `max`.
-    fn check_range(&self, t: &Texture, max: Option<f32>) -> Result<(), String> {
+    /// Refuses negative values and constants above `max`.
+    fn check_range(&self, t: &TextureDesc, max: Option<f32>) -> Result<(), String> {
         if let Texture::Constant(c) = t {
             if !c.is_finite() || c.min_element() < 0.0 {
                 return Err(format!("must be finite and not negative, got {c:?}"));
             }
         }
         if let Some(max) = max {
-            let top = t.max_value();
+            let top = constant_max(t);
             if top > max {
                 return Err(format!("reaches {top}, above {max} (a surface cannot reflect more than it receives)"));
             }
@@ -59,7 +64,7 @@ impl Importer<'_> {
     }
 
     /// A texture plugin.
-    fn texture(&mut self, child: &Child, usage: SpectrumUse) -> Result<Texture, MitsubaError> {
+    fn texture(&mut self, child: &Child, usage: SpectrumUse) -> Result<TextureDesc, MitsubaError> {
         let plugin = &child.plugin;
         let p = Params::new(plugin);
         if plugin.category != Category::Texture {

@@ -7,7 +7,7 @@ use glam::{DMat3, DMat4, DVec3, Vec2, Vec3};
 
 /// A mesh as its file gives it.
 #[derive(Default)]
-pub(super) struct IndexedMesh {
+pub(crate) struct IndexedMesh {
     pub positions: Vec<Vec3>,
     pub triangles: Vec<[u32; 3]>,
     pub normals: Option<Vec<Vec3>>,
@@ -17,7 +17,7 @@ pub(super) struct IndexedMesh {
 
 /// Reads an OBJ file as Mitsuba's `obj` does: every object and group into one mesh, v flipped when
 /// `flip_tex_coords` (Mitsuba's default).
-pub(super) fn read_obj(bytes: &[u8], flip_tex_coords: bool) -> Result<IndexedMesh, String> {
+pub(crate) fn read_obj(bytes: &[u8], flip_tex_coords: bool) -> Result<IndexedMesh, String> {
     let (models, _) = tobj::load_obj_buf(
         &mut std::io::BufReader::new(bytes),
         &tobj::LoadOptions { triangulate: true, single_index: true, ignore_points: true, ignore_lines: true },
@@ -57,13 +57,13 @@ pub(super) fn read_obj(bytes: &[u8], flip_tex_coords: bool) -> Result<IndexedMes
 }
 
 /// Reads a PLY file (coordinates as stored: Mitsuba's PLY reader does not flip them).
-pub(super) fn read_ply(bytes: &[u8]) -> Result<IndexedMesh, String> {
+pub(crate) fn read_ply(bytes: &[u8]) -> Result<IndexedMesh, String> {
     let m = ply::read(bytes).map_err(|e| format!("cannot parse the PLY file: {e}"))?;
     Ok(IndexedMesh { positions: m.positions, triangles: m.triangles, normals: m.normals, uvs: m.uvs })
 }
 
 /// Reads mesh `shape_index` of a serialized file; the second value is its own face-normals flag.
-pub(super) fn read_serialized(bytes: &[u8], shape_index: u32) -> Result<(IndexedMesh, bool), String> {
+pub(crate) fn read_serialized(bytes: &[u8], shape_index: u32) -> Result<(IndexedMesh, bool), String> {
     let m = serialized::read_serialized(bytes, shape_index).map_err(|e| e.to_string())?;
     let v3 = |p: &[f32; 3]| Vec3::from(*p);
     Ok((
@@ -79,7 +79,7 @@ pub(super) fn read_serialized(bytes: &[u8], shape_index: u32) -> Result<(Indexed
 
 /// One world-space triangle of a shape: vertices, vertex normals and photonfarm's texture coordinates (v
 /// upward).
-pub(super) struct WorldTriangle {
+pub(crate) struct WorldTriangle {
     pub v: [Vec3; 3],
     pub n: Option<[Vec3; 3]>,
     pub uv: Option<[Vec2; 3]>,
@@ -87,7 +87,7 @@ pub(super) struct WorldTriangle {
 
 /// How a shape's triangles are placed in the world.
 #[derive(Clone, Copy)]
-pub(super) struct Placement {
+pub(crate) struct Placement {
     pub to_world: DMat4,
     pub flip_normals: bool,
 }
@@ -151,6 +151,6 @@ impl Placement {
 }
 
 /// Mitsuba's texture coordinates (v downward) in photonfarm's (v upward).
-pub(super) fn photonfarm_uv(uv: Vec2) -> Vec2 {
+pub(crate) fn photonfarm_uv(uv: Vec2) -> Vec2 {
     Vec2::new(uv.x, 1.0 - uv.y)
 }
