@@ -18,7 +18,8 @@ use serde::{Deserialize, Serialize};
 /// 11: jobs may ask for a ray map (`Job::ray_map`), whose portions workers send (`RayMapPortion`).
 /// 12: the coordinator tells the workers when a timed run stops (`StopAt`), and jobs carry a Mitsuba scene's
 /// import options (`Job::mitsuba`).
-pub const PROTOCOL_VERSION: u32 = 12;
+/// 14: a snapshot's delta holds only the pixels rendered since the previous one (`delta::SPARSE_MAGIC`).
+pub const PROTOCOL_VERSION: u32 = 14;
 
 /// Which end of a link a peer is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -124,7 +125,8 @@ pub struct Snapshot {
     pub seq: u64,
     /// The worker's counters since its start (cumulative, so a lost snapshot cannot skew them).
     pub totals: RayTotals,
-    /// Per-pixel sums added since the previous snapshot (see `accumulation::delta`).
+    /// Per-pixel sums added since the previous snapshot, over the pixels that changed (see
+    /// `accumulation::delta`).
     pub delta: Vec<u8>,
     /// CRC-32 of `delta`: a delta damaged on its way (a plaintext link has only TCP's 16-bit checksum) is refused
     /// rather than merged.
