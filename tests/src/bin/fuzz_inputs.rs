@@ -270,7 +270,7 @@ fn main() -> Result<()> {
     let delta_small = encode_delta(&current, &base, Compression::Small);
     let ghost_delta = encode_delta(&sums(w, h, &ghost, 1, 0.2), &Accumulator::with_aux(w, h, ghost), Compression::Fast);
     // A snapshot of every other row, as a worker sends the pixels its rounds rendered.
-    let rows: Vec<bool> = (0..(w * h) as usize).map(|i| i / w as usize % 2 == 0).collect();
+    let rows: Vec<bool> = (0..(w * h) as usize).map(|i| (i / w as usize).is_multiple_of(2)).collect();
     let sparse = encode_delta_of(&current, &base, &PixelRuns::from_flags(&rows), Compression::Fast);
     let raw = zstd::bulk::decompress(&delta, 1 << 24).context("the seed delta")?;
     let sparse_raw = zstd::bulk::decompress(&sparse, 1 << 24).context("the seed sparse delta")?;
