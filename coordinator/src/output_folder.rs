@@ -68,15 +68,23 @@ impl Reference {
     }
 }
 
-/// Writes image.exr (with the lit mask as its `lit` layer and the phases per pixel as its `phases` layer),
-/// preview.png and run.json; each file is replaced atomically.
-pub fn save(dir: &Path, sums: &Accumulator, lit: &LitMask, record: &RunRecord) -> Result<()> {
+/// Writes preview.png, then runs `between` (the preview is the cheapest file, and the one a user waits for; a
+/// large image's EXR takes seconds), then image.exr (with the lit mask as its `lit` layer and the phases per
+/// pixel as its `phases` layer) and run.json; each file is replaced atomically.
+pub fn save(
+    dir: &Path,
+    sums: &Accumulator,
+    lit: &LitMask,
+    record: &RunRecord,
+    between: impl FnOnce() -> Result<()>,
+) -> Result<()> {
     let mut layers: Vec<LayerImage> = layer_images(sums);
+    let total = layers.iter().find(|l| l.name == "total").context("total layer missing")?;
+    write_preview_png(&dir.join("preview.png"), total, auto_exposure(total))?;
+    between()?;
     layers.push(lit_layer(lit));
     layers.push(phases_layer(sums));
     write_exr(&dir.join("image.exr"), &layers)?;
-    let total = layers.iter().find(|l| l.name == "total").context("total layer missing")?;
-    write_preview_png(&dir.join("preview.png"), total, auto_exposure(total))?;
     let json = serde_json::to_vec_pretty(record)?;
     let tmp = dir.join(".run.json.tmp");
     std::fs::write(&tmp, json).with_context(|| format!("cannot write {}", tmp.display()))?;

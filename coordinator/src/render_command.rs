@@ -615,7 +615,8 @@ impl Outputs<'_> {
         }
     }
 
-    /// Writes the checkpoint (distributed methods), the image and the record.
+    /// Writes the checkpoint (distributed methods), the image and the record: the run's final save, whose
+    /// record's wall time includes the checkpoint.
     fn save(
         &self,
         engine: &dyn Progressive,
@@ -623,23 +624,81 @@ impl Outputs<'_> {
         reason: StopReason,
         forecast: &Forecast,
     ) -> Result<RunRecord> {
-        if self.args.method.is_distributed() {
-            // The checkpoint first: it is what a resumed run needs.
-            Checkpoint::new(
-                engine.sums(),
-                &self.scene.hash,
-                self.args.method,
-                *engine.settings(),
-                self.session,
-                self.elapsed_s(),
-                engine.totals(),
-                history,
-            )
-            .save(&self.dir.join(CHECKPOINT))?;
-        }
+        write_checkpoint(self.dir, engine.sums(), self.checkpoint_inputs(engine, history))?;
         let record = self.record(engine, history, reason, forecast);
-        output_folder::save(self.dir, engine.sums(), self.lit, &record)?;
+        output_folder::save(self.dir, engine.sums(), self.lit, &record, || Ok(()))?;
         Ok(record)
+    }
+
+    /// `save` on a thread of its own, from a copy of the sums: encoding a large image's checkpoint and EXR takes
+    /// seconds, which would hold back merging the workers' snapshots (and, through their acknowledgements,
+    /// stretch their snapshot interval).
+    fn save_in_background(
+        &self,
+        engine: &dyn Progressive,
+        history: &[HistoryEntry],
+        forecast: &Forecast,
+    ) -> std::io::Result<std::thread::JoinHandle<Result<()>>> {
+        let record = self.record(engine, history, StopReason::Running, forecast);
+        let checkpoint = self.checkpoint_inputs(engine, history);
+        let (dir, sums, lit) = (self.dir.to_path_buf(), engine.sums().clone(), self.lit.clone());
+        std::thread::Builder::new()
+            .name("save".into())
+            .spawn(move || write_outputs(&dir, &sums, &lit, &record, checkpoint))
+    }
+
+    /// What a checkpoint of this moment holds besides the sums (distributed methods only).
+    fn checkpoint_inputs(&self, engine: &dyn Progressive, history: &[HistoryEntry]) -> Option<CheckpointInputs> {
+        self.args.method.is_distributed().then(|| CheckpointInputs {
+            scene_hash: self.scene.hash.clone(),
+            method: self.args.method,
+            settings: *engine.settings(),
+            session: self.session,
+            elapsed_s: self.elapsed_s(),
+            totals: engine.totals(),
+            history: history.to_vec(),
+        })
+    }
+}
+
+/// A checkpoint's fields besides the sums, taken when a save starts.
+struct CheckpointInputs {
+    scene_hash: String,
+    method: Method,
+    settings: RenderSettings,
+    session: u32,
+    elapsed_s: f64,
+    totals: photonfarm::render::RayTotals,
+    history: Vec<HistoryEntry>,
+}
+
+/// Writes the preview first (what a user waits for), then the checkpoint (what a resumed run needs), then the
+/// image and the record.
+fn write_outputs(
+    dir: &Path,
+    sums: &Accumulator,
+    lit: &LitMask,
+    record: &RunRecord,
+    checkpoint: Option<CheckpointInputs>,
+) -> Result<()> {
+    output_folder::save(dir, sums, lit, record, || write_checkpoint(dir, sums, checkpoint))
+}
+
+fn write_checkpoint(dir: &Path, sums: &Accumulator, checkpoint: Option<CheckpointInputs>) -> Result<()> {
+    if let Some(c) = checkpoint {
+        Checkpoint::new(sums, &c.scene_hash, c.method, c.settings, c.session, c.elapsed_s, c.totals, &c.history)
+            .save(&dir.join(CHECKPOINT))?;
+    }
+    Ok(())
+}
+
+/// Waits for the save under way, if any, and keeps its error unless one came before.
+fn join_save(saving: &mut Option<std::thread::JoinHandle<Result<()>>>, save_error: &mut Option<anyhow::Error>) {
+    if let Some(h) = saving.take() {
+        let done = h.join().unwrap_or_else(|_| Err(anyhow::anyhow!("the thread saving the outputs panicked")));
+        if let Err(e) = done {
+            save_error.get_or_insert(e);
+        }
     }
 }
 
@@ -659,6 +718,11 @@ fn run_until_stop(
     // and δ should not wait a whole interval more.
     let mut last_save: Option<Instant> = None;
     let mut save_error: Option<anyhow::Error> = None;
+    // The save under way; a save falls due only once the previous one has ended.
+    let mut saving: Option<std::thread::JoinHandle<Result<()>>> = None;
+    // How long the latest save took: a timed run starts none that would still be writing at its end, where the
+    // final save waits for it.
+    let (mut save_started, mut save_took) = (Instant::now(), Duration::ZERO);
     let stop = outputs.stop;
     let tracking = Tracking { lit: outputs.lit, forecast, elapsed_before: outputs.elapsed_before, tiles };
     let reason = session::run(engine, stop, interrupted, history, tracking, |engine, history, forecast| {
@@ -673,13 +737,25 @@ fn run_until_stop(
         }
         // A step that ends at the deadline is saved by the run's final save, which follows at once.
         let over = stop.time.is_some_and(|t| outputs.elapsed_s() >= t.as_secs_f64());
-        if !over && last_save.is_none_or(|t| t.elapsed() >= save_interval) && save_error.is_none() {
+        if saving.as_ref().is_some_and(|h| h.is_finished()) {
+            join_save(&mut saving, &mut save_error);
+            save_took = save_started.elapsed();
+        }
+        let due = last_save.is_none_or(|t| t.elapsed() >= save_interval);
+        let ends_in_time = stop.time.is_none_or(|t| outputs.elapsed_s() + save_took.as_secs_f64() < t.as_secs_f64());
+        if !over && due && ends_in_time && saving.is_none() && save_error.is_none() {
             last_save = Some(Instant::now());
-            if let Err(e) = outputs.save(engine, history, StopReason::Running, forecast) {
-                save_error = Some(e);
+            save_started = Instant::now();
+            match outputs.save_in_background(engine, history, forecast) {
+                Ok(h) => saving = Some(h),
+                Err(e) => {
+                    save_error = Some(anyhow::Error::new(e).context("cannot start the thread saving the outputs"))
+                }
             }
         }
     });
+    // The run's final save follows: this one must not write over it.
+    join_save(&mut saving, &mut save_error);
     match save_error {
         Some(e) => Err(e),
         None => Ok(reason),

@@ -69,7 +69,8 @@ fn deltas_in(bytes: &[u8]) -> usize {
     for at in (0..bytes.len().saturating_sub(4)).filter(|&i| bytes[i..i + 4] == magic) {
         let Ok(mut d) = zstd::stream::read::Decoder::new(&bytes[at..]) else { continue };
         let mut head = [0u8; 4];
-        if std::io::Read::read_exact(&mut d, &mut head).is_ok() && &head == photonfarm::accumulation::delta::MAGIC {
+        let magics = [photonfarm::accumulation::delta::MAGIC, photonfarm::accumulation::delta::SPARSE_MAGIC];
+        if std::io::Read::read_exact(&mut d, &mut head).is_ok() && magics.contains(&&head) {
             found += 1;
         }
     }

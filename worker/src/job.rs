@@ -6,7 +6,7 @@ use crate::machine;
 use crate::memory_binding::{self, MemoryBinding};
 use crate::parallel::engine::RoundTiming;
 use crate::parallel::{EngineConfig, ParallelEngine};
-use photonfarm::accumulation::delta::{encode_delta, Compression};
+use photonfarm::accumulation::delta::{encode_delta_of, Compression};
 use photonfarm::pbpm::ProcessShare;
 use photonfarm::protocol::{Job, Share, Snapshot, WorkerInfo};
 use photonfarm::ray_map::{self, PortionSink, Recorder};
@@ -284,14 +284,16 @@ pub fn run(
         }
         let stopping = stop.load(Ordering::Acquire);
         let interval = Duration::from_millis(interval_ms.load(Ordering::Relaxed).max(1));
-        // A snapshot without a new phase would cost a pass over every pixel (seconds on a large image) and
-        // add nothing, also at the stop, unless it is the worker's first.
+        // A snapshot without a new phase would add nothing, also at the stop, unless it is the worker's first.
         let news = engine.totals().phases > sent_phases;
         if (stopping && (news || seq == 0)) || (news && last.elapsed() >= interval) {
             sent_phases = engine.totals().phases;
             seq += 1;
+            // Only the pixels the rounds since the previous snapshot rendered: with the phase cap a round
+            // renders a part of a large image, and a pass over all of it would cost more than the round.
+            let changed = engine.take_changed();
             let current = engine.sums();
-            let delta = encode_delta(current, &base, compression);
+            let delta = encode_delta_of(current, &base, &changed, compression);
             let snapshot = Snapshot {
                 seq,
                 totals: engine.totals(),
@@ -302,8 +304,13 @@ pub fn run(
                 peak_memory_bytes: photonfarm::render::memory::peak_rss_bytes().unwrap_or(0),
                 non_finite_dropped: photonfarm::accumulation::non_finite_dropped(),
             };
-            base.pixels.copy_from_slice(&current.pixels);
-            base.aux.values_mut().copy_from_slice(current.aux.values());
+            let channels = current.aux.layout().channels();
+            for &(start, len) in changed.runs() {
+                let r = start as usize..start as usize + len as usize;
+                base.pixels[r.clone()].copy_from_slice(&current.pixels[r.clone()]);
+                base.aux.values_mut()[r.start * channels..r.end * channels]
+                    .copy_from_slice(&current.aux.values()[r.start * channels..r.end * channels]);
+            }
             last = Instant::now();
             if !emit(JobEvent::Snapshot(snapshot)) {
                 return;

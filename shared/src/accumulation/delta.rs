@@ -7,8 +7,11 @@
 use super::{Accumulator, AuxLayout, PixelSums};
 use crate::sampling::REPLICATES;
 
-/// The first bytes of every uncompressed delta (its format version).
+/// The first bytes of every uncompressed delta of the whole image (its format version); checkpoints hold one.
 pub const MAGIC: &[u8; 4] = b"PFD3";
+/// The first bytes of an uncompressed delta of some pixels only (a snapshot of the tiles its rounds rendered):
+/// after the header, the runs of pixels it holds, then the planes over those pixels alone.
+pub const SPARSE_MAGIC: &[u8; 4] = b"PFD4";
 /// f64 planes: 12 layer sums (4 layers × RGB), 5 squared-luminance sums, then the replicates' luminance sums.
 const F64_PLANES: usize = 17 + REPLICATES;
 /// The squared-luminance planes, which no sum of phases can make negative.
@@ -68,19 +71,6 @@ fn u32_plane_mut(p: &mut PixelSums, k: usize) -> &mut u32 {
     }
 }
 
-/// Appends `values` with byte i of every value stored together (a byte shuffle).
-fn push_shuffled<const N: usize>(out: &mut Vec<u8>, values: &[[u8; N]]) {
-    let start = out.len();
-    out.resize(start + N * values.len(), 0);
-    let planes = &mut out[start..];
-    let n = values.len();
-    for (i, v) in values.iter().enumerate() {
-        for (byte, &x) in v.iter().enumerate() {
-            planes[byte * n + i] = x;
-        }
-    }
-}
-
 /// The values of one shuffled plane.
 fn unshuffle<const N: usize>(plane: &[u8], n: usize) -> Vec<[u8; N]> {
     let mut out = vec![[0u8; N]; n];
@@ -120,34 +110,159 @@ impl Compression {
     }
 }
 
-/// The delta `current − base`, compressed. Pixels with no new phase cost almost nothing after compression.
+/// Pixels a delta holds: increasing, disjoint runs of consecutive pixel indices (row-major). A worker's
+/// snapshot holds the pixels its rounds rendered since the previous one, so that its cost, and the merge's,
+/// follow what changed rather than the image's size.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct PixelRuns {
+    /// (first pixel, pixels), each run starting at or after the previous one's end.
+    runs: Vec<(u32, u32)>,
+    pixels: usize,
+}
+
+impl PixelRuns {
+    /// Every pixel of an image of `n` pixels.
+    pub fn all(n: usize) -> Self {
+        let runs = if n == 0 { Vec::new() } else { vec![(0, n as u32)] };
+        PixelRuns { runs, pixels: n }
+    }
+
+    /// The pixels whose flag is set.
+    pub fn from_flags(flags: &[bool]) -> Self {
+        let mut runs: Vec<(u32, u32)> = Vec::new();
+        let mut pixels = 0;
+        let mut i = 0;
+        while i < flags.len() {
+            if !flags[i] {
+                i += 1;
+                continue;
+            }
+            let start = i;
+            while i < flags.len() && flags[i] {
+                i += 1;
+            }
+            runs.push((start as u32, (i - start) as u32));
+            pixels += i - start;
+        }
+        PixelRuns { runs, pixels }
+    }
+
+    /// How many pixels the runs hold.
+    pub fn pixel_count(&self) -> usize {
+        self.pixels
+    }
+
+    /// The runs, as (first pixel, pixels).
+    pub fn runs(&self) -> &[(u32, u32)] {
+        &self.runs
+    }
+
+    /// The pixels' indices, in increasing order.
+    pub fn indices(&self) -> impl Iterator<Item = usize> + '_ {
+        self.runs.iter().flat_map(|&(s, l)| s as usize..s as usize + l as usize)
+    }
+
+    /// The runs cut into pieces of at most `CHUNK` pixels, each with its position among the runs' pixels: a
+    /// piece's sums stay in the cache while every plane of it is written or read.
+    fn pieces(&self) -> impl Iterator<Item = (usize, std::ops::Range<usize>)> + '_ {
+        let mut at = 0;
+        self.runs.iter().flat_map(move |&(s, l)| {
+            let (s, l) = (s as usize, l as usize);
+            let first = at;
+            at += l;
+            (0..l.div_ceil(CHUNK)).map(move |c| (first + c * CHUNK, s + c * CHUNK..s + ((c + 1) * CHUNK).min(l)))
+        })
+    }
+}
+
+/// Pixels per piece of a delta's planes (see `PixelRuns::pieces`): 1024 pixels' sums and their base are about
+/// 400 KB.
+const CHUNK: usize = 1024;
+
+/// The delta `current − base` over the whole image, compressed (the dense format, which checkpoints hold).
+/// Pixels with no new phase cost almost nothing after compression.
 pub fn encode_delta(current: &Accumulator, base: &Accumulator, compression: Compression) -> Vec<u8> {
+    encode(current, base, None, compression)
+}
+
+/// The delta `current − base` over `pixels` only, compressed: the sums of every other pixel must be the same in
+/// both, as the receiver leaves them unchanged.
+pub fn encode_delta_of(
+    current: &Accumulator,
+    base: &Accumulator,
+    pixels: &PixelRuns,
+    compression: Compression,
+) -> Vec<u8> {
+    assert!(
+        pixels.runs.last().is_none_or(|&(s, l)| (s as usize + l as usize) <= current.pixels.len()),
+        "runs beyond the image"
+    );
+    encode(current, base, Some(pixels), compression)
+}
+
+fn encode(current: &Accumulator, base: &Accumulator, pixels: Option<&PixelRuns>, compression: Compression) -> Vec<u8> {
     assert_eq!(current.pixels.len(), base.pixels.len(), "a delta needs two sums of the same image");
     assert_eq!(current.aux.layout(), base.aux.layout(), "a delta needs two sums of the same layers");
     let layout = layout_bytes(current.aux.layout());
     let aux_channels = current.aux.layout().channels();
     let n = current.pixels.len();
-    let mut raw = Vec::with_capacity(8 + layout.len() + (BYTES_PER_PIXEL + 8 * aux_channels) * n);
-    raw.extend_from_slice(MAGIC);
+    let whole;
+    let (magic, runs) = match pixels {
+        Some(r) => (SPARSE_MAGIC, r),
+        None => {
+            whole = PixelRuns::all(n);
+            (MAGIC, &whole)
+        }
+    };
+    let m = runs.pixel_count();
+    let run_bytes = if pixels.is_some() { 4 + 8 * runs.runs.len() } else { 0 };
+    let mut raw = Vec::with_capacity(8 + layout.len() + run_bytes + (BYTES_PER_PIXEL + 8 * aux_channels) * m);
+    raw.extend_from_slice(magic);
     raw.extend_from_slice(&(n as u32).to_le_bytes());
     raw.extend_from_slice(&layout);
-    let pairs = current.pixels.iter().zip(&base.pixels);
-    for k in 0..U32_PLANES {
-        let counts: Vec<[u8; 4]> =
-            pairs.clone().map(|(c, b)| (u32_plane(c, k) - u32_plane(b, k)).to_le_bytes()).collect();
-        push_shuffled(&mut raw, &counts);
+    if pixels.is_some() {
+        raw.extend_from_slice(&(runs.runs.len() as u32).to_le_bytes());
+        for &(s, l) in &runs.runs {
+            raw.extend_from_slice(&s.to_le_bytes());
+            raw.extend_from_slice(&l.to_le_bytes());
+        }
     }
-    let mut plane: Vec<[u8; 8]> = Vec::with_capacity(n);
-    for k in 0..F64_PLANES {
-        plane.clear();
-        plane.extend(pairs.clone().map(|(c, b)| (f64_plane(c, k) - f64_plane(b, k)).to_le_bytes()));
-        push_shuffled(&mut raw, &plane);
-    }
-    let (c, b) = (current.aux.values(), base.aux.values());
-    for k in 0..aux_channels {
-        plane.clear();
-        plane.extend((0..n).map(|i| (c[i * aux_channels + k] - b[i * aux_channels + k]).to_le_bytes()));
-        push_shuffled(&mut raw, &plane);
+    let body_start = raw.len();
+    raw.resize(body_start + (BYTES_PER_PIXEL + 8 * aux_channels) * m, 0);
+    let (counts, floats) = raw[body_start..].split_at_mut(4 * U32_PLANES * m);
+    let (c_aux, b_aux) = (current.aux.values(), base.aux.values());
+    // Byte b of value j of plane k goes to plane k's byte-b row at column j (a byte shuffle).
+    for (j0, range) in runs.pieces() {
+        let pairs = current.pixels[range.clone()].iter().zip(&base.pixels[range.clone()]);
+        for k in 0..U32_PLANES {
+            let plane = &mut counts[4 * m * k..4 * m * (k + 1)];
+            for (j, (c, b)) in pairs.clone().enumerate() {
+                for (byte, x) in (u32_plane(c, k) - u32_plane(b, k)).to_le_bytes().into_iter().enumerate() {
+                    plane[byte * m + j0 + j] = x;
+                }
+            }
+        }
+        for k in 0..F64_PLANES {
+            let plane = &mut floats[8 * m * k..8 * m * (k + 1)];
+            for (j, (c, b)) in pairs.clone().enumerate() {
+                for (byte, x) in (f64_plane(c, k) - f64_plane(b, k)).to_le_bytes().into_iter().enumerate() {
+                    plane[byte * m + j0 + j] = x;
+                }
+            }
+        }
+        let (c, b) = (
+            &c_aux[range.start * aux_channels..range.end * aux_channels],
+            &b_aux[range.start * aux_channels..range.end * aux_channels],
+        );
+        for k in 0..aux_channels {
+            let plane = &mut floats[8 * m * (F64_PLANES + k)..8 * m * (F64_PLANES + k + 1)];
+            for j in 0..range.len() {
+                let v = c[j * aux_channels + k] - b[j * aux_channels + k];
+                for (byte, x) in v.to_le_bytes().into_iter().enumerate() {
+                    plane[byte * m + j0 + j] = x;
+                }
+            }
+        }
     }
     zstd::bulk::compress(&raw, compression.level()).expect("zstd compression of an in-memory buffer cannot fail")
 }
@@ -155,18 +270,30 @@ pub fn encode_delta(current: &Accumulator, base: &Accumulator, compression: Comp
 /// The most bytes a compressed delta of `pixels` pixels with the auxiliary layers `layout` can take
 /// (zstd's bound for incompressible input).
 pub fn max_delta_bytes(pixels: u64, layout: &AuxLayout) -> u64 {
-    let raw = 8 + layout_bytes(layout).len() as u64 + (BYTES_PER_PIXEL as u64 + 8 * layout.channels() as u64) * pixels;
+    let raw = max_raw_bytes(pixels, layout);
     // zstd's documented bound: the input, plus 1/256 of it, plus a small constant for its frame.
     raw + raw / 256 + (128 << 10)
 }
 
+/// The most bytes a delta of `pixels` pixels can take before compression: a sparse one whose runs are single
+/// pixels, every other one.
+fn max_raw_bytes(pixels: u64, layout: &AuxLayout) -> u64 {
+    let runs = pixels.div_ceil(2);
+    8 + layout_bytes(layout).len() as u64
+        + 4
+        + 8 * runs
+        + (BYTES_PER_PIXEL as u64 + 8 * layout.channels() as u64) * pixels
+}
+
 /// What a delta added.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct DeltaSummary {
     /// Pixel-phases added (Σ over pixels of new phases).
     pub pixel_phases: u64,
     /// Bytes of the delta before compression.
     pub raw_bytes: usize,
+    /// The pixels it held.
+    pub pixels: PixelRuns,
 }
 
 /// Why a delta was refused: it does not fit the sums it was applied to, or holds a value no sum can have.
@@ -174,100 +301,138 @@ pub struct DeltaSummary {
 #[error("{0}")]
 pub struct DeltaError(String);
 
-/// Adds a delta to `sums` after checking all of it: the image size, the auxiliary layers, finite numbers,
-/// non-negative squares. A refused delta leaves `sums` unchanged.
+/// The runs of a sparse delta's header (after the magic, the size and the layout), checked against an image of
+/// `n` pixels, and the bytes they took.
+fn read_runs(raw: &[u8], n: usize) -> Result<(PixelRuns, usize), DeltaError> {
+    let short = || DeltaError(format!("the delta ends inside its list of pixels ({} bytes)", raw.len()));
+    let count = u32::from_le_bytes(raw.get(..4).ok_or_else(short)?.try_into().expect("4 bytes")) as usize;
+    let bytes = 4 + 8 * count;
+    let table = raw.get(4..bytes).ok_or_else(short)?;
+    let mut runs = Vec::with_capacity(count);
+    let (mut end, mut pixels) = (0u64, 0usize);
+    for r in table.chunks_exact(8) {
+        let s = u32::from_le_bytes(r[..4].try_into().expect("4 bytes"));
+        let l = u32::from_le_bytes(r[4..].try_into().expect("4 bytes"));
+        if l == 0 || (s as u64) < end || s as u64 + l as u64 > n as u64 {
+            return Err(DeltaError(format!(
+                "the delta's pixels {s}..{} are empty, out of order or outside the image of {n} pixels",
+                s as u64 + l as u64
+            )));
+        }
+        end = s as u64 + l as u64;
+        pixels += l as usize;
+        runs.push((s, l));
+    }
+    Ok((PixelRuns { runs, pixels }, bytes))
+}
+
+/// Adds a delta to `sums` after checking all of it: the image size, the auxiliary layers, the pixels it holds,
+/// finite numbers, non-negative squares. A refused delta leaves `sums` unchanged. Its cost follows the pixels
+/// it holds, not the image's size.
 pub fn apply_delta(bytes: &[u8], sums: &mut Accumulator) -> Result<DeltaSummary, DeltaError> {
     let n = sums.pixels.len();
     let layout = layout_bytes(sums.aux.layout());
     let aux_channels = sums.aux.layout().channels();
-    let expected = 8 + layout.len() + (BYTES_PER_PIXEL + 8 * aux_channels) * n;
-    let raw = zstd::bulk::decompress(bytes, expected).map_err(|e| DeltaError(format!("cannot decompress: {e}")))?;
-    if raw.len() != expected || &raw[..4] != MAGIC || raw[4..8] != (n as u32).to_le_bytes() {
-        return Err(DeltaError(format!(
+    let most = max_raw_bytes(n as u64, sums.aux.layout()).min(usize::MAX as u64) as usize;
+    let raw = zstd::bulk::decompress(bytes, most).map_err(|e| DeltaError(format!("cannot decompress: {e}")))?;
+    let header = 8 + layout.len();
+    let sparse = raw.get(..4) == Some(&SPARSE_MAGIC[..]);
+    let size_error = |expected: usize| {
+        DeltaError(format!(
             "expected a delta of {n} pixels with the auxiliary layers {} ({expected} bytes), got {} bytes",
             layout_names(sums.aux.layout()),
             raw.len()
-        )));
+        ))
+    };
+    if raw.len() < header || !(sparse || &raw[..4] == MAGIC) || raw[4..8] != (n as u32).to_le_bytes() {
+        return Err(size_error(header + (BYTES_PER_PIXEL + 8 * aux_channels) * n));
     }
-    if raw[8..8 + layout.len()] != layout[..] {
+    if raw[8..header] != layout[..] {
         return Err(DeltaError(format!(
             "the delta's auxiliary layers are not the image's {}",
             layout_names(sums.aux.layout())
         )));
     }
-    let body = &raw[8 + layout.len()..];
-    let (counts, rest) = body.split_at(4 * n * U32_PLANES);
-    let (planes, aux_planes) = rest.split_at(8 * n * F64_PLANES);
+    let (runs, run_bytes) = if sparse { read_runs(&raw[header..], n)? } else { (PixelRuns::all(n), 0) };
+    let m = runs.pixel_count();
+    let expected = header + run_bytes + (BYTES_PER_PIXEL + 8 * aux_channels) * m;
+    if raw.len() != expected {
+        return Err(size_error(expected));
+    }
+    let body = &raw[header + run_bytes..];
+    let (counts, rest) = body.split_at(4 * m * U32_PLANES);
+    let (planes, aux_planes) = rest.split_at(8 * m * F64_PLANES);
     let values: Vec<Vec<f64>> = (0..F64_PLANES)
-        .map(|k| unshuffle::<8>(&planes[8 * n * k..8 * n * (k + 1)], n).into_iter().map(f64::from_le_bytes).collect())
+        .map(|k| unshuffle::<8>(&planes[8 * m * k..8 * m * (k + 1)], m).into_iter().map(f64::from_le_bytes).collect())
         .collect();
     for (k, plane) in values.iter().enumerate() {
-        if let Some((i, v)) =
+        if let Some((j, v)) =
             plane.iter().enumerate().find(|(_, v)| !v.is_finite() || (SQUARE_PLANES.contains(&k) && **v < 0.0))
         {
+            let i = runs.indices().nth(j).expect("a value per pixel");
             return Err(DeltaError(format!("pixel {i} has an invalid sum ({v})")));
         }
     }
     let aux_values: Vec<Vec<f64>> = (0..aux_channels)
         .map(|k| {
-            unshuffle::<8>(&aux_planes[8 * n * k..8 * n * (k + 1)], n).into_iter().map(f64::from_le_bytes).collect()
+            unshuffle::<8>(&aux_planes[8 * m * k..8 * m * (k + 1)], m).into_iter().map(f64::from_le_bytes).collect()
         })
         .collect();
     for plane in &aux_values {
-        if let Some((i, v)) = plane.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        if let Some((j, v)) = plane.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+            let i = runs.indices().nth(j).expect("a value per pixel");
             return Err(DeltaError(format!("pixel {i} has an invalid auxiliary sum ({v})")));
         }
     }
     let counts: Vec<Vec<u32>> = (0..U32_PLANES)
-        .map(|k| unshuffle::<4>(&counts[4 * n * k..4 * n * (k + 1)], n).into_iter().map(u32::from_le_bytes).collect())
+        .map(|k| unshuffle::<4>(&counts[4 * m * k..4 * m * (k + 1)], m).into_iter().map(u32::from_le_bytes).collect())
         .collect();
-    check_sums_stay_valid(sums, &counts, &values, &aux_values)?;
+    check_sums_stay_valid(sums, &runs, &counts, &values, &aux_values)?;
     let aux = sums.aux.values_mut();
-    for (k, plane) in aux_values.iter().enumerate() {
-        for (i, v) in plane.iter().enumerate() {
-            aux[i * aux_channels + k] += v;
-        }
-    }
     let mut pixel_phases = 0u64;
-    for (i, p) in sums.pixels.iter_mut().enumerate() {
-        pixel_phases += counts[0][i] as u64;
+    for (j, i) in runs.indices().enumerate() {
+        for (k, plane) in aux_values.iter().enumerate() {
+            aux[i * aux_channels + k] += plane[j];
+        }
+        let p = &mut sums.pixels[i];
+        pixel_phases += counts[0][j] as u64;
         // `check_sums_stay_valid` found no overflow; wrapping adds keep a release build from checking again.
         for (k, plane) in counts.iter().enumerate() {
             let c = u32_plane_mut(p, k);
-            *c = c.wrapping_add(plane[i]);
+            *c = c.wrapping_add(plane[j]);
         }
         for (k, plane) in values.iter().enumerate() {
-            *f64_plane_mut(p, k) += plane[i];
+            *f64_plane_mut(p, k) += plane[j];
         }
     }
-    Ok(DeltaSummary { pixel_phases, raw_bytes: expected })
+    Ok(DeltaSummary { pixel_phases, raw_bytes: expected, pixels: runs })
 }
 
 /// Refuses a delta whose addition would overflow a pixel's phase or camera-ray count or make a sum infinite: a
 /// buggy or hostile peer must not wrap the counts (a panic in debug builds, silent corruption in release) nor
-/// leave part of its delta merged.
+/// leave part of its delta merged. Value j of every plane belongs to the runs' pixel j.
 fn check_sums_stay_valid(
     sums: &Accumulator,
+    runs: &PixelRuns,
     counts: &[Vec<u32>],
     values: &[Vec<f64>],
     aux_values: &[Vec<f64>],
 ) -> Result<(), DeltaError> {
-    for (i, p) in sums.pixels.iter().enumerate() {
-        if let Some(k) = (0..U32_PLANES).find(|&k| u32_plane(p, k).checked_add(counts[k][i]).is_none()) {
+    let channels = aux_values.len();
+    let aux = sums.aux.values();
+    for (j, i) in runs.indices().enumerate() {
+        let p = &sums.pixels[i];
+        if let Some(k) = (0..U32_PLANES).find(|&k| u32_plane(p, k).checked_add(counts[k][j]).is_none()) {
             return Err(DeltaError(format!(
                 "pixel {i} would overflow its count {k} ({} + {})",
                 u32_plane(p, k),
-                counts[k][i]
+                counts[k][j]
             )));
         }
-        if let Some((k, _)) = values.iter().enumerate().find(|(k, plane)| !(f64_plane(p, *k) + plane[i]).is_finite()) {
+        if let Some((k, _)) = values.iter().enumerate().find(|(k, plane)| !(f64_plane(p, *k) + plane[j]).is_finite()) {
             return Err(DeltaError(format!("pixel {i} would overflow its sum {k}")));
         }
-    }
-    let channels = aux_values.len();
-    let aux = sums.aux.values();
-    for (k, plane) in aux_values.iter().enumerate() {
-        if let Some((i, _)) = plane.iter().enumerate().find(|(i, v)| !(aux[i * channels + k] + **v).is_finite()) {
+        if let Some(k) = (0..channels).find(|&k| !(aux[i * channels + k] + aux_values[k][j]).is_finite()) {
             return Err(DeltaError(format!("pixel {i} would overflow its auxiliary sum {k}")));
         }
     }
@@ -406,6 +571,120 @@ mod tests {
         let before = target.clone();
         assert!(apply_delta(&delta, &mut target).unwrap_err().to_string().contains("pixel 4"));
         assert_eq!(target, before);
+    }
+
+    /// Sums of an image of 64 × 48 pixels where the 16-pixel tiles in `tiles` (row-major over 4 × 3) got two
+    /// more phases than `base`, and the flags of their pixels.
+    fn with_tiles_changed(base: &Accumulator, tiles: &[usize], aux: &AuxLayout) -> (Accumulator, Vec<bool>) {
+        let mut current = base.clone();
+        let more = sums(64 * 48, 2, 0.9, aux);
+        let mut flags = vec![false; 64 * 48];
+        for &t in tiles {
+            for y in 0..16 {
+                for x in 0..16 {
+                    let i = (t / 4 * 16 + y) * 64 + t % 4 * 16 + x;
+                    flags[i] = true;
+                    current.pixels[i].merge(&more.pixels[i]);
+                    let c = aux.channels();
+                    for k in 0..c {
+                        current.aux.values_mut()[i * c + k] += more.aux.values()[i * c + k];
+                    }
+                }
+            }
+        }
+        (current, flags)
+    }
+
+    #[test]
+    fn a_delta_of_the_changed_tiles_merges_to_the_sums_of_a_whole_image_delta() {
+        for aux in [AuxLayout::default(), ghost_layout()] {
+            let mut base = sums(64 * 48, 3, 0.1, &aux);
+            (base.width, base.height) = (64, 48);
+            let (current, flags) = with_tiles_changed(&base, &[0, 5, 6, 11], &aux);
+            let runs = PixelRuns::from_flags(&flags);
+            // Tiles 5 and 6 touch: their rows are one run each.
+            assert_eq!((runs.pixel_count(), runs.runs().len()), (4 * 256, 16 * 3));
+            let mut receiver = sums(64 * 48, 5, 0.3, &aux);
+            (receiver.width, receiver.height) = (64, 48);
+            let (mut whole, mut sparse) = (receiver.clone(), receiver.clone());
+            let full = encode_delta(&current, &base, Compression::Fast);
+            let part = encode_delta_of(&current, &base, &runs, Compression::Fast);
+            let a = apply_delta(&full, &mut whole).unwrap();
+            let b = apply_delta(&part, &mut sparse).unwrap();
+            // Bit for bit: the whole image's delta adds exact zeros elsewhere.
+            assert_eq!(sparse, whole);
+            assert_eq!((a.pixel_phases, b.pixel_phases), (4 * 256 * 2, 4 * 256 * 2));
+            assert_eq!(b.pixels, runs);
+            assert_eq!(a.pixels, PixelRuns::all(64 * 48));
+            assert!(b.raw_bytes * 2 < a.raw_bytes, "{} raw bytes against {}", b.raw_bytes, a.raw_bytes);
+            // Nothing changed: a delta of no pixels changes nothing.
+            let none = encode_delta_of(&current, &current, &PixelRuns::default(), Compression::Small);
+            let before = sparse.clone();
+            assert_eq!(apply_delta(&none, &mut sparse).unwrap().pixel_phases, 0);
+            assert_eq!(sparse, before);
+        }
+    }
+
+    #[test]
+    fn a_sparse_delta_with_pixels_out_of_order_overlapping_or_outside_the_image_is_refused() {
+        let none = AuxLayout::default();
+        let base = Accumulator::new(64, 48);
+        let (current, flags) = with_tiles_changed(&base, &[1, 2, 9], &none);
+        let runs = PixelRuns::from_flags(&flags);
+        let raw = zstd::bulk::decompress(
+            &encode_delta_of(&current, &base, &runs, Compression::Fast),
+            max_raw_bytes(64 * 48, &none) as usize,
+        )
+        .unwrap();
+        let table = 8 + layout_bytes(&none).len() + 4;
+        let run = |raw: &[u8], r: usize, field: usize| {
+            let at = table + 8 * r + 4 * field;
+            u32::from_le_bytes(raw[at..at + 4].try_into().unwrap())
+        };
+        let set = |raw: &mut Vec<u8>, r: usize, field: usize, v: u32| {
+            let at = table + 8 * r + 4 * field;
+            raw[at..at + 4].copy_from_slice(&v.to_le_bytes());
+        };
+        let mut edits: Vec<Vec<u8>> = Vec::new();
+        let mut e = raw.clone();
+        // The second run starts inside the first.
+        let first_end = run(&raw, 0, 0) + run(&raw, 0, 1);
+        set(&mut e, 1, 0, first_end - 1);
+        edits.push(e);
+        let mut e = raw.clone();
+        // Runs swapped.
+        let (r0, r1) = ((run(&raw, 0, 0), run(&raw, 0, 1)), (run(&raw, 1, 0), run(&raw, 1, 1)));
+        set(&mut e, 0, 0, r1.0);
+        set(&mut e, 0, 1, r1.1);
+        set(&mut e, 1, 0, r0.0);
+        set(&mut e, 1, 1, r0.1);
+        edits.push(e);
+        let mut e = raw.clone();
+        // The last run past the image's end.
+        let last = runs.runs().len() - 1;
+        set(&mut e, last, 0, 64 * 48 - 8);
+        edits.push(e);
+        let mut e = raw.clone();
+        // An empty run.
+        set(&mut e, 2, 1, 0);
+        edits.push(e);
+        let mut e = raw.clone();
+        // More runs than the table holds.
+        e[table - 4..table].copy_from_slice(&u32::MAX.to_le_bytes());
+        edits.push(e);
+        let mut e = raw.clone();
+        // One pixel more than the planes hold.
+        set(&mut e, 0, 1, run(&raw, 0, 1) + 1);
+        edits.push(e);
+        for (k, e) in edits.iter().enumerate() {
+            let mut target = Accumulator::new(64, 48);
+            let r = apply_delta(&zstd::bulk::compress(e, 1).unwrap(), &mut target);
+            assert!(r.is_err(), "edit {k} was merged");
+            assert_eq!(target, Accumulator::new(64, 48), "edit {k} changed the sums");
+        }
+        let mut target = Accumulator::new(64, 48);
+        apply_delta(&zstd::bulk::compress(&raw, 1).unwrap(), &mut target).unwrap();
+        assert_eq!(target, current);
     }
 
     #[test]

@@ -19,7 +19,8 @@ use serde::{Deserialize, Serialize};
 /// 12: the coordinator tells the workers when a timed run stops (`StopAt`), and jobs carry a Mitsuba scene's
 /// import options (`Job::mitsuba`).
 /// 13: jobs carry the scene's description (`Job::scene`) instead of its file's text and import options.
-pub const PROTOCOL_VERSION: u32 = 13;
+/// 14: a snapshot's delta holds only the pixels rendered since the previous one (`delta::SPARSE_MAGIC`).
+pub const PROTOCOL_VERSION: u32 = 14;
 
 /// Which end of a link a peer is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -119,7 +120,8 @@ pub struct Snapshot {
     pub seq: u64,
     /// The worker's counters since its start (cumulative, so a lost snapshot cannot skew them).
     pub totals: RayTotals,
-    /// Per-pixel sums added since the previous snapshot (see `accumulation::delta`).
+    /// Per-pixel sums added since the previous snapshot, over the pixels that changed (see
+    /// `accumulation::delta`).
     pub delta: Vec<u8>,
     /// CRC-32 of `delta`: a delta damaged on its way (a plaintext link has only TCP's 16-bit checksum) is refused
     /// rather than merged.

@@ -8,7 +8,7 @@
 
 use anyhow::{bail, Context, Result};
 use clap::Parser;
-use photonfarm::accumulation::delta::{apply_delta, encode_delta, Compression};
+use photonfarm::accumulation::delta::{apply_delta, encode_delta, encode_delta_of, Compression, PixelRuns};
 use photonfarm::accumulation::{Accumulator, AuxLayer, AuxLayout};
 use photonfarm::color::Rgb;
 use photonfarm::protocol::frame::{read_frame, write_frame};
@@ -269,8 +269,13 @@ fn main() -> Result<()> {
     let delta = encode_delta(&current, &base, Compression::Fast);
     let delta_small = encode_delta(&current, &base, Compression::Small);
     let ghost_delta = encode_delta(&sums(w, h, &ghost, 1, 0.2), &Accumulator::with_aux(w, h, ghost), Compression::Fast);
+    // A snapshot of every other row, as a worker sends the pixels its rounds rendered.
+    let rows: Vec<bool> = (0..(w * h) as usize).map(|i| (i / w as usize).is_multiple_of(2)).collect();
+    let sparse = encode_delta_of(&current, &base, &PixelRuns::from_flags(&rows), Compression::Fast);
     let raw = zstd::bulk::decompress(&delta, 1 << 24).context("the seed delta")?;
-    let delta_seeds = vec![delta.clone(), delta_small, ghost_delta];
+    let sparse_raw = zstd::bulk::decompress(&sparse, 1 << 24).context("the seed sparse delta")?;
+    let delta_seeds = vec![delta.clone(), delta_small, ghost_delta, sparse];
+    let raw_seeds = [raw, sparse_raw];
 
     let job = Job {
         scene_name: "fuzz.toml".into(),
@@ -387,7 +392,8 @@ fn main() -> Result<()> {
             1 => {
                 // Every other one edits the uncompressed layout, to reach the checks behind the decompression.
                 let bytes = if i % 8 == 1 {
-                    let raw = materialise(&next(&mut runner), std::slice::from_ref(&raw));
+                    let raw =
+                        materialise(&next(&mut runner), if i % 16 == 1 { &raw_seeds[..1] } else { &raw_seeds[1..] });
                     zstd::bulk::compress(&raw, -5)?
                 } else {
                     materialise(&next(&mut runner), &delta_seeds)

@@ -5,6 +5,7 @@
 use super::group::{Group, GroupMap, GroupStats, PhasesBefore, RoundContext};
 use super::map_slot::MapSlot;
 use super::mask;
+use photonfarm::accumulation::delta::PixelRuns;
 use photonfarm::accumulation::{Accumulator, AuxLayout};
 use photonfarm::pbpm::ProcessShare;
 use photonfarm::ray_map::Recorder;
@@ -205,6 +206,8 @@ pub struct ParallelEngine<'s> {
     last_round_end: Option<Instant>,
     /// Records the kept camera and light paths of every group into a ray map.
     recorder: Option<Arc<Recorder>>,
+    /// Pixels whose sums a round changed since `take_changed` last ran: a snapshot sends only these.
+    changed: Vec<bool>,
 }
 
 impl<'s> ParallelEngine<'s> {
@@ -251,6 +254,7 @@ impl<'s> ParallelEngine<'s> {
             between_nanos: 0,
             last_round_end: None,
             recorder: None,
+            changed: vec![false; scene.camera.pixel_count()],
         })
     }
 
@@ -447,9 +451,20 @@ impl<'s> ParallelEngine<'s> {
         self.measure_phases(&stats_before);
         for g in &self.groups {
             self.sums.merge_local(g.mask(), g.local_sums(), g.local_aux());
+            for &p in g.mask() {
+                self.changed[p as usize] = true;
+            }
         }
         // The merge is between-rounds time; it is added when the next round starts.
         self.last_round_end = Some(round_end);
+    }
+
+    /// The pixels whose sums changed since the previous call (every pixel a round's masks held), and forgets
+    /// them: only their sums differ from the sums at that call.
+    pub fn take_changed(&mut self) -> PixelRuns {
+        let runs = PixelRuns::from_flags(&self.changed);
+        self.changed.fill(false);
+        runs
     }
 
     /// Thread-seconds per stage so far.
