@@ -718,7 +718,8 @@ fn run_until_stop(
     // and δ should not wait a whole interval more.
     let mut last_save: Option<Instant> = None;
     let mut save_error: Option<anyhow::Error> = None;
-    // The save under way; a save falls due only once the previous one has ended.
+    // The save under way (distributed methods, whose engine is the workers); a save falls due only once the
+    // previous one has ended.
     let mut saving: Option<std::thread::JoinHandle<Result<()>>> = None;
     // How long the latest save took: a timed run starts none that would still be writing at its end, where the
     // final save waits for it.
@@ -746,11 +747,18 @@ fn run_until_stop(
         if !over && due && ends_in_time && saving.is_none() && save_error.is_none() {
             last_save = Some(Instant::now());
             save_started = Instant::now();
-            match outputs.save_in_background(engine, history, forecast) {
-                Ok(h) => saving = Some(h),
-                Err(e) => {
-                    save_error = Some(anyhow::Error::new(e).context("cannot start the thread saving the outputs"))
+            if outputs.args.method.is_distributed() {
+                match outputs.save_in_background(engine, history, forecast) {
+                    Ok(h) => saving = Some(h),
+                    Err(e) => {
+                        save_error = Some(anyhow::Error::new(e).context("cannot start the thread saving the outputs"))
+                    }
                 }
+            } else {
+                // An engine in this process renders only between steps, so a save here holds back no merging,
+                // and a copy of its sums would be memory that --memory-limit's estimate does not count.
+                save_error = outputs.save(engine, history, StopReason::Running, forecast).err();
+                save_took = save_started.elapsed();
             }
         }
     });
