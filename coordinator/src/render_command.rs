@@ -15,6 +15,7 @@ use photonfarm::ray_map::{self, Recorder};
 use photonfarm::render::active_tiles::DEFAULT_TILE;
 use photonfarm::render::checkpoint::Checkpoint;
 use photonfarm::render::forecast::Forecast;
+use photonfarm::render::memory::MemoryBudget;
 use photonfarm::render::method::{Images, Processes};
 use photonfarm::render::record::{flags_of, HistoryEntry, RunRecord, WorkerRecord, WorkerState};
 use photonfarm::render::session::{self, ErrorOver, Progressive, StopReason, StopRule, Tracking};
@@ -436,12 +437,13 @@ fn start_engine<'s>(
         }
         (Processes::One, None) => {
             let base = memory::current_rss_bytes().unwrap_or(0);
+            let budget = MemoryBudget::new(args.memory_limit);
             let mut engine = Engine::new(scene, settings);
-            if let Some(limit) = args.memory_limit {
+            if let Some(budget) = budget {
                 // The engine's buffers are sized once, for the whole image: what it holds now is what it needs.
                 let need = base + (engine.bytes_per_pixel() * scene.camera.pixel_count() as f64) as u64;
-                if need > limit {
-                    bail!("{}", memory::over_limit(limit, need, base, ""));
+                if need > budget.bytes() {
+                    bail!("{}", memory::over_limit(budget, need, base, ""));
                 }
             }
             engine.set_recorder(recorder);
@@ -453,7 +455,7 @@ fn start_engine<'s>(
                 None => machine::all_cores(),
             };
             let mut threads = args.threads.unwrap_or(cores.len());
-            if let Some(limit) = args.memory_limit {
+            if let Some(budget) = MemoryBudget::new(args.memory_limit) {
                 let base = memory::current_rss_bytes().unwrap_or(0);
                 let pixels = scene.camera.width as u64 * scene.camera.height as u64;
                 let aux = photonfarm::accumulation::AuxLayout::for_scene(scene, settings.spectral_bands);
@@ -463,7 +465,7 @@ fn start_engine<'s>(
                         + (c.bytes_per_pixel(pixels as usize, settings.backward_diffuse_depth, &aux) * pixels as f64)
                             as u64)
                 };
-                threads = fit_memory(limit, method, threads, base, need, notes)?;
+                threads = fit_memory(budget, method, threads, base, need, notes)?;
             }
             let mut config = EngineConfig::for_method(method, threads, args.group_size, cores)?;
             if let Some(t) = args.tile_size {
@@ -877,11 +879,12 @@ fn print_summary(record: &RunRecord, reason: StopReason, dir: &Path) {
     say!("wrote {}", dir.display());
 }
 
-/// The threads an in-process method may use under `--memory-limit`, where `need(t)` is the memory a run of `t`
-/// threads needs (`base` in use now, the scene loaded, plus the engine's buffers). A method whose groups each
-/// keep their own image (async) gives up threads to fit, and `notes` says so; the others refuse.
+/// The threads an in-process method may use within its memory budget (`--memory-limit` or what the machine has
+/// available), where `need(t)` is the memory a run of `t` threads needs (`base` in use now, the scene loaded,
+/// plus the engine's buffers). A method whose groups each keep their own image (async) gives up threads to fit,
+/// and `notes` says so; the others refuse.
 fn fit_memory(
-    limit: u64,
+    budget: MemoryBudget,
     method: ParallelMethod,
     threads: usize,
     base: u64,
@@ -889,6 +892,7 @@ fn fit_memory(
     notes: &mut Vec<String>,
 ) -> Result<usize> {
     let mb = |b: u64| format!("{:.0} MiB", b as f64 / (1u64 << 20) as f64);
+    let limit = budget.bytes();
     let asked = need(threads)?;
     if asked <= limit {
         return Ok(threads);
@@ -897,9 +901,9 @@ fn fit_memory(
     if grows_with_threads {
         if let Some(t) = (1..threads).rev().find(|&t| need(t).is_ok_and(|n| n <= limit)) {
             notes.push(format!(
-                "--memory-limit {}: {} needs about {} at {threads} threads (its buffers grow with its threads), \
-                 so it ran with {t}",
-                mb(limit),
+                "{}: {} needs about {} at {threads} threads (its buffers grow with its threads), so it ran \
+                 with {t}",
+                budget.describe(),
                 method.name(),
                 mb(asked)
             ));
@@ -907,7 +911,7 @@ fn fit_memory(
         }
     }
     let least = need(if grows_with_threads { 1 } else { threads })?;
-    bail!("{}", memory::over_limit(limit, least, base, if grows_with_threads { " even with one thread" } else { "" }))
+    bail!("{}", memory::over_limit(budget, least, base, if grows_with_threads { " even with one thread" } else { "" }))
 }
 
 fn stop_rule(args: &RenderArgs) -> Result<StopRule> {

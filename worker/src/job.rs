@@ -11,6 +11,7 @@ use photonfarm::pbpm::ProcessShare;
 use photonfarm::protocol::{Job, Share, Snapshot, WorkerInfo};
 use photonfarm::ray_map::{self, PortionSink, Recorder};
 use photonfarm::render::light_balance::LightBalance;
+use photonfarm::render::memory::MemoryBudget;
 use photonfarm::render::session::{self, Deadline, Progressive};
 use photonfarm::render::ActiveTiles;
 use photonfarm::scene::Scene;
@@ -77,9 +78,10 @@ pub fn engine_config(job: &Job) -> Result<EngineConfig, String> {
 }
 
 /// Refuses an engine of `config` whose buffers, with the memory this process holds now (the scene loaded), would
-/// not fit in `limit` bytes (`--memory-limit`, per worker process), before it allocates them.
-fn check_memory_limit(
-    limit: u64,
+/// not fit in `budget` (`--memory-limit` per worker process, or the machine's available memory), before it
+/// allocates them.
+fn check_memory(
+    budget: MemoryBudget,
     config: &EngineConfig,
     scene: &Scene,
     settings: &photonfarm::render::RenderSettings,
@@ -88,12 +90,12 @@ fn check_memory_limit(
     let pixels = scene.camera.pixel_count();
     let aux = photonfarm::accumulation::AuxLayout::for_scene(scene, settings.spectral_bands);
     let need = base + (config.bytes_per_pixel(pixels, settings.backward_diffuse_depth, &aux) * pixels as f64) as u64;
-    if need <= limit {
+    if need <= budget.bytes() {
         return Ok(());
     }
     let detail =
         format!(" on this worker's {} thread{}", config.threads(), if config.threads() == 1 { "" } else { "s" });
-    Err(photonfarm::render::memory::over_limit(limit, need, base, &detail))
+    Err(photonfarm::render::memory::over_limit(budget, need, base, &detail))
 }
 
 /// Tiles the coordinator restricted a job to and the engine has not taken yet: the tile edge and one flag per
@@ -148,8 +150,8 @@ pub fn run(
         Some(node) => memory_binding::bind_memory(node),
         None => MemoryBinding::FirstTouch("no NUMA node given".into()),
     };
-    if let Some(limit) = job.engine.memory_limit {
-        if let Err(reason) = check_memory_limit(limit, &config, scene, &job.settings) {
+    if let Some(budget) = MemoryBudget::new(job.engine.memory_limit) {
+        if let Err(reason) = check_memory(budget, &config, scene, &job.settings) {
             emit(JobEvent::Failed(reason));
             return;
         }
