@@ -362,7 +362,8 @@ impl LightVertex<'_> {
 }
 
 /// Gathers a light vertex into `map`: every photon whose sphere contains the vertex, whose surface agrees and
-/// on whose side the light arrives receives τ · f · ΔΦ / (π r²). Returns the number of merges.
+/// on whose side the light arrives (or either side, where its stored lobes transmit) receives
+/// τ · f · ΔΦ / (π r²). Returns the number of merges.
 #[inline]
 pub fn gather(
     map: &PhotonMap,
@@ -418,10 +419,12 @@ fn gather_in<const S: bool>(
     let mut merges = 0;
     let blur = sink.measures_blur();
     for (b, d2) in map.containing_in(bucket, v.p) {
-        if v.wi.dot(b.normal) <= 0.0
-            || v.ng.dot(b.normal).abs() < NORMAL_AGREEMENT
-            || b.segments as u32 + v.m > max_depth
-        {
+        if v.ng.dot(b.normal).abs() < NORMAL_AGREEMENT || b.segments as u32 + v.m > max_depth {
+            continue;
+        }
+        // Light that arrives from behind the photon's surface reaches its camera path only through a stored
+        // transmissive lobe (rough glass), whose f below then tells the two sides apart.
+        if v.wi.dot(b.normal) <= 0.0 && (b.is_lambertian() || !map.vertex(b.stored).transmits()) {
             continue;
         }
         // The partition of docs/estimator.md ("Layers"): every light path is counted by exactly one photon

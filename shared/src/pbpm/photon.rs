@@ -1,7 +1,7 @@
 //! The backward photon: where a camera path met a surface with stored lobes, and the filter it applies to
 //! light arriving there.
 
-use crate::bsdf::{Bsdf, Transport};
+use crate::bsdf::{Bsdf, LobeFlags, Transport};
 use crate::color::Rgb;
 use glam::Vec3;
 
@@ -57,6 +57,12 @@ impl StoredVertex {
     #[inline]
     pub fn eval(&self, wi: Vec3) -> Rgb {
         self.bsdf.eval_stored(self.wo, wi, Transport::Radiance)
+    }
+
+    /// True when some lobe of the BSDF transmits: light from behind the surface may reach the camera path.
+    #[inline]
+    pub fn transmits(&self) -> bool {
+        self.bsdf.flags().contains(LobeFlags::TRANSMISSION)
     }
 }
 

@@ -26,8 +26,13 @@ pub fn shipped(name: &str) -> Scene {
 
 /// The shipped scene `name` rendered at `width` × `height` pixels (its `width` and `height` lines rewritten).
 pub fn shipped_at(name: &str, width: u32, height: u32) -> Scene {
+    shipped_edited(name, width, height, str::to_string)
+}
+
+/// `shipped_at` of the scene's text after `edit`.
+pub fn shipped_edited(name: &str, width: u32, height: u32, edit: impl FnOnce(&str) -> String) -> Scene {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
-    let text = std::fs::read_to_string(dir.join(name)).unwrap();
+    let text = edit(&std::fs::read_to_string(dir.join(name)).unwrap());
     let mut resized = String::new();
     for line in text.lines() {
         match line.split('=').next().map(str::trim) {

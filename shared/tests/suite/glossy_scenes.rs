@@ -1,8 +1,9 @@
 //! On the shipped glossy scenes (scenes/materials.toml and scenes/glossy-room.toml, at a small size), PBPM
 //! converges per pixel to the path tracer: every glossy vertex is counted once, by the camera side where its
-//! lobe passes and by the gather where it is stored (docs/estimator.md, "Glossy surfaces").
+//! lobe passes and by the gather where it is stored (docs/estimator.md, "Glossy surfaces"), also where the
+//! stored lobe is a rough glass's transmission.
 
-use crate::common::{mean_z2, settings, shipped_at};
+use crate::common::{mean_z2, settings, shipped_at, shipped_edited};
 use photonfarm::accumulation::Accumulator;
 use photonfarm::color::luminance_f64;
 use photonfarm::integrator::Layer;
@@ -11,8 +12,20 @@ use photonfarm::scene::Scene;
 
 /// Runs PBPM and the path tracer side by side, single-threaded, and returns their sums.
 fn render_both(scene: &Scene, pbpm_phases: usize, path_phases: usize) -> (Accumulator, Accumulator) {
+    render_both_at_radius(scene, pbpm_phases, path_phases, None)
+}
+
+/// `render_both` with PBPM's photons at `radius_scale` pixel footprints instead of the scene's.
+fn render_both_at_radius(
+    scene: &Scene,
+    pbpm_phases: usize,
+    path_phases: usize,
+    radius_scale: Option<f32>,
+) -> (Accumulator, Accumulator) {
     let render = |method, seed, phases| {
-        let mut engine = Engine::new(scene, settings(scene, method, seed));
+        let mut s = settings(scene, method, seed);
+        s.radius_scale = radius_scale.unwrap_or(s.radius_scale);
+        let mut engine = Engine::new(scene, s);
         for _ in 0..phases {
             engine.run_phase();
         }
@@ -65,4 +78,21 @@ fn pbpm_converges_per_pixel_to_the_path_tracer_in_the_glossy_room() {
     let scene = shipped_at("glossy-room.toml", 32, 24);
     let (pbpm, path) = render_both(&scene, 1000, 4000);
     assert_converge("glossy room", &pbpm, &path);
+}
+
+#[test]
+fn pbpm_converges_per_pixel_to_the_path_tracer_through_rough_glass_whose_lobes_store_photons() {
+    // The room's glass sphere made rough enough (α = 0.4) that camera paths store photons on it: what it shows
+    // of the room behind it reaches those photons from inside the sphere, through the stored transmission lobe.
+    let glass = "ior = 1.5\nalpha = 0.1";
+    let scene = shipped_edited("glossy-room.toml", 32, 24, |text| {
+        assert!(text.contains(glass), "the glossy room's glass changed");
+        text.replace(glass, "ior = 1.5\nalpha = 0.4")
+    });
+    assert!(0.4 >= photonfarm::bsdf::STORED_MIN_ALPHA, "α = 0.4 no longer stores photons");
+    // At 32 × 24 pixels the default disc of 3 pixel footprints spans a good part of the sphere, whose
+    // transmitted image of the room varies within it: the blur's bias would exceed the sums' noise. A third of
+    // the radius leaves a ninth of that bias.
+    let (pbpm, path) = render_both_at_radius(&scene, 1000, 4000, Some(1.0));
+    assert_converge("glossy room, glass of α = 0.4", &pbpm, &path);
 }
