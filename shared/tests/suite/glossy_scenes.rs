@@ -89,7 +89,7 @@ fn pbpm_converges_per_pixel_to_the_path_tracer_through_rough_glass_whose_lobes_s
         assert!(text.contains(glass), "the glossy room's glass changed");
         text.replace(glass, "ior = 1.5\nalpha = 0.4")
     });
-    assert!(0.4 >= photonfarm::bsdf::STORED_MIN_ALPHA, "α = 0.4 no longer stores photons");
+    assert!(photonfarm::bsdf::stores_glossy(0.4), "α = 0.4 no longer stores photons");
     // At 32 × 24 pixels the default disc of 3 pixel footprints spans a good part of the sphere, whose
     // transmitted image of the room varies within it: the blur's bias would exceed the sums' noise. A third of
     // the radius leaves a ninth of that bias.
