@@ -19,7 +19,7 @@ use photonfarm::render::memory::MemoryBudget;
 use photonfarm::render::method::{Images, Processes};
 use photonfarm::render::record::{flags_of, HistoryEntry, RunRecord, WorkerRecord, WorkerState};
 use photonfarm::render::session::{self, ErrorOver, Progressive, StopReason, StopRule, Tracking};
-use photonfarm::render::{memory, ActiveTiles, Engine, Method, RenderSettings};
+use photonfarm::render::{memory, ActiveTiles, Engine, Estimator, Method, RenderSettings};
 use photonfarm::scene::ghost::sensor_ghosts;
 use photonfarm::scene::{MitsubaOptions, Scene};
 use std::path::{Path, PathBuf};
@@ -46,6 +46,10 @@ pub fn run(args: RenderArgs) -> Result<()> {
     if let Some(c) = &checkpoint {
         settings = c.settings;
     }
+    // Before anything the image's size scales (the lit mask, the engine's buffers, the workers): a render that
+    // cannot fit is refused now, and async gives up threads to fit.
+    let mut notes = Vec::new();
+    let threads = memory_plan(&args, &scene, &settings, &mut notes)?;
     // Decided once, before the render, from the scene and the path depth alone: every figure over unlit pixels
     // (δ, the stop on the target error, the true error) measures the same pixels from the first phase on.
     // It takes as long as some renders through a lens, so the terminal says what is going on meanwhile.
@@ -62,14 +66,13 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let interrupted = catch_interrupts()?;
     let bar = progress_bar(args.quiet);
 
-    let mut notes = Vec::new();
     if stop.target_error.is_some() && !args.uniform && sensor_ghosts_keep_tiles(&args, &scene) {
         notes.push(TILES_OFF_FOR_SENSOR_GHOSTS.to_string());
     }
     let session = checkpoint.as_ref().map_or(1, |c| c.session + 1);
     let recorder = start_ray_map(&args, &scene, &settings, &dir, session)?;
     let (mut engine, layout) =
-        start_engine(&args, &scene, settings, &dir, checkpoint.as_ref(), recorder.clone(), &mut notes)?;
+        start_engine(&args, &scene, settings, &dir, checkpoint.as_ref(), recorder.clone(), threads)?;
     let mut live =
         LiveSession::start(live_options(&args, &scene, &layout, &dir, engine.as_ref(), &interrupted, &lit)?)?;
     if let Some(url) = live.as_ref().and_then(|l| l.url.as_ref()) {
@@ -419,7 +422,7 @@ fn start_engine<'s>(
     dir: &Path,
     checkpoint: Option<&Checkpoint>,
     recorder: Option<Arc<Recorder>>,
-    notes: &mut Vec<String>,
+    threads: Option<usize>,
 ) -> Result<(Box<dyn Progressive + 's>, String)> {
     let layout = args.method.layout();
     match (layout.processes, layout.parallel) {
@@ -454,19 +457,7 @@ fn start_engine<'s>(
                 Some(list) => machine::parse_cores(list).map_err(|e| anyhow::anyhow!("--cores: {e}"))?,
                 None => machine::all_cores(),
             };
-            let mut threads = args.threads.unwrap_or(cores.len());
-            if let Some(budget) = MemoryBudget::new(args.memory_limit) {
-                let base = memory::current_rss_bytes().unwrap_or(0);
-                let pixels = scene.camera.width as u64 * scene.camera.height as u64;
-                let aux = photonfarm::accumulation::AuxLayout::for_scene(scene, settings.spectral_bands);
-                let need = |t: usize| -> Result<u64> {
-                    let c = EngineConfig::for_method(method, t, args.group_size, cores.clone())?;
-                    Ok(base
-                        + (c.bytes_per_pixel(pixels as usize, settings.backward_diffuse_depth, &aux) * pixels as f64)
-                            as u64)
-                };
-                threads = fit_memory(budget, method, threads, base, need, notes)?;
-            }
+            let threads = threads.unwrap_or_else(|| args.threads.unwrap_or(cores.len()));
             let mut config = EngineConfig::for_method(method, threads, args.group_size, cores)?;
             if let Some(t) = args.tile_size {
                 config.tile_size = t;
@@ -877,6 +868,64 @@ fn print_summary(record: &RunRecord, reason: StopReason, dir: &Path) {
         say!("interrupted: the results of every completed phase were written");
     }
     say!("wrote {}", dir.display());
+}
+
+/// Checks the render's memory estimate against its budget (`--memory-limit`, or what the machine has available)
+/// before anything the image's size scales is allocated, and returns the threads an in-process parallel method
+/// runs with (async gives up threads to fit; None: the method's own choice).
+fn memory_plan(
+    args: &RenderArgs,
+    scene: &Scene,
+    settings: &RenderSettings,
+    notes: &mut Vec<String>,
+) -> Result<Option<usize>> {
+    let base = memory::current_rss_bytes().unwrap_or(0);
+    let pixels = scene.camera.pixel_count();
+    let aux = photonfarm::accumulation::AuxLayout::for_scene(scene, settings.spectral_bands);
+    let of_pixels = |bytes_per_pixel: f64| base + (bytes_per_pixel * pixels as f64) as u64;
+    let layout = args.method.layout();
+    match (layout.processes, layout.parallel) {
+        (Processes::PerNumaNode, _) => {
+            // The coordinator renders nothing, so --memory-limit (per worker process) is not its budget; it holds
+            // the merged sums, a copy of them while a save lasts, and the lit mask, on this machine. The workers
+            // check their own engines when their job arrives.
+            if let Some(budget) = MemoryBudget::new(None) {
+                let need = of_pixels((2 * photonfarm::accumulation::Accumulator::bytes_per_pixel(&aux) + 1) as f64);
+                if need > budget.bytes() {
+                    let detail = " in the coordinator, which merges the workers' sums and saves from a copy of them";
+                    bail!("{}", memory::over_limit(budget, need, base, detail));
+                }
+            }
+            Ok(None)
+        }
+        (Processes::One, None) => {
+            // The one-thread engine's buffers are a one-group engine's without its grid entries and shared
+            // buffers: that engine's estimate bounds them before they exist, and the engine checks its exact
+            // size again once it has allocated.
+            if let Some(budget) = MemoryBudget::new(args.memory_limit) {
+                let depth = if settings.estimator == Estimator::Path { 0 } else { settings.backward_diffuse_depth };
+                let one = EngineConfig::for_method(ParallelMethod::Sync, 1, 1, machine::all_cores())?;
+                let need = of_pixels(one.bytes_per_pixel(pixels, depth, &aux));
+                if need > budget.bytes() {
+                    bail!("{}", memory::over_limit(budget, need, base, ""));
+                }
+            }
+            Ok(None)
+        }
+        (Processes::One, Some(method)) => {
+            let cores = match &args.cores {
+                Some(list) => machine::parse_cores(list).map_err(|e| anyhow::anyhow!("--cores: {e}"))?,
+                None => machine::all_cores(),
+            };
+            let threads = args.threads.unwrap_or(cores.len());
+            let Some(budget) = MemoryBudget::new(args.memory_limit) else { return Ok(Some(threads)) };
+            let need = |t: usize| -> Result<u64> {
+                let c = EngineConfig::for_method(method, t, args.group_size, cores.clone())?;
+                Ok(of_pixels(c.bytes_per_pixel(pixels, settings.backward_diffuse_depth, &aux)))
+            };
+            fit_memory(budget, method, threads, base, need, notes).map(Some)
+        }
+    }
 }
 
 /// The threads an in-process method may use within its memory budget (`--memory-limit` or what the machine has

@@ -217,6 +217,37 @@ fn a_memory_limit_makes_async_give_up_threads_and_other_methods_refuse_up_front(
 }
 
 #[test]
+fn a_render_larger_than_the_machines_available_memory_is_refused_before_anything_is_sized_by_the_image() {
+    // 16,384² pixels, the largest image the loader accepts: about 100 GiB for a coordinator's sums alone and
+    // twice that for an engine's buffers.
+    let available = photonfarm::render::memory::available_bytes().expect("/proc/meminfo");
+    if available > 90 << 30 {
+        eprintln!("skipped: this machine has {} GiB available, enough for the estimate", available >> 30);
+        return;
+    }
+    let scene_dir = scratch_dir("too-large");
+    let scene = cornell_at(&scene_dir, 16384);
+    for method in ["pbpm", "path", "sync", "async", "three-level"] {
+        let out = scratch_dir(&format!("too-large-{method}"));
+        let o = Command::new(binary("coordinator"))
+            .args(["render", scene.to_str().unwrap(), "--method", method, "--phases", "1", "--quiet", "--out"])
+            .arg(&out)
+            .current_dir(repo_root())
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{method}: a render of 16,384² pixels started: {stderr}");
+        assert!(
+            stderr.contains("of memory this machine has available is not enough: this render needs about")
+                && stderr.contains("--memory-limit sets the budget instead"),
+            "{method}: {stderr}"
+        );
+        // Refused before the lit mask, which would have left its seconds and the output folder's files.
+        assert!(!out.join("run.json").exists() && !out.join("preview.png").exists(), "{method}: outputs written");
+    }
+}
+
+#[test]
 fn bad_input_is_refused_with_a_message_and_no_output() {
     let out = scratch_dir("bad");
     for (args, needle) in [
