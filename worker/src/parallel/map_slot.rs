@@ -220,7 +220,7 @@ mod loom_tests {
             slot.count_owner_paths(&owner, 1);
             slot.owner_data(&owner).contributions.fetch_add(1, Ordering::Relaxed);
             while !slot.try_close(&owner) {
-                crate::parallel::sync_primitives::spin_yield();
+                super::super::sync_primitives::spin_yield();
             }
             let counted = slot.light_paths();
             let data = slot.data_mut(&mut owner);
