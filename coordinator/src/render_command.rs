@@ -453,10 +453,7 @@ fn start_engine<'s>(
             Ok((Box::new(engine), "1 thread".to_string()))
         }
         (Processes::One, Some(method)) => {
-            let cores = match &args.cores {
-                Some(list) => machine::parse_cores(list).map_err(|e| anyhow::anyhow!("--cores: {e}"))?,
-                None => machine::all_cores(),
-            };
+            let cores = cores_of(args)?;
             let threads = threads.unwrap_or_else(|| args.threads.unwrap_or(cores.len()));
             let mut config = EngineConfig::for_method(method, threads, args.group_size, cores)?;
             if let Some(t) = args.tile_size {
@@ -870,6 +867,14 @@ fn print_summary(record: &RunRecord, reason: StopReason, dir: &Path) {
     say!("wrote {}", dir.display());
 }
 
+/// The cores an in-process parallel method runs on: `--cores`, or all of this machine's.
+fn cores_of(args: &RenderArgs) -> Result<Vec<usize>> {
+    match &args.cores {
+        Some(list) => machine::parse_cores(list).map_err(|e| anyhow::anyhow!("--cores: {e}")),
+        None => Ok(machine::all_cores()),
+    }
+}
+
 /// Checks the render's memory estimate against its budget (`--memory-limit`, or what the machine has available)
 /// before anything the image's size scales is allocated, and returns the threads an in-process parallel method
 /// runs with (async gives up threads to fit; None: the method's own choice).
@@ -913,10 +918,7 @@ fn memory_plan(
             Ok(None)
         }
         (Processes::One, Some(method)) => {
-            let cores = match &args.cores {
-                Some(list) => machine::parse_cores(list).map_err(|e| anyhow::anyhow!("--cores: {e}"))?,
-                None => machine::all_cores(),
-            };
+            let cores = cores_of(args)?;
             let threads = args.threads.unwrap_or(cores.len());
             let Some(budget) = MemoryBudget::new(args.memory_limit) else { return Ok(Some(threads)) };
             let need = |t: usize| -> Result<u64> {
