@@ -41,13 +41,16 @@ pub fn mean_z2(a: &Accumulator, b: &Accumulator) -> f64 {
 /// and it averages out the few degrees of freedom of each pixel's replicate SEM.
 pub struct VarianceRatio {
     pub value: f64,
-    /// Delete-one-block jackknife over 8 × 8-pixel blocks, which hold a photon's reach, so their sums are
-    /// nearly independent.
+    /// Delete-one-block jackknife over 4 × 4-pixel blocks. Their sums are nearly independent: on the 64² test
+    /// scenes the jackknife gives the same standard error with blocks of 4, 8 and 16 pixels, which it would not
+    /// if neighbouring blocks shared much of their noise. Many small blocks keep the estimate itself steady: from 64
+    /// blocks of 8 pixels it varies by a factor of two from run to run, enough for a 4-SE check to fail on a
+    /// difference of under three true standard errors.
     pub standard_error: f64,
 }
 
 pub fn variance_ratio(a: &Accumulator, b: &Accumulator, lit: &LitMask) -> VarianceRatio {
-    const BLOCK: u32 = 8;
+    const BLOCK: u32 = 4;
     let (bw, bh) = (a.width.div_ceil(BLOCK), a.height.div_ceil(BLOCK));
     let (mut d2, mut s2) = (vec![0.0; (bw * bh) as usize], vec![0.0; (bw * bh) as usize]);
     for i in (0..a.pixels.len()).filter(|&i| !lit.is_lit(i)) {
