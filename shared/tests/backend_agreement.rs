@@ -140,6 +140,25 @@ fn compare_scene(name: &str, scene: &Scene, preset: ObvhsPreset) {
     assert_eq!(occlusion_differs, 0, "{name}: {occlusion_differs} of {RAYS} occlusion answers differ");
 }
 
+/// A shipped scene, for its geometry. An RGB-only build (CI runs this test in one, beside the RGB-only checks,
+/// to build the library once for both) refuses dispersive glass, which changes no surface: it reads those
+/// scenes without their Abbe numbers.
+fn load_geometry(name: &str) -> Scene {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+    let path = dir.join(name);
+    if cfg!(feature = "spectral") {
+        return Scene::load(&path).unwrap_or_else(|e| panic!("{e}"));
+    }
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let dispersive = |l: &&str| {
+        ["abbe", "ext_abbe"]
+            .iter()
+            .any(|k| l.trim_start().strip_prefix(k).is_some_and(|r| r.trim_start().starts_with('=')))
+    };
+    let text: String = text.lines().filter(|l| !dispersive(l)).map(|l| format!("{l}\n")).collect();
+    Scene::from_toml(&text, &path, &dir).unwrap_or_else(|e| panic!("{name}: {e}"))
+}
+
 #[test]
 fn embree_and_every_obvhs_preset_agree_on_every_shipped_scene() {
     let mut names: Vec<String> = std::fs::read_dir(Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes"))
@@ -150,8 +169,7 @@ fn embree_and_every_obvhs_preset_agree_on_every_shipped_scene() {
     names.sort();
     assert!(names.len() >= 4, "found only {names:?}");
     for name in &names {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes").join(name);
-        let scene = Scene::load(&path).unwrap_or_else(|e| panic!("{e}"));
+        let scene = load_geometry(name);
         if scene.geometry.triangle_count() == 0 {
             println!("{name}: analytic surfaces only, traced by neither backend");
             continue;
