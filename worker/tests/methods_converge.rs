@@ -100,6 +100,12 @@ struct Reference {
     quarters: BlockRounds,
 }
 
+/// The cornell reference both cornell tests compare with, rendered once for the test process.
+fn cornell_reference(sc: &Scene) -> &'static Reference {
+    static CORNELL: std::sync::OnceLock<Reference> = std::sync::OnceLock::new();
+    CORNELL.get_or_init(|| reference(sc, 1200))
+}
+
 fn reference(sc: &Scene, phases: u64) -> Reference {
     let mut e = Engine::new(sc, RenderSettings::for_scene(sc, Method::Pbpm, 99));
     let mut quarters = BlockRounds::new(e.sums(), e.sums().width / 4);
@@ -211,9 +217,9 @@ fn configs(group_variants: bool) -> Vec<EngineConfig> {
 #[test]
 fn every_method_and_group_size_converges_to_the_single_thread_image_on_cornell() {
     let sc = scene("cornell.toml", 64);
-    let reference = reference(&sc, 1200);
+    let reference = cornell_reference(&sc);
     for c in configs(true) {
-        check(&sc, "cornell", &reference, c, 300, true);
+        check(&sc, "cornell", reference, c, 300, true);
     }
     // Each phase is normalised by its own light paths, so rounds at 16 times fewer and 4 times more light paths
     // per pixel than the reference's 1 (as a run that chooses them while it goes) estimate the same image. At
@@ -222,7 +228,7 @@ fn every_method_and_group_size_converges_to_the_single_thread_image_on_cornell()
     // its own L = 1 image at a few hundred phases, falling toward 1 as the phases grow, which a bias would not
     // do. Hence 600 phases.
     let two_level = EngineConfig::for_method(ParallelMethod::TwoLevel, 2, 1, vec![0, 1]).unwrap();
-    check_with(&sc, "cornell, light per pixel 1/16 and 4 in turn,", &reference, two_level, 600, true, |e, round| {
+    check_with(&sc, "cornell, light per pixel 1/16 and 4 in turn,", reference, two_level, 600, true, |e, round| {
         e.set_light_paths_per_pixel(if round % 2 == 0 { 1.0 / 16.0 } else { 4.0 });
     });
 }
@@ -230,7 +236,7 @@ fn every_method_and_group_size_converges_to_the_single_thread_image_on_cornell()
 #[test]
 fn rounds_capped_to_part_of_the_tiles_give_every_tile_its_phases_and_converge_to_the_single_thread_image() {
     let sc = scene("cornell.toml", 64);
-    let reference = reference(&sc, 1200);
+    let reference = cornell_reference(&sc);
     // Two groups of 8-pixel tiles, at most 512 pixels per group phase: a round renders 16 of the 64 tiles, 8 per
     // group, whole (a deal quarters tiles only when there are fewer than four per group), so that every pixel
     // of a tile has its phases.
@@ -240,7 +246,7 @@ fn rounds_capped_to_part_of_the_tiles_give_every_tile_its_phases_and_converge_to
     let tiles = photonfarm::render::ActiveTiles::all(64, 64, 8).unwrap();
     let mut previous: Option<Vec<u32>> = None;
     let (mut rounds, mut most_in_a_round, mut widest_spread) = (0, 0, 0);
-    let sums = check_with(&sc, "cornell, 512 pixels per group phase,", &reference, config, 300, true, |e, round| {
+    let sums = check_with(&sc, "cornell, 512 pixels per group phase,", reference, config, 300, true, |e, round| {
         if round == 0 {
             e.set_phase_cap(PhaseCap::Pixels(cap));
         }
