@@ -49,7 +49,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     // Before anything the image's size scales (the lit mask, the engine's buffers, the workers): a render that
     // cannot fit is refused now, and async gives up threads to fit.
     let mut notes = Vec::new();
-    let threads = memory_plan(&args, &scene, &settings, &mut notes)?;
+    let MemoryPlan { threads, estimate: memory_estimate } = memory_plan(&args, &scene, &settings, &mut notes)?;
     // Decided once, before the render, from the scene and the path depth alone: every figure over unlit pixels
     // (δ, the stop on the target error, the true error) measures the same pixels from the first phase on.
     // It takes as long as some renders through a lens, so the terminal says what is going on meanwhile.
@@ -88,6 +88,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         lit_seconds,
         stop: &stop,
         notes,
+        memory_estimate,
         session,
         elapsed_before: Duration::from_secs_f64(checkpoint.as_ref().map_or(0.0, |c| c.elapsed_s)),
         launched,
@@ -541,6 +542,8 @@ struct Outputs<'a> {
     stop: &'a StopRule,
     /// What the run changed from what it was asked (flags of the record).
     notes: Vec<String>,
+    /// This process's peak memory as estimated before it allocated (`memory_plan`).
+    memory_estimate: u64,
     /// This session of the run (1 unless resumed).
     session: u32,
     /// Rendering time of the earlier sessions.
@@ -585,6 +588,7 @@ impl Outputs<'_> {
             wall_time_s: self.elapsed_s(),
             started_s: Some(self.start.duration_since(self.launched).as_secs_f64()),
             peak_memory_bytes: memory::peak_rss_bytes(),
+            memory_estimate_bytes: Some(self.memory_estimate),
             bytes_per_pixel: engine.bytes_per_pixel(),
             error: engine.sums().error(self.lit),
             lit_mask: Some(self.lit.record(self.lit_seconds)),
@@ -875,15 +879,21 @@ fn cores_of(args: &RenderArgs) -> Result<Vec<usize>> {
     }
 }
 
+/// What `memory_plan` decided: the threads an in-process parallel method runs with (async gives up threads to
+/// fit; None: the method's own choice), and this process's estimated peak, kept in the run record.
+struct MemoryPlan {
+    threads: Option<usize>,
+    estimate: u64,
+}
+
 /// Checks the render's memory estimate against its budget (`--memory-limit`, or what the machine has available)
-/// before anything the image's size scales is allocated, and returns the threads an in-process parallel method
-/// runs with (async gives up threads to fit; None: the method's own choice).
+/// before anything the image's size scales is allocated.
 fn memory_plan(
     args: &RenderArgs,
     scene: &Scene,
     settings: &RenderSettings,
     notes: &mut Vec<String>,
-) -> Result<Option<usize>> {
+) -> Result<MemoryPlan> {
     let base = memory::current_rss_bytes().unwrap_or(0);
     let pixels = scene.camera.pixel_count();
     let aux = photonfarm::accumulation::AuxLayout::for_scene(scene, settings.spectral_bands);
@@ -894,38 +904,41 @@ fn memory_plan(
             // The coordinator renders nothing, so --memory-limit (per worker process) is not its budget; it holds
             // the merged sums, a copy of them while a save lasts, and the lit mask, on this machine. The workers
             // check their own engines when their job arrives.
+            let need = of_pixels((2 * photonfarm::accumulation::Accumulator::bytes_per_pixel(&aux) + 1) as f64);
             if let Some(budget) = MemoryBudget::new(None) {
-                let need = of_pixels((2 * photonfarm::accumulation::Accumulator::bytes_per_pixel(&aux) + 1) as f64);
                 if need > budget.bytes() {
                     let detail = " in the coordinator, which merges the workers' sums and saves from a copy of them";
                     bail!("{}", memory::over_limit(budget, need, base, detail));
                 }
             }
-            Ok(None)
+            Ok(MemoryPlan { threads: None, estimate: need })
         }
         (Processes::One, None) => {
             // The one-thread engine's buffers are a one-group engine's without its grid entries and shared
             // buffers: that engine's estimate bounds them before they exist, and the engine checks its exact
             // size again once it has allocated.
+            let depth = if settings.estimator == Estimator::Path { 0 } else { settings.backward_diffuse_depth };
+            let one = EngineConfig::for_method(ParallelMethod::Sync, 1, 1, machine::all_cores())?;
+            let need = of_pixels(one.bytes_per_pixel(pixels, depth, &aux));
             if let Some(budget) = MemoryBudget::new(args.memory_limit) {
-                let depth = if settings.estimator == Estimator::Path { 0 } else { settings.backward_diffuse_depth };
-                let one = EngineConfig::for_method(ParallelMethod::Sync, 1, 1, machine::all_cores())?;
-                let need = of_pixels(one.bytes_per_pixel(pixels, depth, &aux));
                 if need > budget.bytes() {
                     bail!("{}", memory::over_limit(budget, need, base, ""));
                 }
             }
-            Ok(None)
+            Ok(MemoryPlan { threads: None, estimate: need })
         }
         (Processes::One, Some(method)) => {
             let cores = cores_of(args)?;
             let threads = args.threads.unwrap_or(cores.len());
-            let Some(budget) = MemoryBudget::new(args.memory_limit) else { return Ok(Some(threads)) };
             let need = |t: usize| -> Result<u64> {
                 let c = EngineConfig::for_method(method, t, args.group_size, cores.clone())?;
                 Ok(of_pixels(c.bytes_per_pixel(pixels, settings.backward_diffuse_depth, &aux)))
             };
-            fit_memory(budget, method, threads, base, need, notes).map(Some)
+            let threads = match MemoryBudget::new(args.memory_limit) {
+                Some(budget) => fit_memory(budget, method, threads, base, &need, notes)?,
+                None => threads,
+            };
+            Ok(MemoryPlan { threads: Some(threads), estimate: need(threads)? })
         }
     }
 }

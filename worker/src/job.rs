@@ -77,19 +77,18 @@ pub fn engine_config(job: &Job) -> Result<EngineConfig, String> {
     Ok(config)
 }
 
-/// Refuses an engine of `config` whose buffers, with the memory this process holds now (the scene loaded), would
-/// not fit in `budget` (`--memory-limit` per worker process, or the machine's available memory), before it
-/// allocates them.
-fn check_memory(
-    budget: MemoryBudget,
-    config: &EngineConfig,
-    scene: &Scene,
-    settings: &photonfarm::render::RenderSettings,
-) -> Result<(), String> {
+/// The peak memory an engine of `config` will need: what this process holds now (the scene loaded) plus the
+/// engine's buffers, estimated before it allocates them; and what it holds now.
+fn memory_need(config: &EngineConfig, scene: &Scene, settings: &photonfarm::render::RenderSettings) -> (u64, u64) {
     let base = photonfarm::render::memory::current_rss_bytes().unwrap_or(0);
     let pixels = scene.camera.pixel_count();
     let aux = photonfarm::accumulation::AuxLayout::for_scene(scene, settings.spectral_bands);
-    let need = base + (config.bytes_per_pixel(pixels, settings.backward_diffuse_depth, &aux) * pixels as f64) as u64;
+    (base + (config.bytes_per_pixel(pixels, settings.backward_diffuse_depth, &aux) * pixels as f64) as u64, base)
+}
+
+/// Refuses an engine of `config` that needs `need` bytes (`base` of them held now) when that does not fit in
+/// `budget` (`--memory-limit` per worker process, or the machine's available memory), before it allocates.
+fn check_memory(budget: MemoryBudget, config: &EngineConfig, need: u64, base: u64) -> Result<(), String> {
     if need <= budget.bytes() {
         return Ok(());
     }
@@ -150,8 +149,9 @@ pub fn run(
         Some(node) => memory_binding::bind_memory(node),
         None => MemoryBinding::FirstTouch("no NUMA node given".into()),
     };
+    let (memory_estimate, base) = memory_need(&config, scene, &job.settings);
     if let Some(budget) = MemoryBudget::new(job.engine.memory_limit) {
-        if let Err(reason) = check_memory(budget, &config, scene, &job.settings) {
+        if let Err(reason) = check_memory(budget, &config, memory_estimate, base) {
             emit(JobEvent::Failed(reason));
             return;
         }
@@ -304,6 +304,7 @@ pub fn run(
                 interval_ms: interval.as_millis() as u64,
                 previous_send_ms: 0,
                 peak_memory_bytes: photonfarm::render::memory::peak_rss_bytes().unwrap_or(0),
+                memory_estimate_bytes: memory_estimate,
                 non_finite_dropped: photonfarm::accumulation::non_finite_dropped(),
             };
             let channels = current.aux.layout().channels();

@@ -260,6 +260,7 @@ impl Cluster {
                         v.record.last_send_s = snapshot.previous_send_ms as f64 / 1000.0;
                         v.record.peak_memory_bytes =
                             (snapshot.peak_memory_bytes > 0).then_some(snapshot.peak_memory_bytes);
+                        v.record.memory_estimate_bytes = Some(snapshot.memory_estimate_bytes);
                         v.record.non_finite_dropped = snapshot.non_finite_dropped;
                         self.send(Control::Ack { worker, seq: snapshot.seq });
                         return true;

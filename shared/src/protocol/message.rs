@@ -20,7 +20,7 @@ use serde::{Deserialize, Serialize};
 /// import options (`Job::mitsuba`).
 /// 13: jobs carry the scene's description (`Job::scene`) instead of its file's text and import options.
 /// 14: a snapshot's delta holds only the pixels rendered since the previous one (`delta::SPARSE_MAGIC`).
-pub const PROTOCOL_VERSION: u32 = 14;
+pub const PROTOCOL_VERSION: u32 = 15;
 
 /// Which end of a link a peer is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -132,6 +132,8 @@ pub struct Snapshot {
     pub previous_send_ms: u64,
     /// The worker process's peak resident memory so far (bytes; 0 where the OS does not say).
     pub peak_memory_bytes: u64,
+    /// Its estimate of that peak, made before its engine allocated (bytes).
+    pub memory_estimate_bytes: u64,
     /// Phase values with a NaN or an infinity the worker has dropped so far.
     pub non_finite_dropped: u64,
 }

@@ -145,6 +145,9 @@ pub struct WorkerRecord {
     /// The worker process's peak resident memory at its last snapshot.
     #[serde(default)]
     pub peak_memory_bytes: Option<u64>,
+    /// The worker's estimate of its peak memory, made before its engine allocated (`RunRecord`'s field).
+    #[serde(default)]
+    pub memory_estimate_bytes: Option<u64>,
     /// Phase values with a NaN or an infinity the worker dropped (any is a bug, and flagged in the record).
     #[serde(default)]
     pub non_finite_dropped: u64,
@@ -292,6 +295,11 @@ pub struct RunRecord {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub started_s: Option<f64>,
     pub peak_memory_bytes: Option<u64>,
+    /// This process's peak memory as estimated before it allocated what the image's size scales (the scene
+    /// loaded, plus the engine's buffers or, in a distributed run's coordinator, the merged sums and a copy of
+    /// them): the estimate `--memory-limit` and the machine's available memory are checked against.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub memory_estimate_bytes: Option<u64>,
     pub bytes_per_pixel: f64,
     pub error: ErrorEstimate,
     /// The pixels that see a light, decided before the render: δ unlit and the true error over unlit pixels

@@ -323,6 +323,7 @@ fn main() -> Result<()> {
             interval_ms: 1000,
             previous_send_ms: 3,
             peak_memory_bytes: 1 << 20,
+            memory_estimate_bytes: 1 << 20,
             non_finite_dropped: 0,
         }),
         Message::Ack { seq: 9 },
