@@ -935,7 +935,7 @@ fn memory_plan(
                 Ok(of_pixels(c.bytes_per_pixel(pixels, settings.backward_diffuse_depth, &aux)))
             };
             let threads = match MemoryBudget::new(args.memory_limit) {
-                Some(budget) => fit_memory(budget, method, threads, base, &need, notes)?,
+                Some(budget) => fit_memory(budget, method, threads, base, need, notes)?,
                 None => threads,
             };
             Ok(MemoryPlan { threads: Some(threads), estimate: need(threads)? })
