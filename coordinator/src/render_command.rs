@@ -98,6 +98,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let mut feed = live.as_mut().map(|l| &mut l.feed);
     let mut forecast = Forecast::new(stop.target_error);
     let mut tiles = adaptive_tiles(&args, &scene, &stop)?;
+    let mut saving = None;
     let run = run_until_stop(
         engine.as_mut(),
         &interrupted,
@@ -105,7 +106,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         &bar,
         &mut history,
         (&mut forecast, tiles.as_mut()),
-        feed.as_deref_mut(),
+        (feed.as_deref_mut(), &mut saving),
     );
     bar.set_message("stopping: collecting the last completed phases");
     if let Some(f) = feed.as_deref_mut() {
@@ -115,7 +116,14 @@ pub fn run(args: RenderArgs) -> Result<()> {
     bar.finish_and_clear();
     // After the engine's finish: every worker has sent its last portions.
     let ray_map = recorder.map(|r| r.finish().map(|s| (r.path().map(Path::to_path_buf), s)));
-    let reason = run.context("writing the periodic results failed; the run was stopped")?;
+    // A periodic save still writing from its copy of the sums (distributed runs) ends before the final save,
+    // which it must not overwrite; the workers were stopped and their last snapshots merged meanwhile, so the
+    // rendering ended on time however long that save takes.
+    let mut save_error = None;
+    join_save(&mut saving, &mut save_error);
+    let reason = run
+        .and_then(|r| save_error.map_or(Ok(r), Err))
+        .context("writing the periodic results failed; the run was stopped")?;
     if reason == StopReason::NoWorkers && engine.sums().pixels.iter().all(|p| p.phases == 0) {
         let why: Vec<String> =
             engine.workers().unwrap_or_default().iter().map(|w| format!("{}: {}", w.name, w.state)).collect();
@@ -687,7 +695,7 @@ fn write_checkpoint(dir: &Path, sums: &Accumulator, checkpoint: Option<Checkpoin
 }
 
 /// Waits for the save under way, if any, and keeps its error unless one came before.
-fn join_save(saving: &mut Option<std::thread::JoinHandle<Result<()>>>, save_error: &mut Option<anyhow::Error>) {
+fn join_save(saving: &mut Saving, save_error: &mut Option<anyhow::Error>) {
     if let Some(h) = saving.take() {
         let done = h.join().unwrap_or_else(|_| Err(anyhow::anyhow!("the thread saving the outputs panicked")));
         if let Err(e) = done {
@@ -696,8 +704,12 @@ fn join_save(saving: &mut Option<std::thread::JoinHandle<Result<()>>>, save_erro
     }
 }
 
+/// A periodic save writing on a thread of its own (distributed methods).
+type Saving = Option<std::thread::JoinHandle<Result<()>>>;
+
 /// Runs the engine until the stop rule or Ctrl-C, showing progress and refreshing the outputs every
-/// `--save-interval`. A refresh that fails stops the run, and is the error returned.
+/// `--save-interval`. A refresh that fails stops the run, and is the error returned; a refresh still under way at
+/// the stop is left in `saving` for the caller to join once the engine has finished.
 fn run_until_stop(
     engine: &mut dyn Progressive,
     interrupted: &AtomicBool,
@@ -705,18 +717,16 @@ fn run_until_stop(
     bar: &ProgressBar,
     history: &mut Vec<HistoryEntry>,
     (forecast, tiles): (&mut Forecast, Option<&mut ActiveTiles>),
-    mut feed: Option<&mut LiveFeed>,
+    (mut feed, saving): (Option<&mut LiveFeed>, &mut Saving),
 ) -> Result<StopReason> {
     let save_interval = Duration::from_secs_f64(outputs.args.save_interval.max(0.5));
     // The first step is saved at once: on a large image it comes a phase or so into the run, and the preview
     // and δ should not wait a whole interval more.
     let mut last_save: Option<Instant> = None;
     let mut save_error: Option<anyhow::Error> = None;
-    // The save under way (distributed methods, whose engine is the workers); a save falls due only once the
-    // previous one has ended.
-    let mut saving: Option<std::thread::JoinHandle<Result<()>>> = None;
-    // How long the latest save took: a timed run starts none that would still be writing at its end, where the
-    // final save waits for it.
+    // A save falls due only once the previous one (`saving`: distributed methods, whose engine is the workers)
+    // has ended. How long the latest save took: a timed run starts none that would still be writing at its end,
+    // where the final save waits for it.
     let (mut save_started, mut save_took) = (Instant::now(), Duration::ZERO);
     let stop = outputs.stop;
     let tracking = Tracking { lit: outputs.lit, forecast, elapsed_before: outputs.elapsed_before, tiles };
@@ -733,7 +743,7 @@ fn run_until_stop(
         // A step that ends at the deadline is saved by the run's final save, which follows at once.
         let over = stop.time.is_some_and(|t| outputs.elapsed_s() >= t.as_secs_f64());
         if saving.as_ref().is_some_and(|h| h.is_finished()) {
-            join_save(&mut saving, &mut save_error);
+            join_save(saving, &mut save_error);
             save_took = save_started.elapsed();
         }
         let due = last_save.is_none_or(|t| t.elapsed() >= save_interval);
@@ -743,7 +753,7 @@ fn run_until_stop(
             save_started = Instant::now();
             if outputs.args.method.is_distributed() {
                 match outputs.save_in_background(engine, history, forecast) {
-                    Ok(h) => saving = Some(h),
+                    Ok(h) => *saving = Some(h),
                     Err(e) => {
                         save_error = Some(anyhow::Error::new(e).context("cannot start the thread saving the outputs"))
                     }
@@ -756,8 +766,6 @@ fn run_until_stop(
             }
         }
     });
-    // The run's final save follows: this one must not write over it.
-    join_save(&mut saving, &mut save_error);
     match save_error {
         Some(e) => Err(e),
         None => Ok(reason),
@@ -901,13 +909,18 @@ fn memory_plan(
     let layout = args.method.layout();
     match (layout.processes, layout.parallel) {
         (Processes::PerNumaNode, _) => {
-            // The coordinator renders nothing, so --memory-limit (per worker process) is not its budget; it holds
-            // the merged sums, a copy of them while a save lasts, and the lit mask, on this machine. The workers
-            // check their own engines when their job arrives.
-            let need = of_pixels((2 * photonfarm::accumulation::Accumulator::bytes_per_pixel(&aux) + 1) as f64);
+            // The coordinator renders nothing, so --memory-limit (per worker process) is not its budget. At its
+            // peak it holds the merged sums and the lit mask, a copy of the sums a save writes from, that save's
+            // checkpoint encoding (the raw delta and its compressed form, which zstd bounds by the raw size) and,
+            // meanwhile, a snapshot being merged (compressed and decoded, as large at most). The workers check
+            // their own engines when their job arrives.
+            let sums = photonfarm::accumulation::Accumulator::bytes_per_pixel(&aux) as u64 * pixels as u64;
+            let delta = photonfarm::accumulation::delta::max_delta_bytes(pixels as u64, &aux);
+            let need = base + 2 * sums + pixels as u64 + 4 * delta;
             if let Some(budget) = MemoryBudget::new(None) {
                 if need > budget.bytes() {
-                    let detail = " in the coordinator, which merges the workers' sums and saves from a copy of them";
+                    let detail = " in the coordinator, which merges the workers' sums and saves from a copy of them, \
+                                  encoded for the checkpoint";
                     bail!("{}", memory::over_limit(budget, need, base, detail));
                 }
             }

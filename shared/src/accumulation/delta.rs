@@ -182,7 +182,13 @@ const CHUNK: usize = 1024;
 /// The delta `current − base` over the whole image, compressed (the dense format, which checkpoints hold).
 /// Pixels with no new phase cost almost nothing after compression.
 pub fn encode_delta(current: &Accumulator, base: &Accumulator, compression: Compression) -> Vec<u8> {
-    encode(current, base, None, compression)
+    encode(current, Some(base), None, compression)
+}
+
+/// The delta `current − 0` over every pixel, compressed (a checkpoint's sums): `encode_delta` from sums of
+/// zeros, without allocating them.
+pub fn encode_whole(current: &Accumulator, compression: Compression) -> Vec<u8> {
+    encode(current, None, None, compression)
 }
 
 /// The delta `current − base` over `pixels` only, compressed: the sums of every other pixel must be the same in
@@ -197,12 +203,20 @@ pub fn encode_delta_of(
         pixels.runs.last().is_none_or(|&(s, l)| (s as usize + l as usize) <= current.pixels.len()),
         "runs beyond the image"
     );
-    encode(current, base, Some(pixels), compression)
+    encode(current, Some(base), Some(pixels), compression)
 }
 
-fn encode(current: &Accumulator, base: &Accumulator, pixels: Option<&PixelRuns>, compression: Compression) -> Vec<u8> {
-    assert_eq!(current.pixels.len(), base.pixels.len(), "a delta needs two sums of the same image");
-    assert_eq!(current.aux.layout(), base.aux.layout(), "a delta needs two sums of the same layers");
+/// `current − base` over `pixels` (every pixel if None), with sums of zeros for a base of None.
+fn encode(
+    current: &Accumulator,
+    base: Option<&Accumulator>,
+    pixels: Option<&PixelRuns>,
+    compression: Compression,
+) -> Vec<u8> {
+    if let Some(base) = base {
+        assert_eq!(current.pixels.len(), base.pixels.len(), "a delta needs two sums of the same image");
+        assert_eq!(current.aux.layout(), base.aux.layout(), "a delta needs two sums of the same layers");
+    }
     let layout = layout_bytes(current.aux.layout());
     let aux_channels = current.aux.layout().channels();
     let n = current.pixels.len();
@@ -230,10 +244,12 @@ fn encode(current: &Accumulator, base: &Accumulator, pixels: Option<&PixelRuns>,
     let body_start = raw.len();
     raw.resize(body_start + (BYTES_PER_PIXEL + 8 * aux_channels) * m, 0);
     let (counts, floats) = raw[body_start..].split_at_mut(4 * U32_PLANES * m);
-    let (c_aux, b_aux) = (current.aux.values(), base.aux.values());
+    let c_aux = current.aux.values();
+    let zero = PixelSums::default();
     // Byte b of value j of plane k goes to plane k's byte-b row at column j (a byte shuffle).
     for (j0, range) in runs.pieces() {
-        let pairs = current.pixels[range.clone()].iter().zip(&base.pixels[range.clone()]);
+        let base_of = |j: usize| base.map_or(&zero, |b| &b.pixels[range.start + j]);
+        let pairs = current.pixels[range.clone()].iter().enumerate().map(|(j, c)| (c, base_of(j)));
         for k in 0..U32_PLANES {
             let plane = &mut counts[4 * m * k..4 * m * (k + 1)];
             for (j, (c, b)) in pairs.clone().enumerate() {
@@ -250,14 +266,13 @@ fn encode(current: &Accumulator, base: &Accumulator, pixels: Option<&PixelRuns>,
                 }
             }
         }
-        let (c, b) = (
-            &c_aux[range.start * aux_channels..range.end * aux_channels],
-            &b_aux[range.start * aux_channels..range.end * aux_channels],
-        );
+        let aux_range = range.start * aux_channels..range.end * aux_channels;
+        let c = &c_aux[aux_range.clone()];
+        let b = base.map(|b| &b.aux.values()[aux_range]);
         for k in 0..aux_channels {
             let plane = &mut floats[8 * m * (F64_PLANES + k)..8 * m * (F64_PLANES + k + 1)];
             for j in 0..range.len() {
-                let v = c[j * aux_channels + k] - b[j * aux_channels + k];
+                let v = c[j * aux_channels + k] - b.map_or(0.0, |b| b[j * aux_channels + k]);
                 for (byte, x) in v.to_le_bytes().into_iter().enumerate() {
                     plane[byte * m + j0 + j] = x;
                 }
@@ -499,6 +514,15 @@ mod tests {
             AuxLayer { name: "ghost".into(), channels: 3 },
             AuxLayer { name: "band_550".into(), channels: 1 },
         ]));
+    }
+
+    #[test]
+    fn a_whole_image_delta_is_the_delta_from_sums_of_zeros_byte_for_byte() {
+        for layout in [AuxLayout::default(), ghost_layout()] {
+            let current = sums(37, 3, 0.7, &layout);
+            let zero = Accumulator::with_aux(37, 1, layout.clone());
+            assert_eq!(encode_whole(&current, Compression::Small), encode_delta(&current, &zero, Compression::Small));
+        }
     }
 
     #[test]

@@ -8,7 +8,7 @@ use super::method::Method;
 use super::record::HistoryEntry;
 use super::settings::RenderSettings;
 use super::totals::RayTotals;
-use crate::accumulation::delta::{apply_delta, encode_delta, max_delta_bytes, Compression};
+use crate::accumulation::delta::{apply_delta, encode_whole, max_delta_bytes, Compression};
 use crate::accumulation::{Accumulator, AuxLayout};
 use crate::scene::Scene;
 use serde::{Deserialize, Serialize};
@@ -44,6 +44,24 @@ pub struct Checkpoint {
     pub aux: AuxLayout,
     /// The sums, as an exact delta from zero (see `accumulation::delta`).
     sums: Vec<u8>,
+}
+
+/// A writer that passes its bytes on and keeps their CRC-32.
+struct CrcWriter<W> {
+    inner: W,
+    crc: crc32fast::Hasher,
+}
+
+impl<W: Write> Write for CrcWriter<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.inner.write(buf)?;
+        self.crc.update(&buf[..n]);
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush()
+    }
 }
 
 /// Why a checkpoint cannot be used.
@@ -95,7 +113,6 @@ impl Checkpoint {
         totals: RayTotals,
         history: &[HistoryEntry],
     ) -> Self {
-        let zero = Accumulator::with_aux(sums.width, sums.height, sums.aux.layout().clone());
         Checkpoint {
             format: FORMAT,
             scene_hash: scene_hash.into(),
@@ -108,7 +125,7 @@ impl Checkpoint {
             totals,
             history: history.to_vec(),
             aux: sums.aux.layout().clone(),
-            sums: encode_delta(sums, &zero, Compression::Small),
+            sums: encode_whole(sums, Compression::Small),
         }
     }
 
@@ -124,12 +141,18 @@ impl Checkpoint {
     /// `path` at every moment, the old one or the new one.
     pub fn save(&self, path: &Path) -> Result<(), CheckpointError> {
         let err = |source| CheckpointError::Write { path: path.display().to_string(), source };
-        let mut bytes = bincode::serde::encode_to_vec(self, bincode::config::standard())
-            .map_err(|e| err(std::io::Error::other(e.to_string())))?;
-        bytes.extend_from_slice(&crc32fast::hash(&bytes).to_le_bytes());
         let tmp = path.with_extension("tmp");
-        let mut file = std::fs::File::create(&tmp).map_err(err)?;
-        file.write_all(&bytes).and_then(|()| file.sync_all()).map_err(err)?;
+        // Encoded straight into the file, its CRC-32 taken on the way: a large image's checkpoint is never held
+        // twice in memory.
+        let file = std::fs::File::create(&tmp).map_err(err)?;
+        let mut out =
+            CrcWriter { inner: std::io::BufWriter::with_capacity(1 << 20, file), crc: crc32fast::Hasher::new() };
+        bincode::serde::encode_into_std_write(self, &mut out, bincode::config::standard())
+            .map_err(|e| err(std::io::Error::other(e.to_string())))?;
+        let CrcWriter { mut inner, crc } = out;
+        inner.write_all(&crc.finalize().to_le_bytes()).map_err(err)?;
+        let file = inner.into_inner().map_err(|e| err(e.into_error()))?;
+        file.sync_all().map_err(err)?;
         if path.exists() {
             // Linked (or copied where links are not allowed), then renamed, so that the previous checkpoint is
             // also always whole.
