@@ -296,8 +296,9 @@ pub struct RunRecord {
     pub started_s: Option<f64>,
     pub peak_memory_bytes: Option<u64>,
     /// This process's peak memory as estimated before it allocated what the image's size scales (the scene
-    /// loaded, plus the engine's buffers or, in a distributed run's coordinator, the merged sums and a copy of
-    /// them): the estimate `--memory-limit` and the machine's available memory are checked against.
+    /// loaded, plus the engine's buffers or, in a distributed run's coordinator, the merged sums, the copy a save
+    /// writes from, its checkpoint encoding and a snapshot being merged): the estimate `--memory-limit` and the
+    /// machine's available memory are checked against.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub memory_estimate_bytes: Option<u64>,
     pub bytes_per_pixel: f64,
