@@ -6,7 +6,7 @@ use photonfarm::color::luminance_f64;
 use photonfarm::image_io::exr_file::{find_layer, read_exr, write_exr, LayerImage};
 use photonfarm::image_io::preview::{auto_exposure, write_preview_png};
 use photonfarm::render::images::luminance_of;
-use photonfarm::render::images::{layer_images, lit_layer, phases_layer, total_image};
+use photonfarm::render::images::{layer_images, lit_layer, phases_layer, total_image, total_layer};
 use photonfarm::render::record::{RunRecord, TrueError};
 use std::path::{Path, PathBuf};
 
@@ -70,7 +70,8 @@ impl Reference {
 
 /// Writes preview.png, then runs `between` (the preview is the cheapest file, and the one a user waits for; a
 /// large image's EXR takes seconds), then image.exr (with the lit mask as its `lit` layer and the phases per
-/// pixel as its `phases` layer) and run.json; each file is replaced atomically.
+/// pixel as its `phases` layer) and run.json; each file is replaced atomically. Besides the sums it holds the
+/// preview's total layer, then what `between` holds, then the EXR's layers, never two of them at once.
 pub fn save(
     dir: &Path,
     sums: &Accumulator,
@@ -78,13 +79,14 @@ pub fn save(
     record: &RunRecord,
     between: impl FnOnce() -> Result<()>,
 ) -> Result<()> {
-    let mut layers: Vec<LayerImage> = layer_images(sums);
-    let total = layers.iter().find(|l| l.name == "total").context("total layer missing")?;
-    write_preview_png(&dir.join("preview.png"), total, auto_exposure(total))?;
+    let total = total_layer(sums);
+    write_preview_png(&dir.join("preview.png"), &total, auto_exposure(&total))?;
+    drop(total);
     between()?;
+    let mut layers: Vec<LayerImage> = layer_images(sums);
     layers.push(lit_layer(lit));
     layers.push(phases_layer(sums));
-    write_exr(&dir.join("image.exr"), &layers)?;
+    write_exr(&dir.join("image.exr"), layers)?;
     let json = serde_json::to_vec_pretty(record)?;
     let tmp = dir.join(".run.json.tmp");
     std::fs::write(&tmp, json).with_context(|| format!("cannot write {}", tmp.display()))?;

@@ -19,7 +19,7 @@ use photonfarm::render::memory::MemoryBudget;
 use photonfarm::render::method::{Images, Processes};
 use photonfarm::render::record::{flags_of, HistoryEntry, RunRecord, WorkerRecord, WorkerState};
 use photonfarm::render::session::{self, ErrorOver, Progressive, StopReason, StopRule, Tracking};
-use photonfarm::render::{memory, ActiveTiles, Engine, Estimator, Method, RenderSettings};
+use photonfarm::render::{images, memory, ActiveTiles, Engine, Estimator, Method, RenderSettings};
 use photonfarm::scene::ghost::sensor_ghosts;
 use photonfarm::scene::{MitsubaOptions, Scene};
 use std::path::{Path, PathBuf};
@@ -42,7 +42,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         Some(p) => Some(Reference::load(p, scene.camera.width, scene.camera.height)?),
         None => None,
     };
-    let checkpoint = load_checkpoint(&args, &scene)?;
+    let (checkpoint, mut resumed_sums) = load_checkpoint(&args, &scene)?.unzip();
     if let Some(c) = &checkpoint {
         settings = c.settings;
     }
@@ -59,8 +59,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let lit = Arc::new(LitMask::of_scene(&scene, settings.max_depth));
     spinner.finish_and_clear();
     let lit_seconds = deciding.elapsed().as_secs_f64();
-    if let (Some(c), Some(from)) = (&checkpoint, &args.resume) {
-        check_resume_has_work(c, &stop, args.uniform, from, &lit)?;
+    if let (Some(c), Some(sums), Some(from)) = (&checkpoint, &resumed_sums, &args.resume) {
+        check_resume_has_work(c, sums, &stop, args.uniform, from, &lit)?;
     }
     let dir = output_dir(&args)?;
     let interrupted = catch_interrupts()?;
@@ -71,8 +71,15 @@ pub fn run(args: RenderArgs) -> Result<()> {
     }
     let session = checkpoint.as_ref().map_or(1, |c| c.session + 1);
     let recorder = start_ray_map(&args, &scene, &settings, &dir, session)?;
-    let (mut engine, layout) =
-        start_engine(&args, &scene, settings, &dir, checkpoint.as_ref(), recorder.clone(), threads)?;
+    let (mut engine, layout) = start_engine(
+        &args,
+        &scene,
+        settings,
+        &dir,
+        checkpoint.as_ref().zip(resumed_sums.take()),
+        recorder.clone(),
+        threads,
+    )?;
     let mut live =
         LiveSession::start(live_options(&args, &scene, &layout, &dir, engine.as_ref(), &interrupted, &lit)?)?;
     if let Some(url) = live.as_ref().and_then(|l| l.url.as_ref()) {
@@ -273,8 +280,8 @@ fn settings_of(args: &RenderArgs, scene: &Scene) -> Result<RenderSettings> {
     Ok(settings)
 }
 
-/// The checkpoint `--resume` continues from, checked against the method, the options and the scene.
-fn load_checkpoint(args: &RenderArgs, scene: &Scene) -> Result<Option<Checkpoint>> {
+/// The checkpoint `--resume` continues from and its sums, checked against the method, the options and the scene.
+fn load_checkpoint(args: &RenderArgs, scene: &Scene) -> Result<Option<(Checkpoint, Accumulator)>> {
     let Some(from) = &args.resume else { return Ok(None) };
     if !args.method.is_distributed() {
         bail!("--resume continues combination and three-level runs; --method {} has no checkpoint", args.method);
@@ -288,7 +295,7 @@ fn load_checkpoint(args: &RenderArgs, scene: &Scene) -> Result<Option<Checkpoint
         bail!("a resumed run keeps the settings of its checkpoint: drop --max-depth, --backward-diffuse-depth, --radius-scale, --light-paths-per-pixel and --spectral-output");
     }
     let (_, path) = resume_paths(from);
-    let c = Checkpoint::load(&path, scene)?;
+    let (c, sums) = Checkpoint::load(&path, scene)?;
     if c.method != args.method {
         bail!(
             "the checkpoint in {} is of a --method {} run, and --method {} cannot continue it (three-level is the \
@@ -299,7 +306,7 @@ fn load_checkpoint(args: &RenderArgs, scene: &Scene) -> Result<Option<Checkpoint
             c.method
         );
     }
-    Ok(Some(c))
+    Ok(Some((c, sums)))
 }
 
 /// The output folder of the run `--resume` names and the checkpoint file it continues from: FROM/checkpoint.bin,
@@ -317,6 +324,7 @@ fn resume_paths(from: &Path) -> (PathBuf, PathBuf) {
 /// once would add nothing and say nothing about why.
 fn check_resume_has_work(
     c: &Checkpoint,
+    sums: &Accumulator,
     stop: &StopRule,
     args_uniform: bool,
     from: &Path,
@@ -334,12 +342,11 @@ fn check_resume_has_work(
             );
         }
     }
-    let sums = c.sums().map_err(|e| anyhow::anyhow!("the checkpoint's sums: {e}"))?;
     let e = sums.error(lit);
     if let Some(n) = stop.phases {
         // The run's adaptive tiles (a target without --uniform) count the pixels' mean phases.
         let adaptive = stop.target_error.is_some() && !args_uniform;
-        let done = stop.phases_done(&sums, adaptive);
+        let done = stop.phases_done(sums, adaptive);
         if done >= n as f64 {
             let counted = if adaptive { "on average over the pixels" } else { "in every pixel" };
             bail!(
@@ -429,7 +436,7 @@ fn start_engine<'s>(
     scene: &'s Scene,
     settings: RenderSettings,
     dir: &Path,
-    checkpoint: Option<&Checkpoint>,
+    checkpoint: Option<(&Checkpoint, Accumulator)>,
     recorder: Option<Arc<Recorder>>,
     threads: Option<usize>,
 ) -> Result<(Box<dyn Progressive + 's>, String)> {
@@ -437,11 +444,7 @@ fn start_engine<'s>(
     match (layout.processes, layout.parallel) {
         (Processes::PerNumaNode, _) => {
             let resume = match checkpoint {
-                Some(c) => Some(launch::Resume {
-                    session: c.session + 1,
-                    sums: c.sums().map_err(|e| anyhow::anyhow!("the checkpoint's sums: {e}"))?,
-                    totals: c.totals,
-                }),
+                Some((c, sums)) => Some(launch::Resume { session: c.session + 1, sums, totals: c.totals }),
                 None => None,
             };
             let (cluster, layout) = launch::launch(&launch_options(args), scene, settings, dir, resume, recorder)?;
@@ -632,9 +635,10 @@ impl Outputs<'_> {
         Ok(record)
     }
 
-    /// `save` on a thread of its own, from a copy of the sums: encoding a large image's checkpoint and EXR takes
-    /// seconds, which would hold back merging the workers' snapshots (and, through their acknowledgements,
-    /// stretch their snapshot interval).
+    /// `save` on a thread of its own, reading the sums the engine shares (`Progressive::shared_sums`, which
+    /// holds its merges back meanwhile rather than copy a large image), or a copy of them: encoding a large
+    /// image's checkpoint and EXR takes seconds, which would hold back receiving the workers' snapshots and
+    /// acknowledging them (which paces their snapshot interval).
     fn save_in_background(
         &self,
         engine: &dyn Progressive,
@@ -643,7 +647,8 @@ impl Outputs<'_> {
     ) -> std::io::Result<std::thread::JoinHandle<Result<()>>> {
         let record = self.record(engine, history, StopReason::Running, forecast);
         let checkpoint = self.checkpoint_inputs(engine, history);
-        let (dir, sums, lit) = (self.dir.to_path_buf(), engine.sums().clone(), self.lit.clone());
+        let sums = engine.shared_sums().unwrap_or_else(|| Arc::new(engine.sums().clone()));
+        let (dir, lit) = (self.dir.to_path_buf(), self.lit.clone());
         std::thread::Builder::new()
             .name("save".into())
             .spawn(move || write_outputs(&dir, &sums, &lit, &record, checkpoint))
@@ -689,7 +694,7 @@ fn write_outputs(
 fn write_checkpoint(dir: &Path, sums: &Accumulator, checkpoint: Option<CheckpointInputs>) -> Result<()> {
     if let Some(c) = checkpoint {
         Checkpoint::new(sums, &c.scene_hash, c.method, c.settings, c.session, c.elapsed_s, c.totals, &c.history)
-            .save(&dir.join(CHECKPOINT))?;
+            .save(&dir.join(CHECKPOINT), sums)?;
     }
     Ok(())
 }
@@ -909,18 +914,19 @@ fn memory_plan(
     let layout = args.method.layout();
     match (layout.processes, layout.parallel) {
         (Processes::PerNumaNode, _) => {
-            // The coordinator renders nothing, so --memory-limit (per worker process) is not its budget. At its
-            // peak it holds the merged sums and the lit mask, a copy of the sums a save writes from, that save's
-            // checkpoint encoding (the raw delta and its compressed form, which zstd bounds by the raw size) and,
-            // meanwhile, a snapshot being merged (compressed and decoded, as large at most). The workers check
-            // their own engines when their job arrives.
+            // The coordinator renders nothing, so --memory-limit (per worker process) is not its budget. It
+            // holds the merged sums and the lit mask and, at its peak, either a snapshot being merged (its frame
+            // and the message read from it, then the message and its decompressed delta; a whole image's at
+            // most, which zstd bounds by the raw size) or a save (the preview's layer, a checkpoint piece, or the
+            // EXR's channels, one after the other), never both: a save reads the sums while merges wait. The
+            // workers check their own engines when their job arrives.
             let sums = photonfarm::accumulation::Accumulator::bytes_per_pixel(&aux) as u64 * pixels as u64;
-            let delta = photonfarm::accumulation::delta::max_delta_bytes(pixels as u64, &aux);
-            let need = base + 2 * sums + pixels as u64 + 4 * delta;
+            let merge = 2 * photonfarm::accumulation::delta::max_delta_bytes(pixels as u64, &aux);
+            let save = (images::exr_bytes_per_pixel(&aux) as u64 * pixels as u64).max(Checkpoint::max_save_bytes(&aux));
+            let need = base + sums + pixels as u64 + merge.max(save);
             if let Some(budget) = MemoryBudget::new(None) {
                 if need > budget.bytes() {
-                    let detail = " in the coordinator, which merges the workers' sums and saves from a copy of them, \
-                                  encoded for the checkpoint";
+                    let detail = " in the coordinator, which merges the workers' sums and writes the image from them";
                     bail!("{}", memory::over_limit(budget, need, base, detail));
                 }
             }

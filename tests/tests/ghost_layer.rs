@@ -28,7 +28,7 @@ fn lens_at(dir: &Path) -> PathBuf {
 /// The ghost layer's sums of a run's checkpoint, with the pixel-phases they hold.
 fn checkpointed_ghost(run: &Path, scene: &Path) -> (Vec<f64>, u64) {
     let scene = photonfarm::scene::Scene::load(scene).unwrap();
-    let sums = Checkpoint::load(&run.join("checkpoint.bin"), &scene).unwrap().sums().unwrap();
+    let (_, sums) = Checkpoint::load(&run.join("checkpoint.bin"), &scene).unwrap();
     assert_eq!(sums.aux.layout().offset("ghost"), Some(0), "the checkpoint has no ghost layer");
     let ghost = (0..sums.pixels.len()).flat_map(|p| sums.aux.pixel(p)[..3].to_vec()).collect();
     (ghost, sums.pixels.iter().map(|p| p.phases as u64).sum())

@@ -14,6 +14,7 @@ use photonfarm::protocol::{Share, Snapshot};
 use photonfarm::render::record::{WorkerRecord, WorkerState};
 use photonfarm::render::session::{Deadline, Progressive};
 use photonfarm::render::{ActiveTiles, RayTotals, RenderSettings};
+use std::collections::VecDeque;
 use std::net::IpAddr;
 use std::process::Child;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -35,7 +36,12 @@ pub struct WorkerView {
 pub struct Cluster {
     /// The job's scene file name, for the log.
     job: String,
-    sums: Accumulator,
+    /// The merged sums, shared with a save reading them on a thread of its own (`shared_sums`); snapshots that
+    /// arrive meanwhile wait in `deferred`.
+    sums: Arc<Accumulator>,
+    /// Events held back while a save reads the sums: the snapshots, and the ends of links that followed one,
+    /// in the order they came.
+    deferred: VecDeque<Event>,
     /// Totals of earlier sessions (a resumed run).
     base_totals: RayTotals,
     settings: RenderSettings,
@@ -120,7 +126,8 @@ impl Cluster {
             .collect();
         Ok(Cluster {
             job,
-            sums,
+            sums: Arc::new(sums),
+            deferred: VecDeque::new(),
             base_totals,
             settings,
             workers,
@@ -199,8 +206,34 @@ impl Cluster {
         }
     }
 
-    /// Handles one event; true when a snapshot was merged.
+    /// Handles one event, or holds it back while a save reads the sums (then a snapshot is acknowledged at once:
+    /// its worker's next interval should not wait for the disk); true when a snapshot was merged.
     fn handle(&mut self, event: Event) -> bool {
+        let ordered_after_snapshots =
+            matches!(event, Event::Snapshot { .. } | Event::Finished { .. } | Event::Lost { .. });
+        let saving = Arc::get_mut(&mut self.sums).is_none();
+        if ordered_after_snapshots && (saving || !self.deferred.is_empty()) {
+            if let Event::Snapshot { worker, snapshot, .. } = &event {
+                self.send(Control::Ack { worker: *worker, seq: snapshot.seq });
+            }
+            self.deferred.push_back(event);
+            return false;
+        }
+        self.apply(event)
+    }
+
+    /// Handles the events held back, once no save reads the sums; true when a snapshot was merged.
+    fn catch_up(&mut self) -> bool {
+        let mut merged = false;
+        while Arc::get_mut(&mut self.sums).is_some() {
+            let Some(event) = self.deferred.pop_front() else { break };
+            merged |= self.apply(event);
+        }
+        merged
+    }
+
+    /// Handles one event now; true when a snapshot was merged.
+    fn apply(&mut self, event: Event) -> bool {
         match event {
             Event::Joined { worker, name, address } => {
                 while self.workers.len() <= worker {
@@ -244,7 +277,8 @@ impl Cluster {
                     return false;
                 }
                 let merged = if Snapshot::checksum_of(&snapshot.delta) == snapshot.checksum {
-                    apply_delta(&snapshot.delta, &mut self.sums).map_err(|e| e.to_string())
+                    let sums = Arc::get_mut(&mut self.sums).expect("snapshots wait while a save reads the sums");
+                    apply_delta(&snapshot.delta, sums).map_err(|e| e.to_string())
                 } else {
                     Err("its delta does not match its checksum (damaged on the way)".to_string())
                 };
@@ -291,7 +325,8 @@ impl Cluster {
         self.collected = true;
         self.send(Control::StopAll);
         let deadline = Instant::now() + limit;
-        while !self.all_ended() && Instant::now() < deadline {
+        while (!self.all_ended() || !self.deferred.is_empty()) && Instant::now() < deadline {
+            self.catch_up();
             match self.events.recv_timeout(Duration::from_millis(50)) {
                 Ok(e) => {
                     self.handle(e);
@@ -371,7 +406,7 @@ impl Progressive for Cluster {
             if interrupted.load(Ordering::Relaxed) || deadline.is_some_and(|d| Instant::now() >= d) {
                 return;
             }
-            if !self.active() {
+            if self.catch_up() || !self.active() {
                 return;
             }
             // Wake at the deadline itself: every millisecond past it is a millisecond the workers render for
@@ -397,6 +432,10 @@ impl Progressive for Cluster {
 
     fn sums(&self) -> &Accumulator {
         &self.sums
+    }
+
+    fn shared_sums(&self) -> Option<Arc<Accumulator>> {
+        Some(self.sums.clone())
     }
 
     fn totals(&self) -> RayTotals {

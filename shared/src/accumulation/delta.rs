@@ -1,8 +1,8 @@
 //! Deltas of the sums: per-pixel sums added between two moments, exact (f64), laid out plane by plane with the
 //! bytes of each plane shuffled by significance so that zstd finds the repetition in exponents and counts.
 //! The auxiliary layers' channels follow as further planes; the header names them, so that sums of another
-//! layout are refused rather than misread. Workers send them in snapshots; checkpoints store the sums as a delta
-//! from zero.
+//! layout are refused rather than misread. Workers send them in snapshots; checkpoints store the sums as deltas
+//! from zero of consecutive pieces of the image.
 
 use super::{Accumulator, AuxLayout, PixelSums};
 use crate::sampling::REPLICATES;
@@ -69,17 +69,6 @@ fn u32_plane_mut(p: &mut PixelSums, k: usize) -> &mut u32 {
         1 => &mut p.camera_rays,
         _ => &mut p.replicate_phases[k - 2],
     }
-}
-
-/// The values of one shuffled plane.
-fn unshuffle<const N: usize>(plane: &[u8], n: usize) -> Vec<[u8; N]> {
-    let mut out = vec![[0u8; N]; n];
-    for byte in 0..N {
-        for (v, &x) in out.iter_mut().zip(&plane[byte * n..(byte + 1) * n]) {
-            v[byte] = x;
-        }
-    }
-    out
 }
 
 /// How hard a delta is compressed: what counts on a loopback link is the worker's CPU time, on a network its
@@ -185,10 +174,23 @@ pub fn encode_delta(current: &Accumulator, base: &Accumulator, compression: Comp
     encode(current, Some(base), None, compression)
 }
 
-/// The delta `current − 0` over every pixel, compressed (a checkpoint's sums): `encode_delta` from sums of
-/// zeros, without allocating them.
-pub fn encode_whole(current: &Accumulator, compression: Compression) -> Vec<u8> {
-    encode(current, None, None, compression)
+/// The deltas `current − 0` of consecutive pieces of `piece_pixels` pixels covering the image, each compressed
+/// on its own and handed to `out` in order (a checkpoint's sums): applied in turn to sums of zeros they give
+/// `current` back exactly, and no more than one piece is ever encoded at once, whatever the image's size.
+pub fn encode_whole_in_pieces<E>(
+    current: &Accumulator,
+    piece_pixels: usize,
+    compression: Compression,
+    mut out: impl FnMut(&[u8]) -> Result<(), E>,
+) -> Result<(), E> {
+    assert!(piece_pixels > 0, "pieces of no pixel");
+    let n = current.pixels.len();
+    for start in (0..n).step_by(piece_pixels) {
+        let len = piece_pixels.min(n - start);
+        let piece = PixelRuns { runs: vec![(start as u32, len as u32)], pixels: len };
+        out(&encode(current, None, Some(&piece), compression))?;
+    }
+    Ok(())
 }
 
 /// The delta `current − base` over `pixels` only, compressed: the sums of every other pixel must be the same in
@@ -377,77 +379,103 @@ pub fn apply_delta(bytes: &[u8], sums: &mut Accumulator) -> Result<DeltaSummary,
     let body = &raw[header + run_bytes..];
     let (counts, rest) = body.split_at(4 * m * U32_PLANES);
     let (planes, aux_planes) = rest.split_at(8 * m * F64_PLANES);
-    let values: Vec<Vec<f64>> = (0..F64_PLANES)
-        .map(|k| unshuffle::<8>(&planes[8 * m * k..8 * m * (k + 1)], m).into_iter().map(f64::from_le_bytes).collect())
-        .collect();
-    for (k, plane) in values.iter().enumerate() {
-        if let Some((j, v)) =
-            plane.iter().enumerate().find(|(_, v)| !v.is_finite() || (SQUARE_PLANES.contains(&k) && **v < 0.0))
-        {
-            let i = runs.indices().nth(j).expect("a value per pixel");
-            return Err(DeltaError(format!("pixel {i} has an invalid sum ({v})")));
-        }
+    let shuffled = Shuffled { counts, planes, aux_planes, m };
+    // Every value is checked before any is added, so that a refused delta leaves the sums unchanged; values are
+    // read from the shuffled bytes where they lie, a piece of pixels at a time, so a merge holds no decoded copy.
+    for (j0, range) in runs.pieces() {
+        check_piece(sums, &shuffled, j0, range)?;
     }
-    let aux_values: Vec<Vec<f64>> = (0..aux_channels)
-        .map(|k| {
-            unshuffle::<8>(&aux_planes[8 * m * k..8 * m * (k + 1)], m).into_iter().map(f64::from_le_bytes).collect()
-        })
-        .collect();
-    for plane in &aux_values {
-        if let Some((j, v)) = plane.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-            let i = runs.indices().nth(j).expect("a value per pixel");
-            return Err(DeltaError(format!("pixel {i} has an invalid auxiliary sum ({v})")));
-        }
-    }
-    let counts: Vec<Vec<u32>> = (0..U32_PLANES)
-        .map(|k| unshuffle::<4>(&counts[4 * m * k..4 * m * (k + 1)], m).into_iter().map(u32::from_le_bytes).collect())
-        .collect();
-    check_sums_stay_valid(sums, &runs, &counts, &values, &aux_values)?;
     let aux = sums.aux.values_mut();
     let mut pixel_phases = 0u64;
-    for (j, i) in runs.indices().enumerate() {
-        for (k, plane) in aux_values.iter().enumerate() {
-            aux[i * aux_channels + k] += plane[j];
-        }
-        let p = &mut sums.pixels[i];
-        pixel_phases += counts[0][j] as u64;
-        // `check_sums_stay_valid` found no overflow; wrapping adds keep a release build from checking again.
-        for (k, plane) in counts.iter().enumerate() {
-            let c = u32_plane_mut(p, k);
-            *c = c.wrapping_add(plane[j]);
-        }
-        for (k, plane) in values.iter().enumerate() {
-            *f64_plane_mut(p, k) += plane[j];
+    for (j0, range) in runs.pieces() {
+        for (j, i) in (j0..).zip(range) {
+            for k in 0..aux_channels {
+                aux[i * aux_channels + k] += shuffled.aux(k, j);
+            }
+            let p = &mut sums.pixels[i];
+            pixel_phases += shuffled.count(0, j) as u64;
+            // `check_piece` found no overflow; wrapping adds keep a release build from checking again.
+            for k in 0..U32_PLANES {
+                let c = u32_plane_mut(p, k);
+                *c = c.wrapping_add(shuffled.count(k, j));
+            }
+            for k in 0..F64_PLANES {
+                *f64_plane_mut(p, k) += shuffled.value(k, j);
+            }
         }
     }
     Ok(DeltaSummary { pixel_phases, raw_bytes: expected, pixels: runs })
 }
 
-/// Refuses a delta whose addition would overflow a pixel's phase or camera-ray count or make a sum infinite: a
-/// buggy or hostile peer must not wrap the counts (a panic in debug builds, silent corruption in release) nor
-/// leave part of its delta merged. Value j of every plane belongs to the runs' pixel j.
-fn check_sums_stay_valid(
+/// The planes of a delta's body over its `m` pixels, each value's bytes spread over its plane's byte rows.
+struct Shuffled<'a> {
+    counts: &'a [u8],
+    planes: &'a [u8],
+    aux_planes: &'a [u8],
+    m: usize,
+}
+
+impl Shuffled<'_> {
+    /// Byte b of value j of plane k lies in plane k's byte-b row at column j.
+    fn gather<const N: usize>(bytes: &[u8], m: usize, k: usize, j: usize) -> [u8; N] {
+        let plane = &bytes[N * m * k..N * m * (k + 1)];
+        std::array::from_fn(|b| plane[b * m + j])
+    }
+
+    fn count(&self, k: usize, j: usize) -> u32 {
+        u32::from_le_bytes(Self::gather(self.counts, self.m, k, j))
+    }
+
+    fn value(&self, k: usize, j: usize) -> f64 {
+        f64::from_le_bytes(Self::gather(self.planes, self.m, k, j))
+    }
+
+    fn aux(&self, k: usize, j: usize) -> f64 {
+        f64::from_le_bytes(Self::gather(self.aux_planes, self.m, k, j))
+    }
+}
+
+/// Refuses a piece of a delta (its values from j0 on, for the pixels of `range`) that holds a value no sum can
+/// have (not finite, a negative square), or whose addition would overflow a pixel's phase or camera-ray count
+/// or make a sum infinite: a buggy or hostile peer must not wrap the counts (a panic in debug builds, silent
+/// corruption in release) nor leave part of its delta merged.
+fn check_piece(
     sums: &Accumulator,
-    runs: &PixelRuns,
-    counts: &[Vec<u32>],
-    values: &[Vec<f64>],
-    aux_values: &[Vec<f64>],
+    delta: &Shuffled,
+    j0: usize,
+    range: std::ops::Range<usize>,
 ) -> Result<(), DeltaError> {
-    let channels = aux_values.len();
+    let channels = sums.aux.layout().channels();
     let aux = sums.aux.values();
-    for (j, i) in runs.indices().enumerate() {
+    for k in 0..F64_PLANES {
+        for (j, i) in (j0..).zip(range.clone()) {
+            let v = delta.value(k, j);
+            if !v.is_finite() || (SQUARE_PLANES.contains(&k) && v < 0.0) {
+                return Err(DeltaError(format!("pixel {i} has an invalid sum ({v})")));
+            }
+        }
+    }
+    for k in 0..channels {
+        for (j, i) in (j0..).zip(range.clone()) {
+            let v = delta.aux(k, j);
+            if !v.is_finite() {
+                return Err(DeltaError(format!("pixel {i} has an invalid auxiliary sum ({v})")));
+            }
+        }
+    }
+    for (j, i) in (j0..).zip(range) {
         let p = &sums.pixels[i];
-        if let Some(k) = (0..U32_PLANES).find(|&k| u32_plane(p, k).checked_add(counts[k][j]).is_none()) {
+        if let Some(k) = (0..U32_PLANES).find(|&k| u32_plane(p, k).checked_add(delta.count(k, j)).is_none()) {
             return Err(DeltaError(format!(
                 "pixel {i} would overflow its count {k} ({} + {})",
                 u32_plane(p, k),
-                counts[k][j]
+                delta.count(k, j)
             )));
         }
-        if let Some((k, _)) = values.iter().enumerate().find(|(k, plane)| !(f64_plane(p, *k) + plane[j]).is_finite()) {
+        if let Some(k) = (0..F64_PLANES).find(|&k| !(f64_plane(p, k) + delta.value(k, j)).is_finite()) {
             return Err(DeltaError(format!("pixel {i} would overflow its sum {k}")));
         }
-        if let Some(k) = (0..channels).find(|&k| !(aux[i * channels + k] + aux_values[k][j]).is_finite()) {
+        if let Some(k) = (0..channels).find(|&k| !(aux[i * channels + k] + delta.aux(k, j)).is_finite()) {
             return Err(DeltaError(format!("pixel {i} would overflow its auxiliary sum {k}")));
         }
     }
@@ -517,11 +545,18 @@ mod tests {
     }
 
     #[test]
-    fn a_whole_image_delta_is_the_delta_from_sums_of_zeros_byte_for_byte() {
+    fn a_whole_image_in_pieces_gives_back_the_sums_exactly_one_run_of_pixels_per_piece() {
         for layout in [AuxLayout::default(), ghost_layout()] {
             let current = sums(37, 3, 0.7, &layout);
-            let zero = Accumulator::with_aux(37, 1, layout.clone());
-            assert_eq!(encode_whole(&current, Compression::Small), encode_delta(&current, &zero, Compression::Small));
+            let mut back = Accumulator::with_aux(37, 1, layout.clone());
+            let mut runs = Vec::new();
+            encode_whole_in_pieces(&current, 10, Compression::Small, |piece| {
+                runs.extend(apply_delta(piece, &mut back)?.pixels.runs().to_vec());
+                Ok::<_, DeltaError>(())
+            })
+            .unwrap();
+            assert_eq!(runs, [(0, 10), (10, 10), (20, 10), (30, 7)]);
+            assert_eq!(back, current, "a delta from zero added to zero is the sums bit for bit");
         }
     }
 

@@ -59,9 +59,10 @@ impl LayerImage {
 /// The file is written to a temporary file next to `path` and renamed into place, so a
 /// crash never leaves a half-written image. Layer names must be unique, non-empty,
 /// printable ASCII, and all layers must have the same, non-zero size.
-pub fn write_exr(path: &Path, layers: &[LayerImage]) -> Result<(), OutputError> {
-    let (width, height) = check_layers(path, layers)?;
+pub fn write_exr(path: &Path, layers: Vec<LayerImage>) -> Result<(), OutputError> {
+    let (width, height) = check_layers(path, &layers)?;
 
+    // Each layer goes once its channels are made: a large image's layers and channels are never all held twice.
     let mut channels = Vec::with_capacity(layers.len() * 3);
     for layer in layers {
         for (component, suffix) in ["R", "G", "B"].into_iter().enumerate() {
@@ -295,7 +296,7 @@ mod tests {
         let dir = test_dir("round-trip");
         let path = dir.join("image.exr");
         let layers = sample_layers();
-        write_exr(&path, &layers).unwrap();
+        write_exr(&path, layers.clone()).unwrap();
         let read = read_exr(&path).unwrap();
 
         assert_eq!(read.len(), layers.len());
@@ -313,7 +314,7 @@ mod tests {
         let path = dir.join("image.exr");
         let mut layer = LayerImage::new("total", 3, 2);
         layer.rgb[1] = [1.0, 2.0, 3.0]; // (x=1, y=0)
-        write_exr(&path, &[layer]).unwrap();
+        write_exr(&path, vec![layer.clone()]).unwrap();
         let read = read_exr(&path).unwrap();
         assert_eq!(read[0].get(1, 0), [1.0, 2.0, 3.0]);
         assert_eq!(read[0].get(1, 1), [0.0, 0.0, 0.0]);
@@ -330,7 +331,7 @@ mod tests {
     fn exr_file_is_one_zip_part_with_prefixed_rgb_channels() {
         let dir = test_dir("channels");
         let path = dir.join("image.exr");
-        write_exr(&path, &sample_layers()).unwrap();
+        write_exr(&path, sample_layers()).unwrap();
         let meta = exr::meta::MetaData::read_from_file(&path, false).unwrap();
         assert_eq!(meta.headers.len(), 1);
         let header = &meta.headers[0];
@@ -376,9 +377,9 @@ mod tests {
         let dir = test_dir("rewrite");
         let path = dir.join("image.exr");
         let mut layer = LayerImage::new("total", 2, 2);
-        write_exr(&path, std::slice::from_ref(&layer)).unwrap();
+        write_exr(&path, vec![layer.clone()]).unwrap();
         layer.rgb[3] = [4.0, 5.0, 6.0];
-        write_exr(&path, std::slice::from_ref(&layer)).unwrap();
+        write_exr(&path, vec![layer.clone()]).unwrap();
         assert_eq!(read_exr(&path).unwrap(), vec![layer]);
         let files: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
         assert_eq!(files, ["image.exr"]);
@@ -389,7 +390,7 @@ mod tests {
     fn exr_write_into_missing_directory_names_the_path() {
         let dir = test_dir("missing-dir");
         let path = dir.join("no/such/dir/image.exr");
-        let error = write_exr(&path, &[LayerImage::new("total", 2, 2)]).unwrap_err();
+        let error = write_exr(&path, vec![LayerImage::new("total", 2, 2)]).unwrap_err();
         assert!(matches!(error, OutputError::Io { .. }), "{error:?}");
         let message = error.to_string();
         assert!(message.contains(&path.display().to_string()), "{message}");
@@ -402,13 +403,13 @@ mod tests {
         let dir = test_dir("sizes");
         let path = dir.join("image.exr");
         let layers = [LayerImage::new("total", 4, 4), LayerImage::new("direct", 4, 3)];
-        let error = write_exr(&path, &layers).unwrap_err();
+        let error = write_exr(&path, layers.to_vec()).unwrap_err();
         assert!(matches!(&error, OutputError::SizeMismatch { layer, .. } if layer == "direct"), "{error:?}");
         assert!(error.to_string().contains("4x3"), "{error}");
 
         let mut short = LayerImage::new("total", 4, 4);
         short.rgb.pop();
-        let error = write_exr(&path, &[short]).unwrap_err();
+        let error = write_exr(&path, vec![short]).unwrap_err();
         assert!(matches!(error, OutputError::SizeMismatch { .. }), "{error:?}");
         assert!(!path.exists());
         let _ = std::fs::remove_dir_all(dir);
@@ -425,7 +426,7 @@ mod tests {
             vec![LayerImage::new("a", 2, 2), LayerImage::new("a", 2, 2)],
             vec![LayerImage::new("empty", 0, 2)],
         ] {
-            let error = write_exr(&path, &layers).unwrap_err();
+            let error = write_exr(&path, layers.clone()).unwrap_err();
             assert!(matches!(error, OutputError::Exr { .. }), "{error:?}");
             assert!(error.to_string().contains("image.exr"), "{error}");
         }
@@ -448,7 +449,7 @@ mod tests {
     fn reading_a_truncated_exr_is_an_error_not_a_panic() {
         let dir = test_dir("truncated");
         let path = dir.join("image.exr");
-        write_exr(&path, &sample_layers()).unwrap();
+        write_exr(&path, sample_layers()).unwrap();
         let bytes = std::fs::read(&path).unwrap();
         for keep in [bytes.len() / 2, bytes.len() - 1, 20] {
             std::fs::write(&path, &bytes[..keep]).unwrap();

@@ -8,7 +8,7 @@ use super::method::Method;
 use super::record::HistoryEntry;
 use super::settings::RenderSettings;
 use super::totals::RayTotals;
-use crate::accumulation::delta::{apply_delta, encode_whole, max_delta_bytes, Compression};
+use crate::accumulation::delta::{apply_delta, encode_whole_in_pieces, max_delta_bytes, Compression};
 use crate::accumulation::{Accumulator, AuxLayout};
 use crate::scene::Scene;
 use serde::{Deserialize, Serialize};
@@ -19,13 +19,18 @@ use std::path::{Path, PathBuf};
 /// 4: the totals count the light paths counted against photon maps. 5: the sums keep their replicates.
 /// 6: the history says how many tiles each step rendered. 7: the sums keep the photon discs' blur layers, and
 /// the history the blur's part of δ. 8: the settings say whether the run chose the camera paths' diffuse depth,
-/// and the history which depth each step had. 9: the file ends with a CRC-32 of what comes before it.
-const FORMAT: u32 = 9;
+/// and the history which depth each step had. 9: the file ends with a CRC-32 of what comes before it. 10: the
+/// sums follow the state as deltas of consecutive pieces of the image, each after its length in bytes.
+const FORMAT: u32 = 10;
+
+/// Pixels per piece of a checkpoint's sums: one piece's delta (about 12 MB raw) is all that saving or loading
+/// holds at a time besides the sums themselves, so a large image's checkpoint costs no second image.
+const PIECE_PIXELS: usize = 1 << 16;
 
 /// Bytes of the CRC-32 that ends the file.
 const CHECKSUM_BYTES: usize = 4;
 
-/// Everything a resumed run continues from.
+/// Everything a resumed run continues from besides its sums, which follow it in the file (`save`, `load`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Checkpoint {
     pub format: u32,
@@ -42,8 +47,6 @@ pub struct Checkpoint {
     pub history: Vec<HistoryEntry>,
     /// The auxiliary layers of the sums.
     pub aux: AuxLayout,
-    /// The sums, as an exact delta from zero (see `accumulation::delta`).
-    sums: Vec<u8>,
 }
 
 /// A writer that passes its bytes on and keeps their CRC-32.
@@ -101,7 +104,7 @@ fn decode_config() -> impl bincode::config::Config {
 }
 
 impl Checkpoint {
-    /// A checkpoint of `sums` with the run's state.
+    /// The state of a run whose sums are `sums` (their size and layers), to be saved with them.
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         sums: &Accumulator,
@@ -125,30 +128,31 @@ impl Checkpoint {
             totals,
             history: history.to_vec(),
             aux: sums.aux.layout().clone(),
-            sums: encode_whole(sums, Compression::Small),
         }
     }
 
-    /// The sums it holds.
-    pub fn sums(&self) -> Result<Accumulator, String> {
-        let mut a = Accumulator::with_aux(self.width, self.height, self.aux.clone());
-        apply_delta(&self.sums, &mut a).map_err(|e| e.to_string())?;
-        Ok(a)
-    }
-
-    /// Writes the checkpoint atomically (a temporary file, flushed to the disk, renamed over the old one), with
-    /// its CRC-32 at the end; the checkpoint it replaces becomes `previous_path(path)`. A checkpoint exists at
-    /// `path` at every moment, the old one or the new one.
-    pub fn save(&self, path: &Path) -> Result<(), CheckpointError> {
+    /// Writes the state and `sums` (of the size and layers `new` was given) atomically (a temporary file,
+    /// flushed to the disk, renamed over the old one), with its CRC-32 at the end; the checkpoint it replaces
+    /// becomes `previous_path(path)`. A checkpoint exists at `path` at every moment, the old one or the new one.
+    pub fn save(&self, path: &Path, sums: &Accumulator) -> Result<(), CheckpointError> {
+        assert!(
+            (sums.width, sums.height) == (self.width, self.height) && *sums.aux.layout() == self.aux,
+            "a checkpoint saved with sums of another image"
+        );
         let err = |source| CheckpointError::Write { path: path.display().to_string(), source };
         let tmp = path.with_extension("tmp");
-        // Encoded straight into the file, its CRC-32 taken on the way: a large image's checkpoint is never held
-        // twice in memory.
+        // Encoded piece by piece straight into the file, its CRC-32 taken on the way: a large image's checkpoint
+        // never holds a second image in memory.
         let file = std::fs::File::create(&tmp).map_err(err)?;
         let mut out =
             CrcWriter { inner: std::io::BufWriter::with_capacity(1 << 20, file), crc: crc32fast::Hasher::new() };
         bincode::serde::encode_into_std_write(self, &mut out, bincode::config::standard())
             .map_err(|e| err(std::io::Error::other(e.to_string())))?;
+        encode_whole_in_pieces(sums, PIECE_PIXELS, Compression::Small, |piece| {
+            out.write_all(&(piece.len() as u32).to_le_bytes())?;
+            out.write_all(piece)
+        })
+        .map_err(err)?;
         let CrcWriter { mut inner, crc } = out;
         inner.write_all(&crc.finalize().to_le_bytes()).map_err(err)?;
         let file = inner.into_inner().map_err(|e| err(e.into_error()))?;
@@ -167,18 +171,25 @@ impl Checkpoint {
         std::fs::rename(&tmp, path).map_err(err)
     }
 
+    /// The most memory a save holds besides the sums, for sums with the auxiliary layers `layout`: one piece's
+    /// delta, raw and compressed, and the file's buffer.
+    pub fn max_save_bytes(layout: &AuxLayout) -> u64 {
+        2 * max_delta_bytes(PIECE_PIXELS as u64, layout) + (1 << 20)
+    }
+
     /// The largest checkpoint file `scene` can have: its sums with every auxiliary layer a run of it may keep,
-    /// incompressible, and the rest of the run's state.
+    /// in incompressible pieces, and the rest of the run's state.
     pub fn max_file_bytes(scene: &Scene) -> u64 {
         let widest = AuxLayout::for_scene(scene, crate::spectrum::MAX_BANDS);
         let pixels = scene.camera.width as u64 * scene.camera.height as u64;
-        max_delta_bytes(pixels, &widest) + MAX_STATE_BYTES
+        let pieces = pixels.div_ceil(PIECE_PIXELS as u64);
+        pieces * (4 + max_delta_bytes(PIECE_PIXELS as u64, &widest)) + MAX_STATE_BYTES
     }
 
-    /// Reads a checkpoint of `scene` and checks it: its size against what the scene can have before reading it,
-    /// then its format, the scene's hash, the image size and the auxiliary layers before its sums are decoded,
-    /// so a corrupt or foreign file costs no more memory than the scene's own image.
-    pub fn load(path: &Path, scene: &Scene) -> Result<Self, CheckpointError> {
+    /// Reads a checkpoint of `scene` and its sums, and checks it: its size against what the scene can have
+    /// before reading it, then its format, the scene's hash, the image size and the auxiliary layers before its
+    /// sums are decoded, so a corrupt or foreign file costs no more memory than the scene's own image.
+    pub fn load(path: &Path, scene: &Scene) -> Result<(Self, Accumulator), CheckpointError> {
         let p = path.display().to_string();
         let read_err = |source| CheckpointError::Read { path: p.clone(), source };
         let file = std::fs::File::open(path).map_err(read_err)?;
@@ -200,9 +211,9 @@ impl Checkpoint {
         })
     }
 
-    /// Checks and decodes the bytes of a checkpoint of `scene` (`path` names it in errors), in the order
-    /// `load` gives.
-    pub fn from_bytes(bytes: &[u8], scene: &Scene, path: &str) -> Result<Self, CheckpointError> {
+    /// Checks and decodes the bytes of a checkpoint of `scene` and its sums (`path` names it in errors), in the
+    /// order `load` gives.
+    pub fn from_bytes(bytes: &[u8], scene: &Scene, path: &str) -> Result<(Self, Accumulator), CheckpointError> {
         let max = Self::max_file_bytes(scene);
         if bytes.len() as u64 > max {
             return Err(CheckpointError::TooLarge { path: path.into(), size: bytes.len() as u64, max });
@@ -211,33 +222,45 @@ impl Checkpoint {
             Damage::Checksum => CheckpointError::Damaged { path: path.into(), previous: None },
             Damage::Format(reason) => CheckpointError::Format { path: path.into(), reason },
         })?;
-        let c = Self::decode_body(body).map_err(|reason| CheckpointError::Format { path: path.into(), reason })?;
+        let format = |reason| CheckpointError::Format { path: path.into(), reason };
+        let (c, used) = Self::decode_state(body).map_err(format)?;
         c.check_scene(scene).map_err(|reason| CheckpointError::OtherScene { path: path.into(), reason })?;
-        c.sums().map_err(|reason| CheckpointError::Format { path: path.into(), reason })?;
-        Ok(c)
+        let sums = c.decode_sums(&body[used..]).map_err(format)?;
+        Ok((c, sums))
     }
 
-    /// Decodes the bytes of a checkpoint file, after its checksum, and checks its format number; the sums stay
-    /// encoded.
-    pub fn decode(bytes: &[u8]) -> Result<Self, String> {
-        match checked_body(bytes) {
-            Ok(body) => Self::decode_body(body),
-            Err(Damage::Checksum) => Err("its content does not match its checksum".into()),
-            Err(Damage::Format(reason)) => Err(reason),
-        }
-    }
-
-    /// Decodes a checkpoint without its checksum.
-    fn decode_body(bytes: &[u8]) -> Result<Self, String> {
+    /// The state at the start of a checkpoint's content (after its checksum was checked), with its format
+    /// number checked, and the bytes it took.
+    fn decode_state(body: &[u8]) -> Result<(Self, usize), String> {
         let (c, used): (Checkpoint, usize) =
-            bincode::serde::decode_from_slice(bytes, decode_config()).map_err(|e| e.to_string())?;
-        if used != bytes.len() {
-            return Err(format!("{} bytes after the checkpoint", bytes.len() - used));
-        }
+            bincode::serde::decode_from_slice(body, decode_config()).map_err(|e| e.to_string())?;
         if c.format != FORMAT {
             return Err(format!("format {} (expected {FORMAT})", c.format));
         }
-        Ok(c)
+        Ok((c, used))
+    }
+
+    /// The sums from the pieces that follow the state: each piece holds the next pixels of the image, and the
+    /// last ends at its last pixel.
+    fn decode_sums(&self, mut pieces: &[u8]) -> Result<Accumulator, String> {
+        let mut sums = Accumulator::with_aux(self.width, self.height, self.aux.clone());
+        let n = sums.pixels.len();
+        let mut next = 0;
+        while !pieces.is_empty() {
+            let (len, rest) = pieces.split_first_chunk::<4>().ok_or("the sums end inside the length of a piece")?;
+            let len = u32::from_le_bytes(*len) as usize;
+            let piece = rest.get(..len).ok_or_else(|| format!("the piece at pixel {next} runs past the file's end"))?;
+            let added = apply_delta(piece, &mut sums).map_err(|e| format!("the sums' piece at pixel {next}: {e}"))?;
+            match added.pixels.runs() {
+                &[(first, count)] if first as usize == next => next += count as usize,
+                _ => return Err(format!("a piece of the sums does not hold the pixels from {next} on")),
+            }
+            pieces = &rest[len..];
+        }
+        if next != n {
+            return Err(format!("the sums hold {next} of the image's {n} pixels"));
+        }
+        Ok(sums)
     }
 
     /// Checks that the checkpoint continues a render of `scene`: the same scene and meshes (their hash), the
@@ -304,6 +327,26 @@ mod tests {
     use crate::color::Rgb;
     use crate::render::Estimator;
 
+    /// A checkpoint file's state and sums, trusting the image size it names (the tests' own files).
+    fn decode(bytes: &[u8]) -> Result<(Checkpoint, Accumulator), String> {
+        let body = checked_body(bytes).map_err(|d| match d {
+            Damage::Checksum => "its content does not match its checksum".to_string(),
+            Damage::Format(reason) => reason,
+        })?;
+        let (c, used) = Checkpoint::decode_state(body)?;
+        Ok((c.clone(), c.decode_sums(&body[used..])?))
+    }
+
+    /// The bytes of a checkpoint file of `state` whose sums are `pieces` as they follow the state, with the
+    /// checksum that makes them pass as undamaged.
+    fn file_of(state: &Checkpoint, pieces: &[u8]) -> Vec<u8> {
+        let mut bytes = bincode::serde::encode_to_vec(state, bincode::config::standard()).unwrap();
+        bytes.extend_from_slice(pieces);
+        let crc = crc32fast::hash(&bytes);
+        bytes.extend_from_slice(&crc.to_le_bytes());
+        bytes
+    }
+
     #[test]
     fn a_checkpoint_gives_back_its_sums_and_auxiliary_layers_exactly() {
         let ghost = AuxLayout::new(vec![crate::accumulation::AuxLayer { name: "ghost".into(), channels: 3 }]);
@@ -338,15 +381,67 @@ mod tests {
         let c = Checkpoint::new(&a, "abc", Method::ThreeLevel, settings, 1, 2.5, RayTotals::default(), &history);
         let dir = tempfile::Builder::new().prefix("pf-checkpoint-").tempdir().unwrap();
         let path = dir.path().join("checkpoint.bin");
-        c.save(&path).unwrap();
-        let back = Checkpoint::decode(&std::fs::read(&path).unwrap()).unwrap();
+        c.save(&path, &a).unwrap();
+        let (back, sums) = decode(&std::fs::read(&path).unwrap()).unwrap();
         assert_eq!(back, c);
-        assert_eq!(back.sums().unwrap(), a, "the sums and their ghost layer");
-        assert!(Checkpoint::decode(b"garbage").is_err());
+        assert_eq!(sums, a, "the sums and their ghost layer");
+        assert!(decode(b"garbage").is_err());
     }
 
-    /// A scene of `width` × `height` pixels with nothing in it but a light, and its checkpoint with no phase.
-    fn empty_scene_and_checkpoint(width: u32, height: u32) -> (Scene, Checkpoint) {
+    #[test]
+    fn an_image_of_several_pieces_comes_back_exactly_and_a_missing_or_misplaced_piece_is_refused() {
+        // 300 × 300 pixels: a whole piece and part of another.
+        let (scene, _, mut a) = empty_scene_and_checkpoint(300, 300);
+        for i in (0..90_000).step_by(7) {
+            a.add_phase(i, &[Rgb::splat(i as f32 * 1e-4), Rgb::ONE, Rgb::ZERO, Rgb::splat(0.3)], 1, i % 4);
+        }
+        let c = Checkpoint::new(
+            &a,
+            &scene.hash,
+            Method::ThreeLevel,
+            RenderSettings::for_scene(&scene, Method::ThreeLevel, 1),
+            1,
+            1.0,
+            RayTotals::default(),
+            &[],
+        );
+        let dir = tempfile::Builder::new().prefix("pf-checkpoint-pieces-").tempdir().unwrap();
+        let path = dir.path().join("checkpoint.bin");
+        c.save(&path, &a).unwrap();
+        let (back, sums) = Checkpoint::load(&path, &scene).unwrap();
+        assert_eq!((back, sums), (c.clone(), a.clone()));
+        let mut pieces = Vec::new();
+        encode_whole_in_pieces(&a, PIECE_PIXELS, Compression::Fast, |p| {
+            pieces.push(p.to_vec());
+            Ok::<_, ()>(())
+        })
+        .unwrap();
+        assert_eq!(pieces.len(), 2);
+        let framed = |order: &[usize]| -> Vec<u8> {
+            order
+                .iter()
+                .flat_map(|&k| (pieces[k].len() as u32).to_le_bytes().into_iter().chain(pieces[k].clone()))
+                .collect()
+        };
+        assert_eq!(Checkpoint::from_bytes(&file_of(&c, &framed(&[0, 1])), &scene, "whole").unwrap().1, a);
+        for (order, says) in [
+            (&[0][..], "hold 65536 of the image's 90000 pixels"),
+            (&[1, 0][..], "from 0 on"),
+            (&[0, 0][..], "from 65536 on"),
+            (&[][..], "hold 0 of"),
+        ] {
+            let e = Checkpoint::from_bytes(&file_of(&c, &framed(order)), &scene, "cut").unwrap_err();
+            assert!(matches!(e, CheckpointError::Format { .. }) && e.to_string().contains(says), "{order:?}: {e}");
+        }
+        let mut cut = framed(&[0, 1]);
+        cut.truncate(cut.len() - 10);
+        let e = Checkpoint::from_bytes(&file_of(&c, &cut), &scene, "cut").unwrap_err().to_string();
+        assert!(e.contains("runs past the file's end"), "{e}");
+    }
+
+    /// A scene of `width` × `height` pixels with nothing in it but a light, and its checkpoint with no phase and
+    /// those sums.
+    fn empty_scene_and_checkpoint(width: u32, height: u32) -> (Scene, Checkpoint, Accumulator) {
         let text = format!(
             r#"
 [camera]
@@ -372,28 +467,28 @@ quad = {{ corner = [-1.0, -1.0, 0.0], edge1 = [2.0, 0.0, 0.0], edge2 = [0.0, 2.0
         let settings = RenderSettings::for_scene(&scene, Method::ThreeLevel, 1);
         let sums = Accumulator::with_aux(width, height, AuxLayout::for_scene(&scene, 0));
         let c = Checkpoint::new(&sums, &scene.hash, Method::ThreeLevel, settings, 1, 1.0, RayTotals::default(), &[]);
-        (scene, c)
+        (scene, c, sums)
     }
 
     #[test]
     fn a_checkpoint_of_another_scene_or_size_is_refused_before_its_sums_are_decoded() {
         let dir = tempfile::Builder::new().prefix("pf-checkpoint-scene-").tempdir().unwrap();
         let path = dir.path().join("checkpoint.bin");
-        let (scene, c) = empty_scene_and_checkpoint(8, 4);
-        c.save(&path).unwrap();
-        assert_eq!(Checkpoint::load(&path, &scene).unwrap(), c);
-        let (other, _) = empty_scene_and_checkpoint(8, 5);
+        let (scene, c, sums) = empty_scene_and_checkpoint(8, 4);
+        c.save(&path, &sums).unwrap();
+        assert_eq!(Checkpoint::load(&path, &scene).unwrap().0, c);
+        let (other, _, _) = empty_scene_and_checkpoint(8, 5);
         let e = Checkpoint::load(&path, &other).unwrap_err();
         assert!(matches!(e, CheckpointError::OtherScene { .. }), "{e}");
         // The image size as read is checked against the scene before anything of that size is allocated.
         let mut huge = c.clone();
         (huge.width, huge.height) = (1 << 30, 1 << 30);
-        huge.save(&path).unwrap();
+        std::fs::write(&path, file_of(&huge, &[])).unwrap();
         let e = Checkpoint::load(&path, &scene).unwrap_err().to_string();
         assert!(e.contains("1073741824×1073741824 image"), "{e}");
         let mut foreign = c.clone();
         foreign.scene_hash = "0".repeat(64);
-        foreign.save(&path).unwrap();
+        foreign.save(&path, &sums).unwrap();
         assert!(matches!(Checkpoint::load(&path, &scene), Err(CheckpointError::OtherScene { .. })));
         std::fs::write(&path, b"garbage").unwrap();
         assert!(matches!(Checkpoint::load(&path, &scene), Err(CheckpointError::Format { .. })));
@@ -403,12 +498,12 @@ quad = {{ corner = [-1.0, -1.0, 0.0], edge1 = [2.0, 0.0, 0.0], edge2 = [0.0, 2.0
     fn a_bit_flipped_anywhere_is_refused_as_damaged_and_names_the_previous_checkpoint() {
         let dir = tempfile::Builder::new().prefix("pf-checkpoint-damage-").tempdir().unwrap();
         let path = dir.path().join("checkpoint.bin");
-        let (scene, c) = empty_scene_and_checkpoint(8, 4);
-        c.save(&path).unwrap();
+        let (scene, c, sums) = empty_scene_and_checkpoint(8, 4);
+        c.save(&path, &sums).unwrap();
         assert!(!previous_path(&path).exists(), "a first save has nothing to keep");
-        c.save(&path).unwrap();
+        c.save(&path, &sums).unwrap();
         assert_eq!(previous_path(&path), dir.path().join("checkpoint-previous.bin"));
-        assert_eq!(Checkpoint::load(&previous_path(&path), &scene).unwrap(), c);
+        assert_eq!(Checkpoint::load(&previous_path(&path), &scene).unwrap().0, c);
         let whole = std::fs::read(&path).unwrap();
         // Every bit of the file but the format number's byte, which names another version instead.
         for bit in 8..whole.len() * 8 {
@@ -430,14 +525,14 @@ quad = {{ corner = [-1.0, -1.0, 0.0], edge1 = [2.0, 0.0, 0.0], edge2 = [0.0, 2.0
         let mut old = whole.clone();
         old[0] = 8;
         let e = Checkpoint::from_bytes(&old, &scene, "old").unwrap_err().to_string();
-        assert!(e.contains("format 8 (expected 9)"), "{e}");
+        assert!(e.contains("format 8 (expected 10)"), "{e}");
     }
 
     #[test]
     fn a_file_larger_than_any_checkpoint_of_the_scene_is_refused_unread() {
         let dir = tempfile::Builder::new().prefix("pf-checkpoint-large-").tempdir().unwrap();
         let path = dir.path().join("checkpoint.bin");
-        let (scene, _) = empty_scene_and_checkpoint(2, 2);
+        let (scene, _, _) = empty_scene_and_checkpoint(2, 2);
         let max = Checkpoint::max_file_bytes(&scene);
         // A sparse file: its size, not its content, is what is refused.
         std::fs::File::create(&path).unwrap().set_len(max + 1).unwrap();

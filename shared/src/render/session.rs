@@ -52,6 +52,12 @@ pub trait Progressive {
     fn step(&mut self, interrupted: &AtomicBool, deadline: Option<Deadline>);
     /// The running sums.
     fn sums(&self) -> &Accumulator;
+    /// The running sums as a value a save can read on a thread of its own while the renderer goes on, for
+    /// renderers that add nothing to them while it is held (a distributed one defers its merges); None for the
+    /// others, whose saves run between their steps.
+    fn shared_sums(&self) -> Option<std::sync::Arc<Accumulator>> {
+        None
+    }
     /// Counts so far.
     fn totals(&self) -> RayTotals;
     /// The settings.

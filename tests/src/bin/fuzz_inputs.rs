@@ -352,7 +352,7 @@ fn main() -> Result<()> {
         Checkpoint::new(&current, &scene.hash, Method::ThreeLevel, settings, 1, 3.5, RayTotals::default(), &[]);
     let dir = std::env::temp_dir().join(format!("photonfarm-fuzz-{}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
-    checkpoint.save(&dir.join("checkpoint.bin"))?;
+    checkpoint.save(&dir.join("checkpoint.bin"), &current)?;
     let checkpoint_seeds = vec![std::fs::read(dir.join("checkpoint.bin"))?];
     std::fs::remove_dir_all(&dir).ok();
     let scene_seeds = vec![SCENE.as_bytes().to_vec()];
