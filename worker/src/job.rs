@@ -6,7 +6,7 @@ use crate::machine;
 use crate::memory_binding::{self, MemoryBinding};
 use crate::parallel::engine::RoundTiming;
 use crate::parallel::{EngineConfig, ParallelEngine};
-use photonfarm::accumulation::delta::{encode_delta_of, Compression};
+use photonfarm::accumulation::delta::{encode_changes, Compression};
 use photonfarm::pbpm::ProcessShare;
 use photonfarm::protocol::{Job, Share, Snapshot, WorkerInfo};
 use photonfarm::ray_map::{self, PortionSink, Recorder};
@@ -207,8 +207,6 @@ pub fn run(
     // Each worker chooses its own light paths per pixel and camera paths' depth from its own phases, unless the
     // job fixes them.
     let mut balance = LightBalance::for_run(&settings, engine.sums(), engine.totals());
-    // The sums at the previous snapshot, auxiliary layers included.
-    let mut base = engine.sums().clone();
     let mut seq = 0;
     let mut last = Instant::now();
     let Control { stop, interval_ms, tiles, share, deadline, .. } = control;
@@ -220,9 +218,13 @@ pub fn run(
         }
         let announced = share.lock().unwrap_or_else(|e| e.into_inner()).take();
         if let Some(announced) = announced {
-            // `base` holds what this worker has sent, which the coordinator's merged phases include (or will).
+            // What this worker has sent, which the coordinator's merged phases include (or will): its phases but
+            // those of the rounds since the previous snapshot.
             let own: Vec<u32> = engine.sums().pixels.iter().map(|p| p.phases).collect();
-            let sent: Vec<u32> = base.pixels.iter().map(|p| p.phases).collect();
+            let mut sent = own.clone();
+            for (i, phases) in engine.phases_before_changes() {
+                sent[i] = phases;
+            }
             let share = announced
                 .merged_phases(own.len())
                 .map_err(|e| e.to_string())
@@ -293,9 +295,8 @@ pub fn run(
             seq += 1;
             // Only the pixels the rounds since the previous snapshot rendered: with the phase cap a round
             // renders a part of a large image, and a pass over all of it would cost more than the round.
-            let changed = engine.take_changed();
-            let current = engine.sums();
-            let delta = encode_delta_of(current, &base, &changed, compression);
+            let changes = engine.take_changed();
+            let delta = encode_changes(engine.sums(), &changes, compression);
             let snapshot = Snapshot {
                 seq,
                 totals: engine.totals(),
@@ -307,13 +308,6 @@ pub fn run(
                 memory_estimate_bytes: memory_estimate,
                 non_finite_dropped: photonfarm::accumulation::non_finite_dropped(),
             };
-            let channels = current.aux.layout().channels();
-            for &(start, len) in changed.runs() {
-                let r = start as usize..start as usize + len as usize;
-                base.pixels[r.clone()].copy_from_slice(&current.pixels[r.clone()]);
-                base.aux.values_mut()[r.start * channels..r.end * channels]
-                    .copy_from_slice(&current.aux.values()[r.start * channels..r.end * channels]);
-            }
             last = Instant::now();
             if !emit(JobEvent::Snapshot(snapshot)) {
                 return;

@@ -1,11 +1,11 @@
 //! A worker's snapshots hold only the pixels its rounds rendered: with the phase cap a round renders a part of
-//! the image, the engine names exactly the pixels whose sums changed, and deltas of those pixels alone merge
-//! at the coordinator to the sums that deltas of the whole image give.
+//! the image, the engine names exactly the pixels whose sums changed with the sums they had before, and deltas
+//! of those pixels alone merge at the coordinator to the sums that deltas of the whole image give.
 
 mod common;
 
 use common::scene;
-use photonfarm::accumulation::delta::{apply_delta, encode_delta, encode_delta_of, Compression, PixelRuns};
+use photonfarm::accumulation::delta::{apply_delta, encode_changes, encode_delta, encode_delta_of, Compression};
 use photonfarm::accumulation::Accumulator;
 use photonfarm::render::session::Progressive;
 use photonfarm::render::{Method, RenderSettings};
@@ -31,7 +31,8 @@ fn snapshots_of_the_changed_pixels_merge_to_the_sums_of_whole_image_snapshots() 
         if round % 2 == 0 {
             continue;
         }
-        let changed = engine.take_changed();
+        let changes = engine.take_changed();
+        let changed = changes.runs();
         let current = engine.sums();
         let mut flags = vec![false; n];
         changed.indices().for_each(|i| flags[i] = true);
@@ -41,6 +42,8 @@ fn snapshots_of_the_changed_pixels_merge_to_the_sums_of_whole_image_snapshots() 
         assert!(changed.pixel_count() > 0 && changed.pixel_count() < n, "{} of {n} pixels", changed.pixel_count());
         let full = encode_delta(current, &base, Compression::Fast);
         let part = encode_delta_of(current, &base, &changed, Compression::Fast);
+        // The sums the engine kept of the changed pixels alone give the same delta as a copy of the image.
+        assert_eq!(encode_changes(current, &changes, Compression::Fast), part);
         assert!(part.len() < full.len(), "{} bytes for the changed pixels, {} for all", part.len(), full.len());
         let a = apply_delta(&full, &mut whole).unwrap();
         let b = apply_delta(&part, &mut sparse).unwrap();
@@ -54,7 +57,7 @@ fn snapshots_of_the_changed_pixels_merge_to_the_sums_of_whole_image_snapshots() 
     assert_eq!(sparse, whole);
     assert!(sparse.pixels.iter().all(|p| p.phases > 0), "every tile rendered by the end");
     // Nothing rendered since the last call: nothing named.
-    assert_eq!(engine.take_changed(), PixelRuns::default());
+    assert!(engine.take_changed().is_empty());
     let merged: &Accumulator = &sparse;
     let phases = |s: &Accumulator| s.pixels.iter().map(|p| p.phases as u64).sum::<u64>();
     assert_eq!(phases(merged), phases(engine.sums()));

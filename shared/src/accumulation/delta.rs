@@ -168,10 +168,100 @@ impl PixelRuns {
 /// 400 KB.
 const CHUNK: usize = 1024;
 
+/// The pixels whose sums changed since some moment, each with the sums it had then: what a delta of those
+/// pixels subtracts, kept for them alone rather than as a copy of the whole image (a worker's snapshots).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Changes {
+    /// The pixels, in the order they were kept (increasing once sorted).
+    pixels: Vec<u32>,
+    /// Their sums and auxiliary sums then, in the same order.
+    before: Vec<PixelSums>,
+    before_aux: Vec<f64>,
+    sorted: bool,
+}
+
+impl Changes {
+    /// Keeps pixel `i`'s sums as `sums` hold them now, before it changes; once per pixel.
+    pub fn keep(&mut self, i: usize, sums: &Accumulator) {
+        self.sorted = false;
+        self.pixels.push(i as u32);
+        self.before.push(sums.pixels[i]);
+        self.before_aux.extend_from_slice(sums.aux.pixel(i));
+    }
+
+    /// How many pixels are kept.
+    pub fn len(&self) -> usize {
+        self.pixels.len()
+    }
+
+    /// True when no pixel is kept.
+    pub fn is_empty(&self) -> bool {
+        self.pixels.is_empty()
+    }
+
+    /// The kept pixels with the phases each had then.
+    pub fn phases_before(&self) -> impl Iterator<Item = (usize, u32)> + '_ {
+        self.pixels.iter().zip(&self.before).map(|(&i, b)| (i as usize, b.phases))
+    }
+
+    /// The same changes in increasing pixel order, as `runs` and `encode_changes` take them.
+    pub fn into_sorted(self) -> Self {
+        let mut order: Vec<usize> = (0..self.pixels.len()).collect();
+        order.sort_unstable_by_key(|&k| self.pixels[k]);
+        let channels = if self.pixels.is_empty() { 0 } else { self.before_aux.len() / self.pixels.len() };
+        Changes {
+            pixels: order.iter().map(|&k| self.pixels[k]).collect(),
+            before: order.iter().map(|&k| self.before[k]).collect(),
+            before_aux: order
+                .iter()
+                .flat_map(|&k| &self.before_aux[k * channels..(k + 1) * channels])
+                .copied()
+                .collect(),
+            sorted: true,
+        }
+    }
+
+    /// The kept pixels as runs (sorted changes only).
+    pub fn runs(&self) -> PixelRuns {
+        assert!(self.sorted || self.pixels.is_empty(), "runs of unsorted changes");
+        let mut runs: Vec<(u32, u32)> = Vec::new();
+        for &i in &self.pixels {
+            match runs.last_mut() {
+                Some((s, l)) if *s + *l == i => *l += 1,
+                _ => runs.push((i, 1)),
+            }
+        }
+        PixelRuns { runs, pixels: self.pixels.len() }
+    }
+}
+
+/// The sums a delta subtracts.
+#[derive(Clone, Copy)]
+enum Base<'a> {
+    /// Sums of zeros.
+    Zero,
+    /// Sums of the whole image.
+    Image(&'a Accumulator),
+    /// The sums of the delta's pixels alone, in its order (sorted `Changes`).
+    Kept(&'a Changes),
+}
+
 /// The delta `current − base` over the whole image, compressed (the dense format, which checkpoints hold).
 /// Pixels with no new phase cost almost nothing after compression.
 pub fn encode_delta(current: &Accumulator, base: &Accumulator, compression: Compression) -> Vec<u8> {
-    encode(current, Some(base), None, compression)
+    encode(current, Base::Image(base), None, compression)
+}
+
+/// The delta from the sums `changes` kept to `current` over the changed pixels, compressed: the same bytes as
+/// `encode_delta_of` from a base holding those sums.
+pub fn encode_changes(current: &Accumulator, changes: &Changes, compression: Compression) -> Vec<u8> {
+    let runs = changes.runs();
+    assert!(
+        runs.runs.last().is_none_or(|&(s, l)| (s as usize + l as usize) <= current.pixels.len()),
+        "runs beyond the image"
+    );
+    assert_eq!(changes.before_aux.len(), changes.len() * current.aux.layout().channels(), "changes of other layers");
+    encode(current, Base::Kept(changes), Some(&runs), compression)
 }
 
 /// The deltas `current − 0` of consecutive pieces of `piece_pixels` pixels covering the image, each compressed
@@ -188,7 +278,7 @@ pub fn encode_whole_in_pieces<E>(
     for start in (0..n).step_by(piece_pixels) {
         let len = piece_pixels.min(n - start);
         let piece = PixelRuns { runs: vec![(start as u32, len as u32)], pixels: len };
-        out(&encode(current, None, Some(&piece), compression))?;
+        out(&encode(current, Base::Zero, Some(&piece), compression))?;
     }
     Ok(())
 }
@@ -205,17 +295,12 @@ pub fn encode_delta_of(
         pixels.runs.last().is_none_or(|&(s, l)| (s as usize + l as usize) <= current.pixels.len()),
         "runs beyond the image"
     );
-    encode(current, Some(base), Some(pixels), compression)
+    encode(current, Base::Image(base), Some(pixels), compression)
 }
 
-/// `current − base` over `pixels` (every pixel if None), with sums of zeros for a base of None.
-fn encode(
-    current: &Accumulator,
-    base: Option<&Accumulator>,
-    pixels: Option<&PixelRuns>,
-    compression: Compression,
-) -> Vec<u8> {
-    if let Some(base) = base {
+/// `current − base` over `pixels` (every pixel if None).
+fn encode(current: &Accumulator, base: Base, pixels: Option<&PixelRuns>, compression: Compression) -> Vec<u8> {
+    if let Base::Image(base) = base {
         assert_eq!(current.pixels.len(), base.pixels.len(), "a delta needs two sums of the same image");
         assert_eq!(current.aux.layout(), base.aux.layout(), "a delta needs two sums of the same layers");
     }
@@ -250,7 +335,11 @@ fn encode(
     let zero = PixelSums::default();
     // Byte b of value j of plane k goes to plane k's byte-b row at column j (a byte shuffle).
     for (j0, range) in runs.pieces() {
-        let base_of = |j: usize| base.map_or(&zero, |b| &b.pixels[range.start + j]);
+        let base_of = |j: usize| match base {
+            Base::Zero => &zero,
+            Base::Image(b) => &b.pixels[range.start + j],
+            Base::Kept(c) => &c.before[j0 + j],
+        };
         let pairs = current.pixels[range.clone()].iter().enumerate().map(|(j, c)| (c, base_of(j)));
         for k in 0..U32_PLANES {
             let plane = &mut counts[4 * m * k..4 * m * (k + 1)];
@@ -270,7 +359,11 @@ fn encode(
         }
         let aux_range = range.start * aux_channels..range.end * aux_channels;
         let c = &c_aux[aux_range.clone()];
-        let b = base.map(|b| &b.aux.values()[aux_range]);
+        let b = match base {
+            Base::Zero => None,
+            Base::Image(b) => Some(&b.aux.values()[aux_range]),
+            Base::Kept(k) => Some(&k.before_aux[j0 * aux_channels..(j0 + range.len()) * aux_channels]),
+        };
         for k in 0..aux_channels {
             let plane = &mut floats[8 * m * (F64_PLANES + k)..8 * m * (F64_PLANES + k + 1)];
             for j in 0..range.len() {
@@ -579,6 +672,41 @@ mod tests {
         let plain_delta = encode_delta(&Accumulator::new(10, 1), &Accumulator::new(10, 1), Compression::Fast);
         let mut with_ghost = Accumulator::with_aux(10, 1, ghost_layout());
         assert!(apply_delta(&plain_delta, &mut with_ghost).is_err(), "a delta without the ghost planes");
+    }
+
+    #[test]
+    fn changes_kept_before_an_update_encode_the_bytes_of_a_delta_from_a_copy_of_the_whole_image() {
+        for layout in [AuxLayout::default(), ghost_layout()] {
+            let base = sums(40, 2, 0.3, &layout);
+            let (mut current, mut changes) = (base.clone(), Changes::default());
+            let more = sums(40, 1, 0.9, &layout);
+            // Changed in no order, as groups' masks name their pixels; a run of three among them.
+            for i in [31usize, 4, 17, 5, 6, 39] {
+                changes.keep(i, &current);
+                current.pixels[i].merge(&more.pixels[i]);
+                let channels = layout.channels();
+                for k in 0..channels {
+                    current.aux.values_mut()[i * channels + k] += more.aux.pixel(i)[k];
+                }
+            }
+            assert_eq!(changes.phases_before().next(), Some((31, 2)));
+            let changes = changes.into_sorted();
+            let runs = changes.runs();
+            assert_eq!(runs.runs(), &[(4, 3), (17, 1), (31, 1), (39, 1)]);
+            for compression in [Compression::Fast, Compression::Small] {
+                assert_eq!(
+                    encode_changes(&current, &changes, compression),
+                    encode_delta_of(&current, &base, &runs, compression)
+                );
+            }
+            let mut receiver = base.clone();
+            apply_delta(&encode_changes(&current, &changes, Compression::Fast), &mut receiver).unwrap();
+            assert_eq!(
+                receiver.pixels.iter().map(|p| p.phases).collect::<Vec<_>>(),
+                current.pixels.iter().map(|p| p.phases).collect::<Vec<_>>()
+            );
+        }
+        assert_eq!(Changes::default().into_sorted().runs(), PixelRuns::default());
     }
 
     #[test]

@@ -5,7 +5,7 @@
 use super::group::{Group, GroupMap, GroupStats, PhasesBefore, RoundContext};
 use super::map_slot::MapSlot;
 use super::mask;
-use photonfarm::accumulation::delta::PixelRuns;
+use photonfarm::accumulation::delta::Changes;
 use photonfarm::accumulation::{Accumulator, AuxLayout};
 use photonfarm::pbpm::ProcessShare;
 use photonfarm::ray_map::Recorder;
@@ -208,6 +208,9 @@ pub struct ParallelEngine<'s> {
     recorder: Option<Arc<Recorder>>,
     /// Pixels whose sums a round changed since `take_changed` last ran: a snapshot sends only these.
     changed: Vec<bool>,
+    /// Those pixels' sums before their first change since then, which a snapshot's delta subtracts: kept for
+    /// them alone, so that a worker holds no second image of sums.
+    changes: Changes,
 }
 
 impl<'s> ParallelEngine<'s> {
@@ -255,6 +258,7 @@ impl<'s> ParallelEngine<'s> {
             last_round_end: None,
             recorder: None,
             changed: vec![false; scene.camera.pixel_count()],
+            changes: Changes::default(),
         })
     }
 
@@ -450,21 +454,32 @@ impl<'s> ParallelEngine<'s> {
         }
         self.measure_phases(&stats_before);
         for g in &self.groups {
-            self.sums.merge_local(g.mask(), g.local_sums(), g.local_aux());
             for &p in g.mask() {
-                self.changed[p as usize] = true;
+                if !std::mem::replace(&mut self.changed[p as usize], true) {
+                    self.changes.keep(p as usize, &self.sums);
+                }
             }
+        }
+        for g in &self.groups {
+            self.sums.merge_local(g.mask(), g.local_sums(), g.local_aux());
         }
         // The merge is between-rounds time; it is added when the next round starts.
         self.last_round_end = Some(round_end);
     }
 
-    /// The pixels whose sums changed since the previous call (every pixel a round's masks held), and forgets
-    /// them: only their sums differ from the sums at that call.
-    pub fn take_changed(&mut self) -> PixelRuns {
-        let runs = PixelRuns::from_flags(&self.changed);
-        self.changed.fill(false);
-        runs
+    /// The pixels whose sums changed since the previous call (every pixel a round's masks held), in increasing
+    /// order with the sums each had at that call, and forgets them: only their sums differ from the sums then.
+    pub fn take_changed(&mut self) -> Changes {
+        let changes = std::mem::take(&mut self.changes).into_sorted();
+        for (i, _) in changes.phases_before() {
+            self.changed[i] = false;
+        }
+        changes
+    }
+
+    /// The pixels changed since `take_changed` last ran, with the phases each had then.
+    pub fn phases_before_changes(&self) -> impl Iterator<Item = (usize, u32)> + '_ {
+        self.changes.phases_before()
     }
 
     /// Thread-seconds per stage so far.
