@@ -3,7 +3,7 @@
 //! land on the same surface.
 
 use super::mesh::MeshTriangle;
-use std::collections::HashMap;
+use rayon::slice::ParallelSliceMut;
 
 /// Two surfaces whose normals agree at least this well (|cos|, 25°) count as one surface: a gather takes light
 /// landing on either, and an edge between them does not end the surface.
@@ -20,7 +20,9 @@ impl SurfaceEdges {
     /// object, has an edge with the same two end points (bit for bit, as meshes share their vertices) and a
     /// normal that agrees within `SAME_SURFACE_COS`. Degenerate triangles end the surface on every edge.
     pub fn find(triangles: &[(u32, MeshTriangle)]) -> Self {
-        let key = |t: &MeshTriangle, i: usize| {
+        let key = |edge: usize| {
+            let t = &triangles[edge / 3].1;
+            let i = edge % 3;
             let (a, b) = (t.v[i].to_array().map(f32::to_bits), t.v[(i + 1) % 3].to_array().map(f32::to_bits));
             if a <= b {
                 (a, b)
@@ -29,28 +31,24 @@ impl SurfaceEdges {
             }
         };
         let normals: Vec<_> = triangles.iter().map(|(_, t)| t.cross().normalize_or_zero()).collect();
-        let mut by_edge: HashMap<_, Vec<u32>> = HashMap::with_capacity(triangles.len() * 3 / 2);
-        for (index, (_, t)) in triangles.iter().enumerate() {
-            for i in 0..3 {
-                by_edge.entry(key(t, i)).or_default().push(index as u32);
+        // Every edge (3 × triangle + i) sorted by a hash of its end points: the edges that share their end points
+        // sit together (with the rare others of the same hash, told apart by their points), in one sort rather
+        // than a map of lists, which a mesh of millions of triangles filled slowly.
+        let mut edges: Vec<(u64, u32)> = (0..3 * triangles.len()).map(|e| (edge_hash(key(e)), e as u32)).collect();
+        edges.par_sort_unstable();
+        let mut bits = vec![0b111u8; triangles.len()];
+        for same_hash in edges.chunk_by(|a, b| a.0 == b.0) {
+            for &(_, e) in same_hash {
+                let (e, index) = (e as usize, e as usize / 3);
+                let continued = same_hash.iter().any(|&(_, f)| {
+                    let (f, other) = (f as usize, f as usize / 3);
+                    other != index && key(f) == key(e) && normals[index].dot(normals[other]).abs() >= SAME_SURFACE_COS
+                });
+                if continued {
+                    bits[index] &= !(1 << (e % 3));
+                }
             }
         }
-        let bits = triangles
-            .iter()
-            .enumerate()
-            .map(|(index, (_, t))| {
-                let mut ends = 0u8;
-                for i in 0..3 {
-                    let continued = by_edge[&key(t, i)].iter().any(|&other| {
-                        other as usize != index && normals[index].dot(normals[other as usize]).abs() >= SAME_SURFACE_COS
-                    });
-                    if !continued {
-                        ends |= 1 << i;
-                    }
-                }
-                ends
-            })
-            .collect();
         SurfaceEdges { bits }
     }
 
@@ -59,6 +57,13 @@ impl SurfaceEdges {
     pub fn of(&self, index: u32) -> u8 {
         self.bits.get(index as usize).copied().unwrap_or(0)
     }
+}
+
+/// A hash of an edge's end points (their bits), the same for the same points.
+fn edge_hash((a, b): ([u32; 3], [u32; 3])) -> u64 {
+    a.into_iter()
+        .chain(b)
+        .fold(0xcbf2_9ce4_8422_2325u64, |h, w| (h.rotate_left(5) ^ w as u64).wrapping_mul(0x0100_0000_01b3))
 }
 
 #[cfg(test)]
@@ -95,5 +100,44 @@ mod tests {
         let edges = SurfaceEdges::find(&triangles);
         // The first quad's side at x = 1 (edge b–c of its first triangle) is the second quad's side d–a.
         assert_eq!(edges.of(0), 0b001);
+    }
+
+    #[test]
+    fn the_ends_found_are_those_of_a_comparison_of_every_pair_of_edges() {
+        // A bumpy 12 × 12 grid (neighbours at every angle, shared vertices), a few triangles reusing its points
+        // elsewhere, and a degenerate one.
+        let point = |i: usize, j: usize| Vec3::new(i as f32, ((i * 7 + j * 3) % 5) as f32 * 0.3, j as f32);
+        let mut triangles = Vec::new();
+        for i in 0..12 {
+            for j in 0..12 {
+                let (a, b, c, d) = (point(i, j), point(i + 1, j), point(i + 1, j + 1), point(i, j + 1));
+                triangles.push((0, MeshTriangle { v: [a, b, c], n: None }));
+                triangles.push((1, MeshTriangle { v: [a, c, d], n: None }));
+            }
+        }
+        triangles.push((2, MeshTriangle { v: [point(3, 3), point(4, 3), point(3, 9)], n: None }));
+        triangles.push((2, MeshTriangle { v: [point(5, 5), point(5, 5), point(6, 5)], n: None }));
+        let found = SurfaceEdges::find(&triangles);
+        let normal = |t: &MeshTriangle| t.cross().normalize_or_zero();
+        let same = |p: Vec3, q: Vec3| p.to_array().map(f32::to_bits) == q.to_array().map(f32::to_bits);
+        for (k, (_, t)) in triangles.iter().enumerate() {
+            let mut ends = 0u8;
+            for i in 0..3 {
+                let (a, b) = (t.v[i], t.v[(i + 1) % 3]);
+                let continued = triangles.iter().enumerate().any(|(m, (_, u))| {
+                    m != k
+                        && (0..3).any(|e| {
+                            let (c, d) = (u.v[e], u.v[(e + 1) % 3]);
+                            (same(a, c) && same(b, d)) || (same(a, d) && same(b, c))
+                        })
+                        && normal(t).dot(normal(u)).abs() >= SAME_SURFACE_COS
+                });
+                if !continued {
+                    ends |= 1 << i;
+                }
+            }
+            assert_eq!(found.of(k as u32), ends, "triangle {k}");
+        }
+        assert_eq!(found.of(triangles.len() as u32 - 1), 0b111, "a degenerate triangle ends its surface everywhere");
     }
 }
