@@ -79,13 +79,29 @@ pub fn save(
     record: &RunRecord,
     between: impl FnOnce() -> Result<()>,
 ) -> Result<()> {
+    write_preview(dir, sums)?;
+    between()?;
+    write_image_and_record(dir, exr_layers(sums, lit), record)
+}
+
+/// Writes preview.png from the total layer alone.
+pub fn write_preview(dir: &Path, sums: &Accumulator) -> Result<()> {
     let total = total_layer(sums);
     write_preview_png(&dir.join("preview.png"), &total, auto_exposure(&total))?;
-    drop(total);
-    between()?;
-    let mut layers: Vec<LayerImage> = layer_images(sums);
+    Ok(())
+}
+
+/// The layers of image.exr: `layer_images`, the lit mask as `lit` and the phases per pixel as `phases`.
+pub fn exr_layers(sums: &Accumulator, lit: &LitMask) -> Vec<LayerImage> {
+    let mut layers = layer_images(sums);
     layers.push(lit_layer(lit));
     layers.push(phases_layer(sums));
+    layers
+}
+
+/// Writes image.exr from its layers (`exr_layers`), then run.json; a large image's EXR takes seconds to
+/// compress, with no need of the sums.
+pub fn write_image_and_record(dir: &Path, layers: Vec<LayerImage>, record: &RunRecord) -> Result<()> {
     write_exr(&dir.join("image.exr"), layers)?;
     let json = serde_json::to_vec_pretty(record)?;
     let tmp = dir.join(".run.json.tmp");

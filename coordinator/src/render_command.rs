@@ -13,7 +13,7 @@ use photonfarm::accumulation::{Accumulator, LitMask};
 use photonfarm::protocol::Secret;
 use photonfarm::ray_map::{self, Recorder};
 use photonfarm::render::active_tiles::DEFAULT_TILE;
-use photonfarm::render::checkpoint::Checkpoint;
+use photonfarm::render::checkpoint::{Checkpoint, CheckpointError};
 use photonfarm::render::forecast::Forecast;
 use photonfarm::render::memory::MemoryBudget;
 use photonfarm::render::method::{Images, Processes};
@@ -100,6 +100,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         elapsed_before: Duration::from_secs_f64(checkpoint.as_ref().map_or(0.0, |c| c.elapsed_s)),
         launched,
         start: Instant::now(),
+        stopping: Arc::new(AtomicBool::new(false)),
     };
     let mut history = checkpoint.map(|c| c.history).unwrap_or_default();
     let mut feed = live.as_mut().map(|l| &mut l.feed);
@@ -115,6 +116,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         (&mut forecast, tiles.as_mut()),
         (feed.as_deref_mut(), &mut saving),
     );
+    outputs.stopping.store(true, Ordering::Relaxed);
     bar.set_message("stopping: collecting the last completed phases");
     if let Some(f) = feed.as_deref_mut() {
         f.stopping(engine.as_ref(), &history, outputs.elapsed_s());
@@ -562,6 +564,9 @@ struct Outputs<'a> {
     /// When the command started, and when this session's rendering did.
     launched: Instant,
     start: Instant,
+    /// Set once the run has stopped: a periodic save still under way abandons what it has left, which the
+    /// final save writes anyway, and lets the sums go.
+    stopping: Arc<AtomicBool>,
 }
 
 impl Outputs<'_> {
@@ -629,7 +634,7 @@ impl Outputs<'_> {
         reason: StopReason,
         forecast: &Forecast,
     ) -> Result<RunRecord> {
-        write_checkpoint(self.dir, engine.sums(), self.checkpoint_inputs(engine, history))?;
+        write_checkpoint(self.dir, engine.sums(), self.checkpoint_inputs(engine, history), &AtomicBool::new(false))?;
         let record = self.record(engine, history, reason, forecast);
         output_folder::save(self.dir, engine.sums(), self.lit, &record, || Ok(()))?;
         Ok(record)
@@ -648,10 +653,10 @@ impl Outputs<'_> {
         let record = self.record(engine, history, StopReason::Running, forecast);
         let checkpoint = self.checkpoint_inputs(engine, history);
         let sums = engine.shared_sums().unwrap_or_else(|| Arc::new(engine.sums().clone()));
-        let (dir, lit) = (self.dir.to_path_buf(), self.lit.clone());
+        let (dir, lit, stopping) = (self.dir.to_path_buf(), self.lit.clone(), self.stopping.clone());
         std::thread::Builder::new()
             .name("save".into())
-            .spawn(move || write_outputs(&dir, &sums, &lit, &record, checkpoint))
+            .spawn(move || save_periodically(&dir, sums, &lit, &record, checkpoint, &stopping))
     }
 
     /// What a checkpoint of this moment holds besides the sums (distributed methods only).
@@ -679,22 +684,44 @@ struct CheckpointInputs {
     history: Vec<HistoryEntry>,
 }
 
-/// Writes the preview first (what a user waits for), then the checkpoint (what a resumed run needs), then the
-/// image and the record.
-fn write_outputs(
+/// A periodic save on a thread of its own: the preview first (what a user waits for), then the checkpoint (what
+/// a resumed run needs) and the EXR's layers from the shared sums, which it then lets go, so that merges wait
+/// only for what needs them and not for the EXR's compression; then the image and the record. Once the run
+/// stops, what is left of it is abandoned, as the final save writes everything again.
+fn save_periodically(
     dir: &Path,
-    sums: &Accumulator,
+    sums: Arc<Accumulator>,
     lit: &LitMask,
     record: &RunRecord,
     checkpoint: Option<CheckpointInputs>,
+    stopping: &AtomicBool,
 ) -> Result<()> {
-    output_folder::save(dir, sums, lit, record, || write_checkpoint(dir, sums, checkpoint))
+    let stopped = || stopping.load(Ordering::Relaxed);
+    output_folder::write_preview(dir, &sums)?;
+    if stopped() {
+        return Ok(());
+    }
+    match write_checkpoint(dir, &sums, checkpoint, stopping) {
+        Err(CheckpointError::Abandoned { .. }) => return Ok(()),
+        written => written?,
+    }
+    if stopped() {
+        return Ok(());
+    }
+    let layers = output_folder::exr_layers(&sums, lit);
+    drop(sums);
+    output_folder::write_image_and_record(dir, layers, record)
 }
 
-fn write_checkpoint(dir: &Path, sums: &Accumulator, checkpoint: Option<CheckpointInputs>) -> Result<()> {
+fn write_checkpoint(
+    dir: &Path,
+    sums: &Accumulator,
+    checkpoint: Option<CheckpointInputs>,
+    stop: &AtomicBool,
+) -> Result<(), CheckpointError> {
     if let Some(c) = checkpoint {
         Checkpoint::new(sums, &c.scene_hash, c.method, c.settings, c.session, c.elapsed_s, c.totals, &c.history)
-            .save(&dir.join(CHECKPOINT), sums)?;
+            .save_unless(&dir.join(CHECKPOINT), sums, stop)?;
     }
     Ok(())
 }
@@ -915,15 +942,15 @@ fn memory_plan(
     match (layout.processes, layout.parallel) {
         (Processes::PerNumaNode, _) => {
             // The coordinator renders nothing, so --memory-limit (per worker process) is not its budget. It
-            // holds the merged sums and the lit mask and, at its peak, either a snapshot being merged (its frame
+            // holds the merged sums and the lit mask and, at its peak, a snapshot being merged (its frame
             // and the message read from it, then the message and its decompressed delta; a whole image's at
-            // most, which zstd bounds by the raw size) or a save (the preview's layer, a checkpoint piece, or the
-            // EXR's channels, one after the other), never both: a save reads the sums while merges wait. The
-            // workers check their own engines when their job arrives.
+            // most, which zstd bounds by the raw size) and a save (the preview's layer, a checkpoint piece, or the
+            // EXR's channels, one after the other; merges wait while a save reads the sums, not while it writes
+            // the EXR). The workers check their own engines when their job arrives.
             let sums = photonfarm::accumulation::Accumulator::bytes_per_pixel(&aux) as u64 * pixels as u64;
             let merge = 2 * photonfarm::accumulation::delta::max_delta_bytes(pixels as u64, &aux);
             let save = (images::exr_bytes_per_pixel(&aux) as u64 * pixels as u64).max(Checkpoint::max_save_bytes(&aux));
-            let need = base + sums + pixels as u64 + merge.max(save);
+            let need = base + sums + pixels as u64 + merge + save;
             if let Some(budget) = MemoryBudget::new(None) {
                 if need > budget.bytes() {
                     let detail = " in the coordinator, which merges the workers' sums and writes the image from them";

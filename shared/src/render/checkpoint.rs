@@ -14,6 +14,7 @@ use crate::scene::Scene;
 use serde::{Deserialize, Serialize};
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// 2: the sums' auxiliary layers (the ghost layer) are kept. 3: the settings hold the spectral-output bands.
 /// 4: the totals count the light paths counted against photon maps. 5: the sums keep their replicates.
@@ -74,6 +75,8 @@ pub enum CheckpointError {
     Read { path: String, source: std::io::Error },
     #[error("cannot write the checkpoint {path}: {source}")]
     Write { path: String, source: std::io::Error },
+    #[error("the checkpoint {path} was not written: the run stopped meanwhile")]
+    Abandoned { path: String },
     #[error("{path} is not a photonfarm checkpoint of this version: {reason}")]
     Format { path: String, reason: String },
     #[error("{path} is {size} bytes, more than a checkpoint of this scene can be ({max} bytes): it is corrupt or not a checkpoint")]
@@ -135,6 +138,12 @@ impl Checkpoint {
     /// flushed to the disk, renamed over the old one), with its CRC-32 at the end; the checkpoint it replaces
     /// becomes `previous_path(path)`. A checkpoint exists at `path` at every moment, the old one or the new one.
     pub fn save(&self, path: &Path, sums: &Accumulator) -> Result<(), CheckpointError> {
+        self.save_unless(path, sums, &AtomicBool::new(false))
+    }
+
+    /// `save`, abandoned (`CheckpointError::Abandoned`, leaving the checkpoint at `path` as it was) once `stop`
+    /// is set: a periodic save that the run's final one will follow at once need not hold the sums any longer.
+    pub fn save_unless(&self, path: &Path, sums: &Accumulator, stop: &AtomicBool) -> Result<(), CheckpointError> {
         assert!(
             (sums.width, sums.height) == (self.width, self.height) && *sums.aux.layout() == self.aux,
             "a checkpoint saved with sums of another image"
@@ -148,11 +157,21 @@ impl Checkpoint {
             CrcWriter { inner: std::io::BufWriter::with_capacity(1 << 20, file), crc: crc32fast::Hasher::new() };
         bincode::serde::encode_into_std_write(self, &mut out, bincode::config::standard())
             .map_err(|e| err(std::io::Error::other(e.to_string())))?;
-        encode_whole_in_pieces(sums, PIECE_PIXELS, Compression::Small, |piece| {
-            out.write_all(&(piece.len() as u32).to_le_bytes())?;
-            out.write_all(piece)
-        })
-        .map_err(err)?;
+        let pieces = encode_whole_in_pieces(sums, PIECE_PIXELS, Compression::Small, |piece| {
+            if stop.load(Ordering::Relaxed) {
+                return Err(None);
+            }
+            out.write_all(&(piece.len() as u32).to_le_bytes()).and_then(|()| out.write_all(piece)).map_err(Some)
+        });
+        match pieces {
+            Ok(()) => {}
+            Err(Some(e)) => return Err(err(e)),
+            Err(None) => {
+                drop(out);
+                let _ = std::fs::remove_file(&tmp);
+                return Err(CheckpointError::Abandoned { path: path.display().to_string() });
+            }
+        }
         let CrcWriter { mut inner, crc } = out;
         inner.write_all(&crc.finalize().to_le_bytes()).map_err(err)?;
         let file = inner.into_inner().map_err(|e| err(e.into_error()))?;
@@ -492,6 +511,22 @@ quad = {{ corner = [-1.0, -1.0, 0.0], edge1 = [2.0, 0.0, 0.0], edge2 = [0.0, 2.0
         assert!(matches!(Checkpoint::load(&path, &scene), Err(CheckpointError::OtherScene { .. })));
         std::fs::write(&path, b"garbage").unwrap();
         assert!(matches!(Checkpoint::load(&path, &scene), Err(CheckpointError::Format { .. })));
+    }
+
+    #[test]
+    fn a_save_abandoned_at_the_stop_leaves_the_checkpoint_as_it_was() {
+        let dir = tempfile::Builder::new().prefix("pf-checkpoint-abandoned-").tempdir().unwrap();
+        let path = dir.path().join("checkpoint.bin");
+        let (scene, c, sums) = empty_scene_and_checkpoint(8, 4);
+        c.save(&path, &sums).unwrap();
+        let before = std::fs::read(&path).unwrap();
+        let mut later = c.clone();
+        later.session = 2;
+        let e = later.save_unless(&path, &sums, &AtomicBool::new(true)).unwrap_err();
+        assert!(matches!(e, CheckpointError::Abandoned { .. }), "{e}");
+        assert_eq!(std::fs::read(&path).unwrap(), before);
+        assert!(!previous_path(&path).exists() && !path.with_extension("tmp").exists(), "nothing left beside it");
+        assert_eq!(Checkpoint::load(&path, &scene).unwrap().0, c);
     }
 
     #[test]
