@@ -212,7 +212,7 @@ fn live_options(
     Ok(LiveOptions {
         serve,
         tev: args.display.as_ref().map(|Display::Tev(address)| address.clone()),
-        blank: Accumulator::with_aux(sums.width, sums.height, sums.aux.layout().clone()),
+        image: (sums.width, sums.height, sums.aux.layout().clone()),
         lit: lit.clone(),
         settings,
         dir: dir.to_path_buf(),

@@ -7,7 +7,7 @@ use super::render_page::{self, RenderPage};
 use super::server::{url_of, LiveThread};
 use super::tev;
 use anyhow::Result;
-use photonfarm::accumulation::{Accumulator, LitMask};
+use photonfarm::accumulation::{Accumulator, AuxLayout, LitMask};
 use photonfarm::protocol::Secret;
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -20,8 +20,9 @@ pub struct LiveOptions {
     pub serve: Option<(SocketAddr, Option<Secret>)>,
     /// `--display tev`: where tev listens.
     pub tev: Option<String>,
-    /// Empty sums of the run's size and layers: what the page shows before the first merge.
-    pub blank: Accumulator,
+    /// The run's image size and layers, whose empty sums the page shows before the first merge (made only when
+    /// a live view is asked for: a large image's sums are gigabytes).
+    pub image: (u32, u32, AuxLayout),
     /// The run's lit pixels, which δ unlit leaves out.
     pub lit: Arc<LitMask>,
     /// The run's settings as the page serves them.
@@ -51,7 +52,8 @@ impl LiveSession {
             None => None,
         };
         let thread = LiveThread::start()?;
-        let (feed, views) = LiveFeed::new(options.blank, options.lit);
+        let (width, height, aux) = options.image;
+        let (feed, views) = LiveFeed::new(Accumulator::with_aux(width, height, aux), options.lit);
         let mut url = None;
         if let Some((addr, access)) = access {
             let page = RenderPage {

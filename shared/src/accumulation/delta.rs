@@ -444,7 +444,11 @@ pub fn apply_delta(bytes: &[u8], sums: &mut Accumulator) -> Result<DeltaSummary,
     let layout = layout_bytes(sums.aux.layout());
     let aux_channels = sums.aux.layout().channels();
     let most = max_raw_bytes(n as u64, sums.aux.layout()).min(usize::MAX as u64) as usize;
-    let raw = zstd::bulk::decompress(bytes, most).map_err(|e| DeltaError(format!("cannot decompress: {e}")))?;
+    // The frame's own size when it states one within the bound: the buffer is then the delta's size, not the
+    // whole image's bound. A frame that understates its size fails to decompress into it.
+    let stated = zstd::zstd_safe::get_frame_content_size(bytes).ok().flatten().filter(|&s| s <= most as u64);
+    let capacity = stated.map_or(most, |s| s as usize);
+    let raw = zstd::bulk::decompress(bytes, capacity).map_err(|e| DeltaError(format!("cannot decompress: {e}")))?;
     let header = 8 + layout.len();
     let sparse = raw.get(..4) == Some(&SPARSE_MAGIC[..]);
     let size_error = |expected: usize| {
@@ -707,6 +711,22 @@ mod tests {
             );
         }
         assert_eq!(Changes::default().into_sorted().runs(), PixelRuns::default());
+    }
+
+    #[test]
+    fn a_frame_that_states_no_size_decodes_as_one_that_does() {
+        let current = sums(30, 2, 0.4, &AuxLayout::default());
+        let stated = encode_delta(&current, &Accumulator::new(30, 1), Compression::Fast);
+        assert!(zstd::zstd_safe::get_frame_content_size(&stated).unwrap().is_some(), "bulk frames state their size");
+        let raw = zstd::bulk::decompress(&stated, 1 << 20).unwrap();
+        let mut compressor = zstd::bulk::Compressor::new(1).unwrap();
+        compressor.include_contentsize(false).unwrap();
+        let unstated = compressor.compress(&raw).unwrap();
+        assert_eq!(zstd::zstd_safe::get_frame_content_size(&unstated).unwrap(), None);
+        let (mut a, mut b) = (Accumulator::new(30, 1), Accumulator::new(30, 1));
+        apply_delta(&stated, &mut a).unwrap();
+        apply_delta(&unstated, &mut b).unwrap();
+        assert_eq!((&a, &b), (&current, &current));
     }
 
     #[test]
