@@ -634,7 +634,7 @@ impl Outputs<'_> {
         reason: StopReason,
         forecast: &Forecast,
     ) -> Result<RunRecord> {
-        write_checkpoint(self.dir, engine.sums(), self.checkpoint_inputs(engine, history), &AtomicBool::new(false))?;
+        write_checkpoint(self.dir, engine.sums(), self.checkpoint_inputs(engine, history), None)?;
         let record = self.record(engine, history, reason, forecast);
         output_folder::save(self.dir, engine.sums(), self.lit, &record, || Ok(()))?;
         Ok(record)
@@ -701,7 +701,7 @@ fn save_periodically(
     if stopped() {
         return Ok(());
     }
-    match write_checkpoint(dir, &sums, checkpoint, stopping) {
+    match write_checkpoint(dir, &sums, checkpoint, Some(stopping)) {
         Err(CheckpointError::Abandoned { .. }) => return Ok(()),
         written => written?,
     }
@@ -717,11 +717,16 @@ fn write_checkpoint(
     dir: &Path,
     sums: &Accumulator,
     checkpoint: Option<CheckpointInputs>,
-    stop: &AtomicBool,
+    periodic_until: Option<&AtomicBool>,
 ) -> Result<(), CheckpointError> {
     if let Some(c) = checkpoint {
-        Checkpoint::new(sums, &c.scene_hash, c.method, c.settings, c.session, c.elapsed_s, c.totals, &c.history)
-            .save_unless(&dir.join(CHECKPOINT), sums, stop)?;
+        let c =
+            Checkpoint::new(sums, &c.scene_hash, c.method, c.settings, c.session, c.elapsed_s, c.totals, &c.history);
+        let path = dir.join(CHECKPOINT);
+        match periodic_until {
+            Some(stop) => c.save_unless(&path, sums, stop)?,
+            None => c.save(&path, sums)?,
+        }
     }
     Ok(())
 }

@@ -138,12 +138,23 @@ impl Checkpoint {
     /// flushed to the disk, renamed over the old one), with its CRC-32 at the end; the checkpoint it replaces
     /// becomes `previous_path(path)`. A checkpoint exists at `path` at every moment, the old one or the new one.
     pub fn save(&self, path: &Path, sums: &Accumulator) -> Result<(), CheckpointError> {
-        self.save_unless(path, sums, &AtomicBool::new(false))
+        self.write(path, sums, Compression::Small, &AtomicBool::new(false))
     }
 
-    /// `save`, abandoned (`CheckpointError::Abandoned`, leaving the checkpoint at `path` as it was) once `stop`
-    /// is set: a periodic save that the run's final one will follow at once need not hold the sums any longer.
+    /// `save` for a periodic save: abandoned (`CheckpointError::Abandoned`, leaving the checkpoint at `path` as
+    /// it was) once `stop` is set, as the run's final save follows at once, and compressed in zstd's fast mode,
+    /// so that it holds the sums, which merges wait for, a shorter time for a somewhat larger file.
     pub fn save_unless(&self, path: &Path, sums: &Accumulator, stop: &AtomicBool) -> Result<(), CheckpointError> {
+        self.write(path, sums, Compression::Fast, stop)
+    }
+
+    fn write(
+        &self,
+        path: &Path,
+        sums: &Accumulator,
+        compression: Compression,
+        stop: &AtomicBool,
+    ) -> Result<(), CheckpointError> {
         assert!(
             (sums.width, sums.height) == (self.width, self.height) && *sums.aux.layout() == self.aux,
             "a checkpoint saved with sums of another image"
@@ -157,7 +168,7 @@ impl Checkpoint {
             CrcWriter { inner: std::io::BufWriter::with_capacity(1 << 20, file), crc: crc32fast::Hasher::new() };
         bincode::serde::encode_into_std_write(self, &mut out, bincode::config::standard())
             .map_err(|e| err(std::io::Error::other(e.to_string())))?;
-        let pieces = encode_whole_in_pieces(sums, PIECE_PIXELS, Compression::Small, |piece| {
+        let pieces = encode_whole_in_pieces(sums, PIECE_PIXELS, compression, |piece| {
             if stop.load(Ordering::Relaxed) {
                 return Err(None);
             }
