@@ -445,10 +445,7 @@ fn start_engine<'s>(
     let layout = args.method.layout();
     match (layout.processes, layout.parallel) {
         (Processes::PerNumaNode, _) => {
-            let resume = match checkpoint {
-                Some((c, sums)) => Some(launch::Resume { session: c.session + 1, sums, totals: c.totals }),
-                None => None,
-            };
+            let resume = checkpoint.map(|(c, sums)| launch::Resume { session: c.session + 1, sums, totals: c.totals });
             let (cluster, layout) = launch::launch(&launch_options(args), scene, settings, dir, resume, recorder)?;
             Ok((Box::new(cluster), layout))
         }
