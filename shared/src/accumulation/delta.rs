@@ -177,13 +177,11 @@ pub struct Changes {
     /// Their sums and auxiliary sums then, in the same order.
     before: Vec<PixelSums>,
     before_aux: Vec<f64>,
-    sorted: bool,
 }
 
 impl Changes {
     /// Keeps pixel `i`'s sums as `sums` hold them now, before it changes; once per pixel.
     pub fn keep(&mut self, i: usize, sums: &Accumulator) {
-        self.sorted = false;
         self.pixels.push(i as u32);
         self.before.push(sums.pixels[i]);
         self.before_aux.extend_from_slice(sums.aux.pixel(i));
@@ -197,6 +195,11 @@ impl Changes {
     /// True when no pixel is kept.
     pub fn is_empty(&self) -> bool {
         self.pixels.is_empty()
+    }
+
+    /// The kept pixels, in the order they are kept.
+    pub fn pixels(&self) -> impl Iterator<Item = usize> + '_ {
+        self.pixels.iter().map(|&i| i as usize)
     }
 
     /// The kept pixels with the phases each had then.
@@ -217,13 +220,12 @@ impl Changes {
                 .flat_map(|&k| &self.before_aux[k * channels..(k + 1) * channels])
                 .copied()
                 .collect(),
-            sorted: true,
         }
     }
 
     /// The kept pixels as runs (sorted changes only).
     pub fn runs(&self) -> PixelRuns {
-        assert!(self.sorted || self.pixels.is_empty(), "runs of unsorted changes");
+        assert!(self.pixels.is_sorted_by(|a, b| a < b), "runs of unsorted changes");
         let mut runs: Vec<(u32, u32)> = Vec::new();
         for &i in &self.pixels {
             match runs.last_mut() {

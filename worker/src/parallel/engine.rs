@@ -471,7 +471,7 @@ impl<'s> ParallelEngine<'s> {
     /// order with the sums each had at that call, and forgets them: only their sums differ from the sums then.
     pub fn take_changed(&mut self) -> Changes {
         let changes = std::mem::take(&mut self.changes).into_sorted();
-        for (i, _) in changes.phases_before() {
+        for i in changes.pixels() {
             self.changed[i] = false;
         }
         changes
