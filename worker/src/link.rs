@@ -1,14 +1,13 @@
 //! The worker's end of a coordinator link: handshake, job, the files it lacks, then snapshots out and
 //! acknowledgements, heartbeats and the stop request in, until the job ends or the link fails.
 
+use crate::files::{Arrivals, FileCache};
 use crate::job::{self, JobEvent};
 use photonfarm::accumulation::delta::Compression;
 use photonfarm::protocol::auth::{handshake, Peer};
 use photonfarm::protocol::{Connection, Job, Message, ProtocolError, RayMapPortion, Role, Secret};
 use photonfarm::ray_map::{Portion, PortionSink};
 use photonfarm::render::session::Deadline;
-use sha2::{Digest, Sha256};
-use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -40,9 +39,6 @@ impl LinkOptions {
         }
     }
 }
-
-/// Mesh files received, by SHA-256: a daemon keeps them from job to job.
-pub type FileCache = BTreeMap<String, Vec<u8>>;
 
 /// How a job ended.
 #[derive(Debug)]
@@ -92,19 +88,24 @@ pub async fn serve_job(
             snapshots_acked: 0,
         });
     }
-    let meshes: BTreeMap<String, Vec<u8>> =
-        job.files.iter().map(|f| (f.path.clone(), cache[&f.sha256].clone())).collect();
+    let meshes = cache.take(&job.files);
     let job = Arc::new(*job);
     let scene = {
-        let job = job.clone();
-        let mut load = tokio::task::spawn_blocking(move || job::load_scene(&job, &meshes));
+        let loading = job.clone();
+        let mut load = tokio::task::spawn_blocking(move || {
+            let scene = job::load_scene(&loading, &meshes);
+            (scene, meshes)
+        });
         // A large mesh takes longer to read and build than the coordinator waits for a silent worker: the
         // heartbeats go on meanwhile. What the coordinator sends waits in the link until the engine runs.
         let mut tick = tokio::time::interval(opts.heartbeat);
         loop {
             tokio::select! {
                 loaded = &mut load => {
-                    break loaded.map_err(|e| LinkError::Job(format!("the scene loader panicked: {e}")))?;
+                    let (scene, meshes) =
+                        loaded.map_err(|e| LinkError::Job(format!("the scene loader panicked: {e}")))?;
+                    cache.give_back(&job.files, meshes);
+                    break scene;
                 }
                 _ = tick.tick() => conn.write(&Message::Heartbeat).await?,
             }
@@ -340,8 +341,6 @@ async fn drain_until_closed(conn: &mut Connection) {
     while let Ok(Ok(_)) = tokio::time::timeout(deadline.saturating_duration_since(Instant::now()), conn.read()).await {}
 }
 
-/// Asks for the job's files that are not in `cache` and checks every one against its hash. A stop request
-/// that arrives first ends the job normally; active tiles that arrive meanwhile are kept in `tiles`.
 /// The deadline of a `StopAt` received now. Milliseconds beyond any real run (a forged or corrupt message)
 /// saturate to no deadline a run would reach.
 fn stop_at(in_ms: u64, slack_ms: u64) -> Deadline {
@@ -350,6 +349,9 @@ fn stop_at(in_ms: u64, slack_ms: u64) -> Deadline {
     Deadline { at: now + ms(in_ms), slack: ms(slack_ms) }
 }
 
+/// Asks for the job's files that are not in `cache` and assembles each from its pieces, checked against its
+/// hash. A stop request that arrives first ends the job normally; active tiles and a stop time that arrive
+/// meanwhile are kept for the engine.
 async fn fetch_files(
     conn: &mut Connection,
     job: &Job,
@@ -357,26 +359,20 @@ async fn fetch_files(
     tiles: &job::PendingTiles,
     deadline: &job::PendingDeadline,
 ) -> Result<Fetched, ProtocolError> {
-    let mut missing: Vec<String> =
-        job.files.iter().map(|f| f.sha256.clone()).filter(|h| !cache.contains_key(h)).collect();
+    let mut missing: Vec<String> = job.files.iter().map(|f| f.sha256.clone()).filter(|h| !cache.contains(h)).collect();
     missing.sort();
     missing.dedup();
     if missing.is_empty() {
         return Ok(Fetched::All);
     }
     conn.write(&Message::NeedFiles { hashes: missing.clone() }).await?;
-    while !missing.is_empty() {
-        match conn.read_within(Duration::from_secs(120), "File").await? {
-            Message::File { sha256, bytes } => {
-                let Some(pos) = missing.iter().position(|h| *h == sha256) else {
-                    return Err(ProtocolError::Malformed(format!("a file that was not asked for ({sha256})")));
-                };
-                let actual = format!("{:x}", Sha256::digest(&bytes));
-                if actual != sha256 {
-                    return Err(ProtocolError::Malformed(format!("file {sha256} arrived with hash {actual}")));
+    let mut arrivals = Arrivals::expecting(&missing);
+    while !arrivals.is_done() {
+        match conn.read_within(Duration::from_secs(120), "FilePiece").await? {
+            Message::FilePiece(piece) => {
+                if let Some((sha256, bytes)) = arrivals.receive(piece)? {
+                    cache.insert(sha256, bytes);
                 }
-                missing.swap_remove(pos);
-                cache.insert(sha256, bytes);
             }
             Message::Stop => return Ok(Fetched::Stopped),
             Message::ActiveTiles { tile, flags } => {
@@ -387,7 +383,7 @@ async fn fetch_files(
             }
             Message::Heartbeat => {}
             Message::Refused { reason } => return Err(ProtocolError::Refused(reason)),
-            other => return Err(ProtocolError::Unexpected { expected: "File", got: other.kind().into() }),
+            other => return Err(ProtocolError::Unexpected { expected: "FilePiece", got: other.kind().into() }),
         }
     }
     Ok(Fetched::All)
@@ -397,11 +393,12 @@ async fn fetch_files(
 mod tests {
     use super::*;
     use photonfarm::protocol::auth::handshake;
-    use photonfarm::protocol::{EngineSpec, FileRef};
+    use photonfarm::protocol::{EngineSpec, FilePiece, FileRef};
     use photonfarm::render::method::ParallelMethod;
     use photonfarm::render::{Method, RenderSettings};
     use photonfarm::scene::description::SceneDescription;
     use photonfarm::scene::Scene;
+    use std::collections::BTreeMap;
     use std::path::Path;
     use tokio::net::{TcpListener, TcpStream};
 
@@ -484,8 +481,9 @@ mod tests {
                         Message::NeedFiles { hashes } => {
                             for h in hashes {
                                 asked += 1;
-                                let bytes = store[&h].clone();
-                                c.write(&Message::File { sha256: h, bytes }).await.unwrap();
+                                for piece in FilePiece::all_of(&h, &store[&h]) {
+                                    c.write(&Message::FilePiece(piece)).await.unwrap();
+                                }
                             }
                         }
                         Message::Snapshot(snapshot) => {
@@ -504,7 +502,7 @@ mod tests {
             });
             let conn = Connection::new(TcpStream::connect(addr).await.unwrap()).unwrap();
             let opts = LinkOptions::new("w".into(), Secret::insecure());
-            let outcome = serve_job(conn, &opts, &mut FileCache::new()).await.expect("a normal end");
+            let outcome = serve_job(conn, &opts, &mut FileCache::for_one_job()).await.expect("a normal end");
             let (asked, snapshots) = coordinator.await.unwrap();
             // Every mesh came from the coordinator, and the worker rendered with them.
             assert_eq!(asked, sent);
@@ -531,8 +529,9 @@ mod tests {
                     match c.read().await.unwrap() {
                         Message::NeedFiles { hashes } => {
                             for h in hashes {
-                                let bytes = store[&h].clone();
-                                c.write(&Message::File { sha256: h, bytes }).await.unwrap();
+                                for piece in FilePiece::all_of(&h, &store[&h]) {
+                                    c.write(&Message::FilePiece(piece)).await.unwrap();
+                                }
                             }
                         }
                         other => return other.kind(),
@@ -541,7 +540,7 @@ mod tests {
             });
             let conn = Connection::new(TcpStream::connect(addr).await.unwrap()).unwrap();
             let opts = LinkOptions::new("w".into(), Secret::insecure());
-            let outcome = serve_job(conn, &opts, &mut FileCache::new()).await.expect("a normal end");
+            let outcome = serve_job(conn, &opts, &mut FileCache::for_one_job()).await.expect("a normal end");
             assert_eq!((outcome.snapshots_sent, outcome.snapshots_acked), (0, 0));
             assert_eq!(coordinator.await.unwrap(), "Finished");
         });
@@ -567,8 +566,9 @@ mod tests {
                     match c.read().await.unwrap() {
                         Message::NeedFiles { hashes } => {
                             for h in hashes {
-                                let bytes = store[&h].clone();
-                                c.write(&Message::File { sha256: h, bytes }).await.unwrap();
+                                for piece in FilePiece::all_of(&h, &store[&h]) {
+                                    c.write(&Message::FilePiece(piece)).await.unwrap();
+                                }
                             }
                         }
                         Message::Failed { reason } => return reason,
@@ -579,7 +579,7 @@ mod tests {
             });
             let conn = Connection::new(TcpStream::connect(addr).await.unwrap()).unwrap();
             let opts = LinkOptions::new("w".into(), Secret::insecure());
-            assert!(serve_job(conn, &opts, &mut FileCache::new()).await.is_err());
+            assert!(serve_job(conn, &opts, &mut FileCache::for_one_job()).await.is_err());
             let reason = coordinator.await.unwrap();
             assert!(reason.contains("active tiles") && reason.contains("3 tile flags"), "{reason}");
         });

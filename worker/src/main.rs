@@ -9,7 +9,8 @@ use photonfarm::protocol::Role;
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
-use worker::link::{serve_job, FileCache, LinkOptions};
+use worker::files::FileCache;
+use worker::link::{serve_job, LinkOptions};
 
 #[derive(Parser)]
 #[command(name = "worker", version, about = "photonfarm's rendering process")]
@@ -125,7 +126,7 @@ async fn run(cli: Cli) -> Result<()> {
                 }
             };
             let conn = transport.connect(stream).await.with_context(|| format!("cannot set up the link to {addr}"))?;
-            let outcome = serve_job(conn, &opts, &mut FileCache::new()).await?;
+            let outcome = serve_job(conn, &opts, &mut FileCache::for_one_job()).await?;
             tracing::info!(
                 worker = %opts.name,
                 job = %outcome.job,
@@ -146,7 +147,7 @@ async fn run(cli: Cli) -> Result<()> {
             let listener =
                 tokio::net::TcpListener::bind(listen).await.with_context(|| format!("cannot listen on {listen}"))?;
             tracing::info!(worker = %opts.name, "listening on {}", listener.local_addr()?);
-            let mut cache = FileCache::new();
+            let mut cache = FileCache::kept_between_jobs();
             loop {
                 let (stream, peer) = listener.accept().await.context("accept failed")?;
                 if opts.secret.is_insecure() && !peer.ip().is_loopback() && !s.insecure {

@@ -5,7 +5,8 @@
 use photonfarm::protocol::auth::{handshake, Peer};
 use photonfarm::protocol::tls::Transport;
 use photonfarm::protocol::{
-    Connection, Job, Message, ProtocolError, RayMapPortion, Role, Secret, Share, Snapshot, WorkerInfo,
+    Connection, FilePiece, Job, Message, MessageWriter, ProtocolError, RayMapPortion, Role, Secret, Share, Snapshot,
+    WorkerInfo, FILE_PIECE_BYTES,
 };
 use photonfarm::ray_map::format::PortionHeader;
 use photonfarm::ray_map::{Portion, Recorder};
@@ -376,20 +377,37 @@ async fn accept(
 }
 
 /// Sends the files a worker asked for; a hash that is not the job's ends the link.
-async fn send_files(
-    writer: &mut photonfarm::protocol::MessageWriter,
-    hashes: Vec<String>,
-    files: &FileStore,
-) -> Result<(), String> {
+async fn send_files(writer: &mut MessageWriter, hashes: Vec<String>, files: &FileStore) -> Result<(), String> {
     for h in hashes {
         let Some(path) = files.get(&h) else {
             let _ = writer.write(&Message::Refused { reason: format!("no file with hash {h} in this job") }).await;
             return Err(format!("the worker asked for a file that is not the job's ({h})"));
         };
-        let bytes = tokio::fs::read(path).await.map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-        writer.write(&Message::File { sha256: h, bytes }).await.map_err(|e| e.to_string())?;
+        send_file(writer, &h, path).await?;
     }
     Ok(())
+}
+
+/// Streams one file from disk in pieces, so that neither the coordinator nor a frame holds it whole.
+async fn send_file(writer: &mut MessageWriter, sha256: &str, path: &std::path::Path) -> Result<(), String> {
+    use tokio::io::AsyncReadExt;
+    let cannot = |e: std::io::Error| format!("cannot read {}: {e}", path.display());
+    let mut file = tokio::fs::File::open(path).await.map_err(cannot)?;
+    let size = file.metadata().await.map_err(cannot)?.len();
+    let mut offset = 0u64;
+    loop {
+        let want = (size - offset).min(FILE_PIECE_BYTES as u64) as usize;
+        let mut bytes = vec![0u8; want];
+        file.read_exact(&mut bytes)
+            .await
+            .map_err(|e| format!("cannot read {} (did it change while it was being sent?): {e}", path.display()))?;
+        let piece = FilePiece { sha256: sha256.to_string(), size, offset, bytes };
+        writer.write(&Message::FilePiece(piece)).await.map_err(|e| e.to_string())?;
+        offset += want as u64;
+        if offset == size {
+            return Ok(());
+        }
+    }
 }
 
 /// A worker's ray map portion as its map's stream holds it, or why it cannot be one.
@@ -433,6 +451,9 @@ async fn drive(
                         Ok(Message::NeedFiles { hashes }) => {
                             send_files(&mut writer, hashes, &plan.files).await?;
                             last_sent = Instant::now();
+                            // While a large mesh was being sent, the worker's heartbeats waited in the queue
+                            // behind it: its silence is counted from now.
+                            last_heard = Instant::now();
                         }
                         Ok(Message::Started(info)) => { let _ = events.send(Event::Started { worker, info }); }
                         Ok(Message::Snapshot(snapshot)) => { let _ = events.send(Event::Snapshot { worker, snapshot, frame_bytes }); }
@@ -506,5 +527,40 @@ async fn drive(
         Err(reason) => {
             let _ = events.send(Event::Lost { worker, reason });
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use photonfarm::protocol::Connection;
+
+    #[test]
+    fn a_file_larger_than_a_piece_is_sent_as_the_pieces_that_carry_it() {
+        let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+        runtime.block_on(async {
+            let dir = tempfile::tempdir().unwrap();
+            let path = dir.path().join("mesh.obj");
+            let bytes: Vec<u8> = (0..FILE_PIECE_BYTES + 1000).map(|i| (i % 241) as u8).collect();
+            std::fs::write(&path, &bytes).unwrap();
+            let (a, b) = tokio::io::duplex(1 << 20);
+            let peer: SocketAddr = "127.0.0.1:1".parse().unwrap();
+            let (_, mut writer) = Connection::from_stream(a, peer).split();
+            let mut reader = Connection::from_stream(b, peer);
+            let files: FileStore = [("h".to_string(), path)].into();
+            let receiving = tokio::spawn(async move {
+                let mut pieces = Vec::new();
+                while let Ok(Message::FilePiece(p)) = reader.read().await {
+                    pieces.push(p);
+                }
+                pieces
+            });
+            send_files(&mut writer, vec!["h".into()], &files).await.unwrap();
+            let refused = send_files(&mut writer, vec!["nothing".into()], &files).await;
+            assert!(refused.unwrap_err().contains("not the job's"));
+            drop(writer);
+            let pieces = receiving.await.unwrap();
+            assert_eq!(pieces, FilePiece::all_of("h", &bytes));
+        });
     }
 }

@@ -20,7 +20,13 @@ use serde::{Deserialize, Serialize};
 /// import options (`Job::mitsuba`).
 /// 13: jobs carry the scene's description (`Job::scene`) instead of its file's text and import options.
 /// 14: a snapshot's delta holds only the pixels rendered since the previous one (`delta::SPARSE_MAGIC`).
-pub const PROTOCOL_VERSION: u32 = 15;
+/// 16: files travel in pieces (`FilePiece`), so that a mesh larger than a frame can be sent.
+pub const PROTOCOL_VERSION: u32 = 16;
+
+/// The most bytes of a file one `FilePiece` carries: far below the frame limit, and small enough that neither
+/// end holds a second copy of a large mesh while it is sent.
+pub const FILE_PIECE_BYTES: usize = 16 << 20;
+const _: () = assert!(FILE_PIECE_BYTES + 4096 <= super::frame::DEFAULT_MAX_FRAME as usize);
 
 /// Which end of a link a peer is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -98,6 +104,34 @@ pub struct RayMapPortion {
     pub segments: u32,
     /// One zstd frame with a content checksum.
     pub frame: Vec<u8>,
+}
+
+/// Coordinator → worker: bytes `offset..offset + bytes.len()` of a file of `size` bytes. A file's pieces come in
+/// order and without gaps; an empty file is one empty piece.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FilePiece {
+    /// The whole file's SHA-256 (lower-case hex), as the job names it.
+    pub sha256: String,
+    pub size: u64,
+    pub offset: u64,
+    pub bytes: Vec<u8>,
+}
+
+impl FilePiece {
+    /// The pieces that carry `bytes` whole (one empty piece for an empty file).
+    pub fn all_of(sha256: &str, bytes: &[u8]) -> Vec<FilePiece> {
+        let size = bytes.len() as u64;
+        let piece = |offset: usize, chunk: &[u8]| FilePiece {
+            sha256: sha256.to_string(),
+            size,
+            offset: offset as u64,
+            bytes: chunk.to_vec(),
+        };
+        if bytes.is_empty() {
+            return vec![piece(0, &[])];
+        }
+        bytes.chunks(FILE_PIECE_BYTES).enumerate().map(|(i, c)| piece(i * FILE_PIECE_BYTES, c)).collect()
+    }
 }
 
 /// What a worker reports once its engine runs.
@@ -184,8 +218,8 @@ pub enum Message {
     Job(Box<Job>),
     /// Worker → coordinator: hashes of the files it needs.
     NeedFiles { hashes: Vec<String> },
-    /// Coordinator → worker: one file.
-    File { sha256: String, bytes: Vec<u8> },
+    /// Coordinator → worker: a piece of a file it asked for.
+    FilePiece(FilePiece),
     /// Worker → coordinator: the engine runs.
     Started(WorkerInfo),
     /// Worker → coordinator: completed phases.
@@ -231,7 +265,7 @@ impl Message {
             Message::Refused { .. } => "Refused",
             Message::Job(_) => "Job",
             Message::NeedFiles { .. } => "NeedFiles",
-            Message::File { .. } => "File",
+            Message::FilePiece(_) => "FilePiece",
             Message::Started(_) => "Started",
             Message::Snapshot(_) => "Snapshot",
             Message::Ack { .. } => "Ack",
@@ -286,6 +320,24 @@ mod tests {
         assert_eq!(decode(&encode(&m).unwrap()).unwrap(), m);
         let m = Message::StopAt { in_ms: 60_000, slack_ms: 1_200 };
         assert_eq!(decode(&encode(&m).unwrap()).unwrap(), m);
+        let m = Message::FilePiece(FilePiece { sha256: "ab".into(), size: 9, offset: 4, bytes: vec![1, 2] });
+        assert_eq!(decode(&encode(&m).unwrap()).unwrap(), m);
+    }
+
+    #[test]
+    fn a_file_s_pieces_cover_it_in_order_and_each_fits_a_frame() {
+        let bytes: Vec<u8> = (0..2 * FILE_PIECE_BYTES + 5).map(|i| (i % 251) as u8).collect();
+        let pieces = FilePiece::all_of("h", &bytes);
+        assert_eq!(pieces.len(), 3);
+        let mut joined = Vec::new();
+        for p in &pieces {
+            assert_eq!((p.size, p.offset), (bytes.len() as u64, joined.len() as u64));
+            assert!(encode(&Message::FilePiece(p.clone())).unwrap().len() <= DECODE_LIMIT);
+            joined.extend_from_slice(&p.bytes);
+        }
+        assert_eq!(joined, bytes);
+        let empty = FilePiece::all_of("h", &[]);
+        assert_eq!(empty, vec![FilePiece { sha256: "h".into(), size: 0, offset: 0, bytes: vec![] }]);
     }
 
     #[test]

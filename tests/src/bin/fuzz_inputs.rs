@@ -14,7 +14,7 @@ use photonfarm::color::Rgb;
 use photonfarm::protocol::frame::{read_frame, write_frame};
 use photonfarm::protocol::message::{decode, encode};
 use photonfarm::protocol::{
-    EngineSpec, FileRef, Job, Message, RayMapPortion, RayMapRequest, Role, Share, Snapshot, WorkerInfo,
+    EngineSpec, FilePiece, FileRef, Job, Message, RayMapPortion, RayMapRequest, Role, Share, Snapshot, WorkerInfo,
 };
 use photonfarm::render::checkpoint::Checkpoint;
 use photonfarm::render::method::ParallelMethod;
@@ -306,7 +306,7 @@ fn main() -> Result<()> {
         Message::Refused { reason: "no".into() },
         Message::Job(Box::new(job)),
         Message::NeedFiles { hashes: vec![scene.mesh_files[0].1.clone()] },
-        Message::File { sha256: scene.mesh_files[0].1.clone(), bytes: OBJ.as_bytes().to_vec() },
+        Message::FilePiece(FilePiece::all_of(&scene.mesh_files[0].1, OBJ.as_bytes()).remove(0)),
         Message::Started(WorkerInfo {
             hostname: "h".into(),
             threads: 2,
