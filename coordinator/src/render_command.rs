@@ -85,6 +85,12 @@ pub fn run(args: RenderArgs) -> Result<()> {
     if let Some(url) = live.as_ref().and_then(|l| l.url.as_ref()) {
         say!("live page: {url}  (results in {})", dir.display());
     }
+    if args.method.layout().processes == Processes::PerNumaNode {
+        // The run's clock, and `--time`, start when the first worker renders: a large scene takes its workers a
+        // while to receive and load, which is not rendering time.
+        bar.set_message("the workers are loading the scene");
+        engine.wait_until_rendering(&interrupted);
+    }
     let outputs = Outputs {
         args: &args,
         scene: &scene,

@@ -54,13 +54,16 @@ fn a_1080p_room_with_a_large_mesh_stops_on_time_saves_before_its_deadline_and_st
     // group's phase lasts its worker's rendering seconds over the phases each of its groups ran (one thread per
     // group here).
     let rendered = seconds(&record["history"].as_array().unwrap().last().unwrap()["time_s"]);
+    // The run's clock starts when the first worker renders; each worker's start is counted from the launch of
+    // the workers, so a later one rendered for `first - started_after_s` less.
+    let first = workers.iter().map(|w| seconds(&w["started_after_s"])).fold(f64::INFINITY, f64::min);
     let phase = workers
         .iter()
         .map(|w| {
             let groups = w["cores"].as_array().unwrap().len() as f64;
             let phases = w["totals"]["phases"].as_f64().unwrap();
             assert!(phases > 0.0, "a worker rendered nothing: {w}");
-            (rendered - seconds(&w["started_after_s"])) * groups / phases
+            (rendered + first - seconds(&w["started_after_s"])) * groups / phases
         })
         .fold(0.0, f64::max);
     let late = rendered - TIME_S;

@@ -474,4 +474,23 @@ impl Progressive for Cluster {
     fn set_active_tiles(&mut self, tiles: &ActiveTiles) {
         self.send(Control::ActiveTiles { tile: tiles.tile, flags: Arc::new(tiles.flags().to_vec()) });
     }
+
+    fn wait_until_rendering(&mut self, interrupted: &AtomicBool) {
+        // A coordinator that only listens has no worker to wait for: its clock runs from the start.
+        let rendering = |c: &Cluster| {
+            c.workers.iter().any(|w| matches!(w.record.state, WorkerState::Running | WorkerState::Finished))
+        };
+        while !self.workers.is_empty() && !rendering(self) && !self.all_ended() {
+            if interrupted.load(Ordering::Relaxed) {
+                return;
+            }
+            match self.events.recv_timeout(Duration::from_millis(50)) {
+                Ok(e) => {
+                    self.handle(e);
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => return,
+            }
+        }
+    }
 }

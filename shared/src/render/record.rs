@@ -138,7 +138,7 @@ pub struct WorkerRecord {
     /// its acknowledgement (s): the interval grows on slow links so that sending stays under 5% of it.
     pub snapshot_interval_s: f64,
     pub last_send_s: f64,
-    /// Seconds from the start of the render to the worker's start of rendering (process start, link, job,
+    /// Seconds from the launch of the workers to the worker's start of rendering (process start, link, job,
     /// meshes, scene and engine set-up): the distribution's fixed cost.
     #[serde(default)]
     pub started_after_s: f64,

@@ -95,6 +95,10 @@ pub trait Progressive {
     }
     /// Renders only `tiles`' active tiles from the next step on.
     fn set_active_tiles(&mut self, tiles: &ActiveTiles);
+    /// Returns once the renderer renders: at once for one that renders in this process; for a distributed one
+    /// when its first worker has loaded the scene and runs its engine (or every worker has ended, or on
+    /// interruption), so that a run's clock and its `--time` count rendering, not the workers' loading.
+    fn wait_until_rendering(&mut self, _interrupted: &AtomicBool) {}
 }
 
 impl Progressive for Engine<'_> {
