@@ -35,7 +35,7 @@ const CHECKPOINT: &str = "checkpoint.bin";
 pub fn run(args: RenderArgs) -> Result<()> {
     let launched = Instant::now();
     let stop = stop_rule(&args)?;
-    let scene = Scene::load_with_options(&args.scene, &mitsuba_options(&args))?;
+    let mut scene = Scene::load_with_options(&args.scene, &mitsuba_options(&args))?;
     check_method_options(&args)?;
     let mut settings = settings_of(&args, &scene)?;
     let reference = match &args.reference {
@@ -59,6 +59,11 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let lit = Arc::new(LitMask::of_scene(&scene, settings.max_depth));
     spinner.finish_and_clear();
     let lit_seconds = deciding.elapsed().as_secs_f64();
+    if args.method.layout().processes == Processes::PerNumaNode {
+        // The workers trace; this process merges and saves. The mesh and its BVH, the largest part of a large
+        // scene, are let go before the workers load their own.
+        scene.release_geometry();
+    }
     if let (Some(c), Some(sums), Some(from)) = (&checkpoint, &resumed_sums, &args.resume) {
         check_resume_has_work(c, sums, &stop, args.uniform, from, &lit)?;
     }

@@ -50,6 +50,7 @@ impl LitMask {
     /// The mask of `scene`: the pixels that see an emitter directly or through specular surfaces only within
     /// `max_depth` segments (`crate::integrator::lit_pixels`), and the pixels next to those (`with_neighbours_lit`).
     pub fn of_scene(scene: &Scene, max_depth: u32) -> LitMask {
+        scene.assert_traceable();
         let (width, height) = (scene.camera.width, scene.camera.height);
         LitMask::from_flags(width, height, lit_pixels(scene, max_depth), LIT_MASK_SAMPLES).with_neighbours_lit()
     }

@@ -148,13 +148,16 @@ pub enum AccelError {
     Build { backend: &'static str, message: String },
 }
 
-/// Shading data of one triangle, stored in BVH order next to its vertices.
+/// Shading data of one triangle, stored in BVH order next to its vertices. Its vertex normals stay in
+/// `SceneGeometry::by_index`, read only for a triangle that has them: a large mesh without them (the common case
+/// for scanned and generated meshes) keeps no second copy of their absence.
 #[derive(Clone, Copy, Debug)]
 struct TriangleData {
     object: u32,
     /// Index in the order triangles were added (stable across BVH builds).
     index: u32,
-    normals: Option<[Vec3; 3]>,
+    /// Whether the triangle has vertex normals.
+    smooth: bool,
 }
 
 /// obvhs's BVH with the triangles in its leaf order, so that traversal reads them without indirection.
@@ -266,6 +269,11 @@ impl SceneGeometry {
             analytic,
             t_min: RELATIVE_T_MIN * (1.0 + extent),
         })
+    }
+
+    /// No surfaces at all: what a scene keeps once it has let its geometry go (`Scene::release_geometry`).
+    pub fn empty() -> Self {
+        Self::build_with(Backend::default(), Vec::new(), Vec::new()).expect("nothing to build cannot fail to build")
     }
 
     /// The same geometry solving every analytic surface for every ray, as if it kept no boxes around them, and
@@ -384,7 +392,8 @@ impl SceneGeometry {
                 let id = hit.primitive_id as usize;
                 let (tri, data) = (&o.triangles[id], &o.data[id]);
                 let uv = || barycentrics(tri, ray);
-                Some(triangle_hit(ray, hit.t, [tri.v0, tri.v1, tri.v2], data.normals, uv, data.object, data.index))
+                let normals = if data.smooth { self.by_index[data.index as usize].1.n } else { None };
+                Some(triangle_hit(ray, hit.t, [tri.v0, tri.v1, tri.v2], normals, uv, data.object, data.index))
             }
             #[cfg(feature = "embree")]
             TriangleAccel::Embree(e) => {
@@ -521,14 +530,15 @@ const BVH_BOX_MARGIN: f32 = 1e-5;
 /// obvhs's `build_cwbvh_from_tris` over triangle boxes widened by `BVH_BOX_MARGIN` × (1 + `extent`).
 fn build_obvhs(triangles: &[(u32, MeshTriangle)], preset: ObvhsPreset, extent: f32) -> ObvhsTriangles {
     use obvhs::{bvh2::reinsertion::ReinsertionOptimizer, cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh, ploc::PlocBuilder};
-    let tris: Vec<Triangle> = triangles
-        .iter()
-        .map(|(_, t)| Triangle { v0: Vec3A::from(t.v[0]), v1: Vec3A::from(t.v[1]), v2: Vec3A::from(t.v[2]) })
-        .collect();
+    // Each intermediate (boxes, the binary BVH) is dropped as soon as the next is built, and the triangles are
+    // converted straight into BVH order: a large mesh's build peaks at little more than what it keeps.
+    let triangle =
+        |t: &MeshTriangle| Triangle { v0: Vec3A::from(t.v[0]), v1: Vec3A::from(t.v[1]), v2: Vec3A::from(t.v[2]) };
     let params = preset.params();
-    let mut boxes: Vec<obvhs::aabb::Aabb> = tris.iter().map(Triangle::aabb).collect();
-    let mut indices: Vec<u32> = (0..tris.len() as u32).collect();
+    let mut boxes: Vec<obvhs::aabb::Aabb> = triangles.iter().map(|(_, t)| triangle(t).aabb()).collect();
+    let mut indices: Vec<u32> = (0..triangles.len() as u32).collect();
     if params.pre_split {
+        let tris: Vec<Triangle> = triangles.iter().map(|(_, t)| triangle(t)).collect();
         let areas = boxes.iter().map(|b| b.half_area());
         let (largest, total) = areas.fold((0.0f32, 0.0f32), |(l, t), a| (l.max(a), t + a));
         let average = total / tris.len() as f32;
@@ -545,14 +555,19 @@ fn build_obvhs(triangles: &[(u32, MeshTriangle)], preset: ObvhsPreset, extent: f
         params.sort_precision,
         params.search_depth_threshold,
     );
+    drop(boxes);
     bvh2.uses_spatial_splits = params.pre_split;
     ReinsertionOptimizer::default().run(&mut bvh2, params.reinsertion_batch_ratio, None);
     let bvh = bvh2_to_cwbvh(&bvh2, params.max_prims_per_leaf.clamp(1, 3), true, false);
-    let order: Vec<usize> = bvh.primitive_indices.iter().map(|&i| i as usize).collect();
-    let triangles_bvh = order.iter().map(|&i| tris[i]).collect();
-    let data = order
+    drop(bvh2);
+    let triangles_bvh = bvh.primitive_indices.iter().map(|&i| triangle(&triangles[i as usize].1)).collect();
+    let data = bvh
+        .primitive_indices
         .iter()
-        .map(|&i| TriangleData { object: triangles[i].0, index: i as u32, normals: triangles[i].1.n })
+        .map(|&i| {
+            let (object, t) = &triangles[i as usize];
+            TriangleData { object: *object, index: i, smooth: t.n.is_some() }
+        })
         .collect();
     ObvhsTriangles { bvh, triangles: triangles_bvh, data }
 }

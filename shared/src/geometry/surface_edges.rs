@@ -3,7 +3,8 @@
 //! land on the same surface.
 
 use super::mesh::MeshTriangle;
-use rayon::slice::ParallelSliceMut;
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicU8, Ordering};
 
 /// Two surfaces whose normals agree at least this well (|cos|, 25°) count as one surface: a gather takes light
 /// landing on either, and an edge between them does not end the surface.
@@ -30,14 +31,16 @@ impl SurfaceEdges {
                 (b, a)
             }
         };
-        let normals: Vec<_> = triangles.iter().map(|(_, t)| t.cross().normalize_or_zero()).collect();
+        let normals: Vec<_> = triangles.par_iter().map(|(_, t)| t.cross().normalize_or_zero()).collect();
         // Every edge (3 × triangle + i) sorted by a hash of its end points: the edges that share their end points
         // sit together (with the rare others of the same hash, told apart by their points), in one sort rather
         // than a map of lists, which a mesh of millions of triangles filled slowly.
-        let mut edges: Vec<(u64, u32)> = (0..3 * triangles.len()).map(|e| (edge_hash(key(e)), e as u32)).collect();
+        let mut edges: Vec<(u64, u32)> =
+            (0..3 * triangles.len()).into_par_iter().map(|e| (edge_hash(key(e)), e as u32)).collect();
         edges.par_sort_unstable();
-        let mut bits = vec![0b111u8; triangles.len()];
-        for same_hash in edges.chunk_by(|a, b| a.0 == b.0) {
+        // Runs of one hash are independent, but two runs may clear bits of the same triangle (its other edges).
+        let bits: Vec<AtomicU8> = (0..triangles.len()).map(|_| AtomicU8::new(0b111)).collect();
+        edges.par_chunk_by(|a, b| a.0 == b.0).for_each(|same_hash| {
             for &(_, e) in same_hash {
                 let (e, index) = (e as usize, e as usize / 3);
                 let continued = same_hash.iter().any(|&(_, f)| {
@@ -45,10 +48,11 @@ impl SurfaceEdges {
                     other != index && key(f) == key(e) && normals[index].dot(normals[other]).abs() >= SAME_SURFACE_COS
                 });
                 if continued {
-                    bits[index] &= !(1 << (e % 3));
+                    bits[index].fetch_and(!(1 << (e % 3)), Ordering::Relaxed);
                 }
             }
-        }
+        });
+        let bits = bits.into_iter().map(AtomicU8::into_inner).collect();
         SurfaceEdges { bits }
     }
 

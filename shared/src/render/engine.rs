@@ -66,6 +66,7 @@ impl TilePixels {
 impl<'s> Engine<'s> {
     /// An engine with empty sums.
     pub fn new(scene: &'s Scene, settings: RenderSettings) -> Self {
+        scene.assert_traceable();
         let pixels = scene.camera.pixel_count();
         let aux = AuxLayout::for_scene(scene, settings.spectral_bands);
         let mut buffers = PhaseBuffers::new(aux.clone(), Executor::CallingThread);

@@ -9,6 +9,7 @@ use super::description::{
     SceneDescription, ShapeDesc, Source, SourceFormat,
 };
 use super::mitsuba::meshes::{read_obj, read_ply, read_serialized, Placement};
+use super::uv_table::UvTable;
 use super::{Scene, SceneError, SceneObject};
 use crate::camera::{Camera, Lens, RearElement};
 use crate::color::Rgb;
@@ -56,8 +57,8 @@ struct Parts {
     objects: Vec<SceneObject>,
     /// Every triangle with the object it belongs to.
     triangles: Vec<(u32, MeshTriangle)>,
-    /// Texture coordinates of each triangle, parallel to `triangles`.
-    triangle_uvs: Vec<Option<[Vec2; 3]>>,
+    /// Texture coordinates of the triangles, by their index in `triangles`.
+    triangle_uvs: UvTable,
     analytic: Vec<(u32, Analytic)>,
     /// One area light per emitting triangle or analytic surface, and its emission texture.
     lights: Vec<Light>,
@@ -277,8 +278,8 @@ impl<'a> Builder<'a> {
                     _ => None,
                 });
             }
+            parts.triangle_uvs.push(parts.triangles.len() as u32, uv);
             parts.triangles.push((id, t));
-            parts.triangle_uvs.push(uv);
         }
     }
 
@@ -427,6 +428,7 @@ impl<'a> Builder<'a> {
             has_delta_surfaces,
             ghost_pairs: OnceLock::new(),
             notes: self.notes,
+            released: false,
         })
     }
 }

@@ -3,7 +3,7 @@
 //! format: `loader` reads TOML files (`file` holds the format) and `mitsuba` Mitsuba 3 files. One build step
 //! (`build`) turns a description and the files it references into a `Scene`, on the coordinator and on every
 //! worker alike. `error` holds the error that points at the file, line and field; `ghost` what a scene
-//! declares about the ghosts its lens makes.
+//! declares about the ghosts its lens makes; `uv_table` the triangles' texture coordinates.
 
 pub mod build;
 pub mod description;
@@ -14,6 +14,7 @@ mod loader;
 
 pub use loader::SceneFiles;
 pub mod mitsuba;
+pub mod uv_table;
 
 pub use error::SceneError;
 pub use mitsuba::MitsubaOptions;
@@ -81,8 +82,8 @@ pub struct Scene {
     pub path: PathBuf,
     pub camera: Camera,
     pub materials: Vec<Material>,
-    /// Texture coordinates of each triangle, by the index it was added with; None where its shape has none.
-    pub triangle_uvs: Vec<Option<[Vec2; 3]>>,
+    /// Texture coordinates of each triangle, by the index it was added with.
+    pub triangle_uvs: uv_table::UvTable,
     pub objects: Vec<SceneObject>,
     pub geometry: SceneGeometry,
     pub lights: Lights,
@@ -103,6 +104,8 @@ pub struct Scene {
     /// What an imported scene's mapping ignored or rendered differently, one sentence each, for the run record
     /// (empty for TOML scenes, whose every key maps exactly).
     pub notes: Vec<String>,
+    /// Set once the geometry was let go (`release_geometry`): the scene can no longer be traced.
+    released: bool,
 }
 
 /// True when the file is a Mitsuba 3 scene, told by its extension `.xml`; other files are TOML scenes.
@@ -136,6 +139,26 @@ impl description::SceneDescription {
 }
 
 impl Scene {
+    /// Lets go of the triangles, their BVH and their texture coordinates, keeping what describes the scene (the
+    /// camera, materials, lights, description and hash): for a process that merges and saves what others
+    /// render and never traces a ray, such as the coordinator of a distributed run.
+    pub fn release_geometry(&mut self) {
+        self.geometry = SceneGeometry::empty();
+        self.triangle_uvs = uv_table::UvTable::default();
+        self.released = true;
+    }
+
+    /// Whether the geometry was let go (`release_geometry`).
+    pub fn is_released(&self) -> bool {
+        self.released
+    }
+
+    /// Panics when the geometry was let go: every renderer calls it before it traces, so that a released scene
+    /// fails loudly rather than rendering an empty world.
+    pub fn assert_traceable(&self) {
+        assert!(!self.released, "the scene's geometry was released: it cannot be traced");
+    }
+
     /// Reads a scene file of either format and builds it; `options` as `SceneDescription::read` takes them.
     pub fn load_with_options(path: &std::path::Path, options: &MitsubaOptions) -> Result<Scene, SceneError> {
         let (desc, files) = description::SceneDescription::read(path, options)?;
@@ -201,8 +224,8 @@ impl Scene {
             return None;
         }
         let v = &self.geometry.triangle(hit.triangle).v;
-        match self.triangle_uvs.get(hit.triangle as usize) {
-            Some(Some(uv)) => uv_tangent(v, uv),
+        match self.triangle_uvs.get(hit.triangle) {
+            Some(uv) => uv_tangent(v, uv),
             _ => Some(v[1] - v[0]),
         }
     }
@@ -210,8 +233,8 @@ impl Scene {
     /// The texture coordinates at the hit point ((0, 0) where the surface has none, which the loader does not
     /// let a textured material meet).
     fn uv_at(&self, hit: &SurfaceHit) -> Vec2 {
-        match self.triangle_uvs.get(hit.triangle as usize) {
-            Some(Some(uv)) => {
+        match self.triangle_uvs.get(hit.triangle) {
+            Some(uv) => {
                 let b = barycentric(&self.geometry.triangle(hit.triangle).v, hit.p);
                 interpolate_uv(uv, b)
             }

@@ -131,7 +131,7 @@ fn the_slide_virtual_image_lies_at_the_designed_distance_within_five_percent() {
 fn screen_uv(scene: &Scene, ray: Ray) -> Option<Vec2> {
     let (hits, _) = reflect_to(scene, ray, "screen")?;
     let hit = hits.last()?;
-    let uv = scene.triangle_uvs[hit.triangle as usize]?;
+    let uv = *scene.triangle_uvs.get(hit.triangle)?;
     Some(interpolate_uv(&uv, barycentric(&scene.geometry.triangle(hit.triangle).v, hit.p)))
 }
 

@@ -669,7 +669,7 @@ fn ply_in_every_encoding_and_serialized_meshes_load_placed_with_their_texture_co
         assert_eq!(t.v[0], Vec3::new(x, 0.0, -2.0), "mesh {k} placed by to_world");
         assert_eq!(t.v[2], Vec3::new(x + 1.0, 1.0, -2.0));
         // Mitsuba's v = 0.25 is photonfarm's 0.75 (its v runs downward).
-        let uv = scene.triangle_uvs[first as usize].unwrap();
+        let uv = *scene.triangle_uvs.get(first).unwrap();
         assert_eq!(uv, [Vec2::new(0.0, 1.0), Vec2::new(1.0, 1.0), Vec2::new(1.0, 0.75)], "mesh {k}");
     }
     assert_eq!(scene.mesh_files.len(), 4);

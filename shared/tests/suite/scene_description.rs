@@ -218,3 +218,21 @@ intensity = [1.0, 1.0, 1.0]
     assert_eq!(e.field.as_deref(), Some("<shape type=\"obj\">"), "{e}");
     assert!(e.message.contains("no texture coordinates"), "{e}");
 }
+
+#[test]
+fn a_released_scene_keeps_what_describes_it_and_refuses_to_be_traced() {
+    let mut scene = Scene::load(&scenes_dir().join("cornell.toml")).unwrap();
+    assert!(scene.geometry.triangle_count() > 0);
+    let (hash, files, camera) = (scene.hash.clone(), scene.mesh_files.clone(), scene.camera.pixel_count());
+    scene.release_geometry();
+    assert!(scene.is_released());
+    assert_eq!(scene.geometry.triangle_count(), 0);
+    assert!(scene.triangle_uvs.is_empty());
+    // What a coordinator sends and saves is unchanged.
+    assert_eq!((scene.hash.clone(), scene.mesh_files.clone(), scene.camera.pixel_count()), (hash, files, camera));
+    assert_eq!(scene.description.hash(), scene.hash);
+    let traced = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        photonfarm::accumulation::LitMask::of_scene(&scene, 8)
+    }));
+    assert!(traced.is_err(), "a released scene must not render an empty world");
+}

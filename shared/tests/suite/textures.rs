@@ -458,7 +458,7 @@ fn the_tangent_is_du_along_texture_coordinates_or_the_first_edge_without_them() 
     // barycentric parametrisation has it.
     let hit = hit_at(&scene, 0.2, 2.5);
     let v = scene.geometry.triangle(hit.triangle).v;
-    assert!(scene.triangle_uvs[hit.triangle as usize].is_none());
+    assert!(scene.triangle_uvs.get(hit.triangle).is_none());
     assert_eq!(scene.tangent_at(&hit), Some(v[1] - v[0]));
 }
 

@@ -216,6 +216,7 @@ pub struct ParallelEngine<'s> {
 impl<'s> ParallelEngine<'s> {
     /// Starts the groups' threads (pinned) with empty sums.
     pub fn new(scene: &'s Scene, settings: RenderSettings, mut config: EngineConfig) -> Result<Self, ConfigError> {
+        scene.assert_traceable();
         // In a spectral scene each group phase has its own wavelength, and a light path at one wavelength cannot
         // join camera paths at another: every group gathers only into its own map.
         if settings.is_spectral(scene) {
