@@ -7,6 +7,7 @@ use super::{
     analytic_culling::{AnalyticCulling, Probe},
     hit::SurfaceHit,
     mesh::MeshTriangle,
+    per_triangle::PerTriangle,
     ray::{slab_entry, slab_inverse, Ray},
     surface_edges::SurfaceEdges,
     watertight::ShearedRay,
@@ -148,16 +149,13 @@ pub enum AccelError {
     Build { backend: &'static str, message: String },
 }
 
-/// Shading data of one triangle, stored in BVH order next to its vertices. Its vertex normals stay in
-/// `SceneGeometry::by_index`, read only for a triangle that has them: a large mesh without them (the common case
-/// for scanned and generated meshes) keeps no second copy of their absence.
+/// What a hit needs of a triangle besides its vertices, stored in BVH order next to them (its vertex normals
+/// are in `SceneGeometry::normals`, by index).
 #[derive(Clone, Copy, Debug)]
 struct TriangleData {
     object: u32,
     /// Index in the order triangles were added (stable across BVH builds).
     index: u32,
-    /// Whether the triangle has vertex normals.
-    smooth: bool,
 }
 
 /// obvhs's BVH with the triangles in its leaf order, so that traversal reads them without indirection.
@@ -192,8 +190,10 @@ enum TriangleAccel {
 pub struct SceneGeometry {
     backend: Backend,
     accel: TriangleAccel,
-    /// Triangles and their objects in the order they were added, for light sampling and shading.
-    by_index: Vec<(u32, MeshTriangle)>,
+    /// Triangles' vertices and their objects in the order they were added, for light sampling and shading.
+    by_index: Vec<(u32, [Vec3; 3])>,
+    /// The triangles' vertex normals, by the same index.
+    normals: PerTriangle<[Vec3; 3]>,
     /// Which triangle edges end their surface, for the photons' gather discs.
     edges: SurfaceEdges,
     analytic: Vec<(u32, Analytic)>,
@@ -227,9 +227,18 @@ impl SceneGeometry {
         triangles: Vec<(u32, MeshTriangle)>,
         analytic: Vec<(u32, Analytic)>,
     ) -> Result<Self, AccelError> {
+        // Vertices and normals apart, so that a mesh without normals holds nothing for their absence; the
+        // triangles as given are let go before the BVH's build needs its own memory.
+        let mut normals = PerTriangle::default();
+        let mut by_index = Vec::with_capacity(triangles.len());
+        for (i, (object, t)) in triangles.into_iter().enumerate() {
+            normals.push(i as u32, t.n);
+            by_index.push((object, t.v));
+        }
+        let triangles = by_index;
         let mut extent = 0.0f32;
         for (_, t) in &triangles {
-            for v in t.v {
+            for &v in t {
                 extent = extent.max(v.abs().max_element());
             }
         }
@@ -256,7 +265,7 @@ impl SceneGeometry {
         let edges = SurfaceEdges::find(&triangles);
         let (lo, hi) = triangles
             .iter()
-            .flat_map(|(_, t)| t.v)
+            .flat_map(|(_, t)| *t)
             .fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(lo, hi), v| (lo.min(v), hi.max(v)));
         let pad = Vec3::splat(TRIANGLE_BOX_MARGIN * (1.0 + extent));
         Ok(SceneGeometry {
@@ -264,6 +273,7 @@ impl SceneGeometry {
             backend,
             accel,
             by_index: triangles,
+            normals,
             edges,
             culling: AnalyticCulling::new(&analytic),
             analytic,
@@ -286,7 +296,9 @@ impl SceneGeometry {
 
     /// The same surfaces with their BVH built by another backend, to compare backends.
     pub fn rebuilt_with(&self, backend: Backend) -> Result<SceneGeometry, AccelError> {
-        let mut g = Self::build_with(backend, self.by_index.clone(), self.analytic.clone())?;
+        let triangles =
+            (0..self.triangle_count() as u32).map(|i| (self.object_of_triangle(i), self.triangle(i))).collect();
+        let mut g = Self::build_with(backend, triangles, self.analytic.clone())?;
         g.culling.enabled = self.culling.enabled;
         Ok(g)
     }
@@ -318,8 +330,9 @@ impl SceneGeometry {
     }
 
     /// A triangle by the index it was added with.
-    pub fn triangle(&self, index: u32) -> &MeshTriangle {
-        &self.by_index[index as usize].1
+    #[inline]
+    pub fn triangle(&self, index: u32) -> MeshTriangle {
+        MeshTriangle { v: self.by_index[index as usize].1, n: self.normals.get(index).copied() }
     }
 
     /// The object a triangle (by the index it was added with) belongs to.
@@ -392,15 +405,16 @@ impl SceneGeometry {
                 let id = hit.primitive_id as usize;
                 let (tri, data) = (&o.triangles[id], &o.data[id]);
                 let uv = || barycentrics(tri, ray);
-                let normals = if data.smooth { self.by_index[data.index as usize].1.n } else { None };
+                let normals = self.normals.get(data.index).copied();
                 Some(triangle_hit(ray, hit.t, [tri.v0, tri.v1, tri.v2], normals, uv, data.object, data.index))
             }
             #[cfg(feature = "embree")]
             TriangleAccel::Embree(e) => {
                 let h = e.intersect(&Ray { t_max, ..*ray }, self.t_min)?;
                 let (object, tri) = &self.by_index[h.index as usize];
-                let v = tri.v.map(Vec3A::from);
-                Some(triangle_hit(ray, h.t, v, tri.n, || (h.u, h.v), *object, h.index))
+                let v = tri.map(Vec3A::from);
+                let normals = self.normals.get(h.index).copied();
+                Some(triangle_hit(ray, h.t, v, normals, || (h.u, h.v), *object, h.index))
             }
         }
     }
@@ -528,12 +542,11 @@ fn bvh_ray(origin: Vec3A, direction: Vec3A, t_min: f32, t_max: f32) -> BvhRay {
 const BVH_BOX_MARGIN: f32 = 1e-5;
 
 /// obvhs's `build_cwbvh_from_tris` over triangle boxes widened by `BVH_BOX_MARGIN` × (1 + `extent`).
-fn build_obvhs(triangles: &[(u32, MeshTriangle)], preset: ObvhsPreset, extent: f32) -> ObvhsTriangles {
+fn build_obvhs(triangles: &[(u32, [Vec3; 3])], preset: ObvhsPreset, extent: f32) -> ObvhsTriangles {
     use obvhs::{bvh2::reinsertion::ReinsertionOptimizer, cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh, ploc::PlocBuilder};
     // Each intermediate (boxes, the binary BVH) is dropped as soon as the next is built, and the triangles are
     // converted straight into BVH order: a large mesh's build peaks at little more than what it keeps.
-    let triangle =
-        |t: &MeshTriangle| Triangle { v0: Vec3A::from(t.v[0]), v1: Vec3A::from(t.v[1]), v2: Vec3A::from(t.v[2]) };
+    let triangle = |v: &[Vec3; 3]| Triangle { v0: Vec3A::from(v[0]), v1: Vec3A::from(v[1]), v2: Vec3A::from(v[2]) };
     let params = preset.params();
     let mut boxes: Vec<obvhs::aabb::Aabb> = triangles.iter().map(|(_, t)| triangle(t).aabb()).collect();
     let mut indices: Vec<u32> = (0..triangles.len() as u32).collect();
@@ -561,14 +574,8 @@ fn build_obvhs(triangles: &[(u32, MeshTriangle)], preset: ObvhsPreset, extent: f
     let bvh = bvh2_to_cwbvh(&bvh2, params.max_prims_per_leaf.clamp(1, 3), true, false);
     drop(bvh2);
     let triangles_bvh = bvh.primitive_indices.iter().map(|&i| triangle(&triangles[i as usize].1)).collect();
-    let data = bvh
-        .primitive_indices
-        .iter()
-        .map(|&i| {
-            let (object, t) = &triangles[i as usize];
-            TriangleData { object: *object, index: i, smooth: t.n.is_some() }
-        })
-        .collect();
+    let data =
+        bvh.primitive_indices.iter().map(|&i| TriangleData { object: triangles[i as usize].0, index: i }).collect();
     ObvhsTriangles { bvh, triangles: triangles_bvh, data }
 }
 

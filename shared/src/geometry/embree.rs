@@ -1,7 +1,6 @@
 //! The Embree backend (the `embree` feature): one Embree triangle mesh holding every triangle of the scene,
 //! its primitive ids the triangles' indices, traced one ray at a time through the `embree3` crate's safe API.
 
-use super::mesh::MeshTriangle;
 use super::ray::Ray;
 use embree3::{
     BufferUsage, Device, Format, GeometryKind, IntersectContext, Ray as EmbreeRay, RayHit as EmbreeRayHit, Scene,
@@ -27,7 +26,7 @@ pub(super) struct EmbreeHit {
 impl EmbreeTriangles {
     /// Builds the BVH over `triangles` (not empty), each triangle's three vertices stored apart so that the
     /// primitive id is the triangle's index. The error is Embree's reason; the caller names the backend.
-    pub(super) fn build(triangles: &[(u32, MeshTriangle)]) -> Result<Self, String> {
+    pub(super) fn build(triangles: &[(u32, [Vec3; 3])]) -> Result<Self, String> {
         let count = triangles.len();
         let vertices = count
             .checked_mul(3)
@@ -40,7 +39,7 @@ impl EmbreeTriangles {
                 .set_new_buffer::<[f32; 3]>(BufferUsage::VERTEX, 0, Format::FLOAT3, 12, vertices)
                 .map_err(|e| format!("vertex buffer of {vertices} vertices: {e}"))?;
             for (slot, (_, t)) in buffer.chunks_exact_mut(3).zip(triangles) {
-                for (out, v) in slot.iter_mut().zip(t.v) {
+                for (out, v) in slot.iter_mut().zip(t) {
                     *out = v.to_array();
                 }
             }

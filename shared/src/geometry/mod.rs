@@ -7,6 +7,7 @@ mod analytic_culling;
 mod embree;
 pub mod hit;
 pub mod mesh;
+pub mod per_triangle;
 pub mod ray;
 pub mod surface_edges;
 pub mod watertight;
@@ -15,5 +16,6 @@ pub use accel::{AccelError, Backend, ObvhsPreset, SceneGeometry, BACKEND_VARIABL
 pub use analytic::{Analytic, Annulus, LensSurface, Sphere};
 pub use hit::SurfaceHit;
 pub use mesh::{Mesh, MeshTriangle};
+pub use per_triangle::PerTriangle;
 pub use ray::Ray;
 pub use surface_edges::{SurfaceEdges, SAME_SURFACE_COS};

@@ -2,7 +2,7 @@
 //! around a point near such an edge must not count the part of its disc that lies past it, where no light can
 //! land on the same surface.
 
-use super::mesh::MeshTriangle;
+use glam::Vec3;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU8, Ordering};
 
@@ -20,18 +20,19 @@ impl SurfaceEdges {
     /// Finds the surface's ends among `triangles`: an edge continues the surface when another triangle, of any
     /// object, has an edge with the same two end points (bit for bit, as meshes share their vertices) and a
     /// normal that agrees within `SAME_SURFACE_COS`. Degenerate triangles end the surface on every edge.
-    pub fn find(triangles: &[(u32, MeshTriangle)]) -> Self {
+    pub fn find(triangles: &[(u32, [Vec3; 3])]) -> Self {
         let key = |edge: usize| {
-            let t = &triangles[edge / 3].1;
+            let v = &triangles[edge / 3].1;
             let i = edge % 3;
-            let (a, b) = (t.v[i].to_array().map(f32::to_bits), t.v[(i + 1) % 3].to_array().map(f32::to_bits));
+            let (a, b) = (v[i].to_array().map(f32::to_bits), v[(i + 1) % 3].to_array().map(f32::to_bits));
             if a <= b {
                 (a, b)
             } else {
                 (b, a)
             }
         };
-        let normals: Vec<_> = triangles.par_iter().map(|(_, t)| t.cross().normalize_or_zero()).collect();
+        let normals: Vec<_> =
+            triangles.par_iter().map(|(_, v)| (v[1] - v[0]).cross(v[2] - v[0]).normalize_or_zero()).collect();
         // Every edge (3 × triangle + i) sorted by a hash of its end points: the edges that share their end points
         // sit together (with the rare others of the same hash, told apart by their points), in one sort rather
         // than a map of lists, which a mesh of millions of triangles filled slowly.
@@ -73,11 +74,10 @@ fn edge_hash((a, b): ([u32; 3], [u32; 3])) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::Mesh;
-    use glam::Vec3;
+    use crate::geometry::{Mesh, MeshTriangle};
 
-    fn tagged(mesh: Mesh) -> Vec<(u32, MeshTriangle)> {
-        mesh.triangles.into_iter().map(|t| (0, t)).collect()
+    fn tagged(mesh: Mesh) -> Vec<(u32, [Vec3; 3])> {
+        mesh.triangles.into_iter().map(|t| (0, t.v)).collect()
     }
 
     #[test]
@@ -100,7 +100,7 @@ mod tests {
     #[test]
     fn a_coplanar_neighbour_of_another_object_continues_the_surface() {
         let mut triangles = tagged(Mesh::quad(Vec3::ZERO, Vec3::X, Vec3::Z));
-        triangles.extend(Mesh::quad(Vec3::X, Vec3::X, Vec3::Z).triangles.into_iter().map(|t| (1, t)));
+        triangles.extend(Mesh::quad(Vec3::X, Vec3::X, Vec3::Z).triangles.into_iter().map(|t| (1, t.v)));
         let edges = SurfaceEdges::find(&triangles);
         // The first quad's side at x = 1 (edge b–c of its first triangle) is the second quad's side d–a.
         assert_eq!(edges.of(0), 0b001);
@@ -121,7 +121,7 @@ mod tests {
         }
         triangles.push((2, MeshTriangle { v: [point(3, 3), point(4, 3), point(3, 9)], n: None }));
         triangles.push((2, MeshTriangle { v: [point(5, 5), point(5, 5), point(6, 5)], n: None }));
-        let found = SurfaceEdges::find(&triangles);
+        let found = SurfaceEdges::find(&triangles.iter().map(|(o, t)| (*o, t.v)).collect::<Vec<_>>());
         let normal = |t: &MeshTriangle| t.cross().normalize_or_zero();
         let same = |p: Vec3, q: Vec3| p.to_array().map(f32::to_bits) == q.to_array().map(f32::to_bits);
         for (k, (_, t)) in triangles.iter().enumerate() {

@@ -9,11 +9,10 @@ use super::description::{
     SceneDescription, ShapeDesc, Source, SourceFormat,
 };
 use super::mitsuba::meshes::{read_obj, read_ply, read_serialized, Placement};
-use super::uv_table::UvTable;
 use super::{Scene, SceneError, SceneObject};
 use crate::camera::{Camera, Lens, RearElement};
 use crate::color::Rgb;
-use crate::geometry::{Analytic, LensSurface, Mesh, MeshTriangle, SceneGeometry};
+use crate::geometry::{Analytic, LensSurface, Mesh, MeshTriangle, PerTriangle, SceneGeometry};
 use crate::light::directional::Sun;
 use crate::light::environment::{ConstantEnvironment, EnvironmentMap};
 use crate::light::infinite::{InfiniteLight, SceneSphere};
@@ -58,7 +57,7 @@ struct Parts {
     /// Every triangle with the object it belongs to.
     triangles: Vec<(u32, MeshTriangle)>,
     /// Texture coordinates of the triangles, by their index in `triangles`.
-    triangle_uvs: UvTable,
+    triangle_uvs: PerTriangle<[Vec2; 3]>,
     analytic: Vec<(u32, Analytic)>,
     /// One area light per emitting triangle or analytic surface, and its emission texture.
     lights: Vec<Light>,

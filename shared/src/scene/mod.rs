@@ -3,7 +3,7 @@
 //! format: `loader` reads TOML files (`file` holds the format) and `mitsuba` Mitsuba 3 files. One build step
 //! (`build`) turns a description and the files it references into a `Scene`, on the coordinator and on every
 //! worker alike. `error` holds the error that points at the file, line and field; `ghost` what a scene
-//! declares about the ghosts its lens makes; `uv_table` the triangles' texture coordinates.
+//! declares about the ghosts its lens makes.
 
 pub mod build;
 pub mod description;
@@ -14,7 +14,6 @@ mod loader;
 
 pub use loader::SceneFiles;
 pub mod mitsuba;
-pub mod uv_table;
 
 pub use error::SceneError;
 pub use mitsuba::MitsubaOptions;
@@ -22,7 +21,7 @@ pub use mitsuba::MitsubaOptions;
 use crate::bsdf::Bsdf;
 use crate::camera::Camera;
 use crate::color::Rgb;
-use crate::geometry::{SceneGeometry, SurfaceHit};
+use crate::geometry::{PerTriangle, SceneGeometry, SurfaceHit};
 use crate::light::Lights;
 use crate::material::Material;
 use crate::texture::{barycentric, interpolate_uv, uv_tangent};
@@ -83,7 +82,7 @@ pub struct Scene {
     pub camera: Camera,
     pub materials: Vec<Material>,
     /// Texture coordinates of each triangle, by the index it was added with.
-    pub triangle_uvs: uv_table::UvTable,
+    pub triangle_uvs: PerTriangle<[Vec2; 3]>,
     pub objects: Vec<SceneObject>,
     pub geometry: SceneGeometry,
     pub lights: Lights,
@@ -144,7 +143,7 @@ impl Scene {
     /// render and never traces a ray, such as the coordinator of a distributed run.
     pub fn release_geometry(&mut self) {
         self.geometry = SceneGeometry::empty();
-        self.triangle_uvs = uv_table::UvTable::default();
+        self.triangle_uvs = PerTriangle::default();
         self.released = true;
     }
 
