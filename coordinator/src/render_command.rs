@@ -14,6 +14,7 @@ use photonfarm::protocol::Secret;
 use photonfarm::ray_map::{self, Recorder};
 use photonfarm::render::active_tiles::DEFAULT_TILE;
 use photonfarm::render::checkpoint::{Checkpoint, CheckpointError};
+use photonfarm::render::engine::CAPPED_PHASE_PIXELS;
 use photonfarm::render::forecast::Forecast;
 use photonfarm::render::memory::MemoryBudget;
 use photonfarm::render::method::{Images, Processes};
@@ -464,6 +465,9 @@ fn start_engine<'s>(
             let base = memory::current_rss_bytes().unwrap_or(0);
             let budget = MemoryBudget::new(args.memory_limit);
             let mut engine = Engine::new(scene, settings);
+            if scene.camera.pixel_count() > CAPPED_PHASE_PIXELS {
+                engine.set_phase_cap(CAPPED_PHASE_PIXELS, DEFAULT_TILE);
+            }
             if let Some(budget) = budget {
                 // The engine's buffers are sized once, for the whole image: what it holds now is what it needs.
                 let need = base + (engine.bytes_per_pixel() * scene.camera.pixel_count() as f64) as u64;

@@ -37,6 +37,22 @@ pub struct Engine<'s> {
     tiles: Option<TilePixels>,
     /// How long the latest phase took: a timed run starts no phase it expects to end past its deadline.
     last_phase: Option<std::time::Duration>,
+    /// At most how many pixels a phase renders (`set_phase_cap`), and the tiles a capped phase chooses among.
+    cap: Option<PhaseCap>,
+}
+
+/// Above this many pixels a phase renders only the tiles with the fewest phases, about this many pixels of
+/// them (`Engine::set_phase_cap`): on a large image a whole-image phase lasts a minute, and a timed run can
+/// stop, and show its image, only between phases. Every image up to 512 × 512 (every shipped scene) renders
+/// whole, and so keeps its images for a fixed seed.
+pub const CAPPED_PHASE_PIXELS: usize = 512 * 512;
+
+/// A phase cap: at most `pixels` a phase, in whole tiles of `tile` pixels, chosen among `wanted`'s active tiles
+/// (the run's adaptive tiles; None: every tile).
+struct PhaseCap {
+    pixels: usize,
+    tile: u32,
+    wanted: Option<ActiveTiles>,
 }
 
 /// The pixels a phase renders when some tiles have retired, and the phase's sums over them: a phase closes
@@ -88,12 +104,56 @@ impl<'s> Engine<'s> {
             recorder: None,
             tiles: None,
             last_phase: None,
+            cap: None,
         }
     }
 
+    /// Renders at most `pixels` pixels a phase from the next phase on: the tiles (of `tile` pixels) with the
+    /// fewest phases, whole, until they hold `pixels`. Each pixel's phase j and radius stay its own, and a
+    /// phase's light shrinks with its pixels, as with adaptive tiles; an image of at most `pixels` pixels
+    /// renders whole.
+    pub fn set_phase_cap(&mut self, pixels: usize, tile: u32) {
+        let wanted = self.cap.take().and_then(|c| c.wanted);
+        self.cap = Some(PhaseCap { pixels: pixels.max(1), tile: tile.max(1), wanted });
+    }
+
+    /// The tiles a capped phase renders: those with the fewest phases among the wanted ones, until they hold
+    /// the cap's pixels.
+    fn capped_tiles(&self, cap: &PhaseCap) -> ActiveTiles {
+        let cam = &self.scene.camera;
+        let all = || ActiveTiles::all(cam.width, cam.height, cap.tile).expect("a tile of at least one pixel");
+        let base = cap.wanted.clone().unwrap_or_else(all);
+        let phases = &self.sums.pixels;
+        let mut fewest: Vec<(u32, usize)> = (0..base.len())
+            .filter(|&t| base.is_active(t))
+            .map(|t| (base.pixels_of(t).map(|p| phases[p as usize].phases).min().unwrap_or(0), t))
+            .collect();
+        fewest.sort_unstable();
+        let mut flags = vec![false; base.len()];
+        let mut taken = 0;
+        for (_, t) in fewest {
+            if taken >= cap.pixels {
+                break;
+            }
+            flags[t] = true;
+            taken += base.pixels_of(t).count();
+        }
+        ActiveTiles::from_flags(base.width, base.height, base.tile, flags).expect("flags of the base's own tiles")
+    }
+
     /// Renders only `tiles`' active tiles from the next phase on (adaptive tiles); every pixel keeps its own
-    /// phase count, so each pixel's phase j and radius are its own.
+    /// phase count, so each pixel's phase j and radius are its own. Under a phase cap, a phase renders some of
+    /// them.
     pub fn set_active_tiles(&mut self, tiles: &ActiveTiles) {
+        if let Some(cap) = &mut self.cap {
+            cap.wanted = (!tiles.all_active()).then(|| tiles.clone());
+            return;
+        }
+        self.render_tiles(tiles);
+    }
+
+    /// Renders `tiles`' active tiles from the next phase on.
+    fn render_tiles(&mut self, tiles: &ActiveTiles) {
         let cam = &self.scene.camera;
         assert_eq!((tiles.width, tiles.height), (cam.width, cam.height), "tiles of another image");
         let aux = self.sums.aux.layout().clone();
@@ -162,6 +222,12 @@ impl<'s> Engine<'s> {
     /// Renders one more phase and closes it into the sums.
     pub fn run_phase(&mut self) -> PhaseReport {
         let started = std::time::Instant::now();
+        if let Some(cap) = &self.cap {
+            let tiles = self.capped_tiles(cap);
+            if !(tiles.all_active() && self.tiles.is_none()) {
+                self.render_tiles(&tiles);
+            }
+        }
         let report = match self.settings.estimator {
             Estimator::Pbpm => self.pbpm_phase(),
             Estimator::Path => self.path_phase(),

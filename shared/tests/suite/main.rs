@@ -28,6 +28,7 @@ mod mitsuba_reader;
 mod mitsuba_twins;
 mod outdoor_reference;
 mod partition;
+mod phase_cap;
 mod prism;
 mod protocol_hostile_input;
 mod quasi_random;
