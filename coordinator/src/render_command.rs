@@ -60,7 +60,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let lit = Arc::new(LitMask::of_scene(&scene, settings.max_depth));
     spinner.finish_and_clear();
     let lit_seconds = deciding.elapsed().as_secs_f64();
-    if args.method.layout().processes == Processes::PerNumaNode {
+    let distributed = args.method.layout().processes == Processes::PerNumaNode;
+    if distributed {
         // The workers trace; this process merges and saves. The mesh and its BVH, the largest part of a large
         // scene, are let go before the workers load their own.
         scene.release_geometry();
@@ -91,7 +92,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     if let Some(url) = live.as_ref().and_then(|l| l.url.as_ref()) {
         say!("live page: {url}  (results in {})", dir.display());
     }
-    if args.method.layout().processes == Processes::PerNumaNode {
+    if distributed {
         // The run's clock, and `--time`, start when the first worker renders: a large scene takes its workers a
         // while to receive and load, which is not rendering time.
         bar.set_message("the workers are loading the scene");

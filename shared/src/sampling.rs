@@ -139,6 +139,14 @@ impl Sampler {
     pub fn next_2d(&mut self) -> Vec2 {
         Vec2::new(self.next_f32(), self.next_f32())
     }
+
+    /// Puts `items` in a random order drawn from this stream (Fisher–Yates).
+    pub fn shuffle<T>(&mut self, items: &mut [T]) {
+        for i in (1..items.len()).rev() {
+            let j = ((self.next_f32() * (i + 1) as f32) as usize).min(i);
+            items.swap(i, j);
+        }
+    }
 }
 
 /// An orthonormal frame around a unit normal (Duff et al. 2017), for sampling in local coordinates.

@@ -31,6 +31,7 @@
 
 use crate::accumulation::{Accumulator, ErrorOver, LitMask};
 use crate::color::luminance_f64;
+use crate::sampling::{Pass, Sampler};
 use serde::{Deserialize, Serialize};
 
 /// Tile edge in pixels when the run does not set one (the parallel engine's tile for up to 16 groups).
@@ -140,6 +141,43 @@ impl ActiveTiles {
     /// The pixels of the active tiles, tile by tile.
     pub fn active_pixels(&self) -> Vec<u32> {
         (0..self.len()).filter(|&t| self.active[t]).flat_map(|t| self.pixels_of(t)).collect()
+    }
+
+    /// The active tiles a capped phase or round renders: those with the fewest phases (a tile's phases being its
+    /// pixels' fewest, `phases` of an image pixel), ties in a random order drawn from `seed` and `deal_index`, as
+    /// many as fit in `max_pixels` and at least one. None when every active tile fits, so that the phase renders
+    /// them all as without a cap.
+    pub fn fewest_phases_first(
+        &self,
+        phases: impl Fn(u32) -> u32,
+        max_pixels: usize,
+        seed: u64,
+        deal_index: u64,
+    ) -> Option<ActiveTiles> {
+        let area = |t: usize| {
+            let (_, _, w, h) = self.rect(t);
+            (w * h) as usize
+        };
+        let mut order: Vec<usize> = (0..self.len()).filter(|&t| self.is_active(t)).collect();
+        if order.iter().map(|&t| area(t)).sum::<usize>() <= max_pixels {
+            return None;
+        }
+        // Shuffled, then sorted stably by phases: ties fall in a random order, so that no tile is always left for
+        // the next round. A stream of its own leaves the deals' draws as they are without a cap.
+        Sampler::new(seed, Pass::Camera, deal_index, u64::MAX - 1).shuffle(&mut order);
+        let mut keyed: Vec<(u32, usize)> =
+            order.into_iter().map(|t| (self.pixels_of(t).map(&phases).min().unwrap_or(0), t)).collect();
+        keyed.sort_by_key(|&(n, _)| n);
+        let mut flags = vec![false; self.len()];
+        let mut taken = 0;
+        for (_, t) in keyed {
+            if taken > 0 && taken + area(t) > max_pixels {
+                break;
+            }
+            flags[t] = true;
+            taken += area(t);
+        }
+        Some(ActiveTiles::from_flags(self.width, self.height, self.tile, flags).expect("the same image's tiles"))
     }
 
     /// Each tile's δ over its pixels of the class `over` selects, and its fewest phases. A tile without pixels
@@ -373,6 +411,29 @@ mod tests {
 
     /// The blur decay of the default radius schedule (the sums of these tests keep no blur layers).
     const DECAY: f64 = 2.0 / 3.0;
+
+    #[test]
+    fn a_capped_round_takes_the_tiles_with_the_fewest_phases_and_breaks_ties_at_random() {
+        // 100 × 70 in 32-pixel tiles: 4 × 3 tiles, the right column 4 and the bottom row 6 pixels short.
+        let all = ActiveTiles::all(100, 70, 32).unwrap();
+        assert_eq!(all.fewest_phases_first(|_| 0, 7000, 1, 1), None, "every tile fits");
+        // Tile t = column + 4 × row has t mod 3 phases: 0, 3, 6 and 9 have none, and hold 1024 + 128 + 1024 +
+        // 192 = 2368 pixels, which fit in 2400 where no other tile fits beside them.
+        let phases = |p: u32| ((p % 100) / 32 + 4 * ((p / 100) / 32)) % 3;
+        let capped = all.fewest_phases_first(phases, 2400, 1, 1).unwrap();
+        let chosen: Vec<usize> = (0..all.len()).filter(|&t| capped.is_active(t)).collect();
+        assert_eq!(chosen, vec![0, 3, 6, 9]);
+        // Ties go another way in another deal, the same way for the same seed and deal.
+        let sets: std::collections::BTreeSet<Vec<bool>> =
+            (0..20).map(|d| all.fewest_phases_first(phases, 1024, 1, d).unwrap().flags().to_vec()).collect();
+        assert!(sets.len() > 1);
+        assert_eq!(all.fewest_phases_first(phases, 1024, 1, 3), all.fewest_phases_first(phases, 1024, 1, 3));
+        // Retired tiles are never taken, and a cap below one tile still renders one.
+        let some = ActiveTiles::from_flags(100, 70, 32, (0..12).map(|t| t >= 6).collect()).unwrap();
+        let one = some.fewest_phases_first(|_| 0, 10, 2, 2).unwrap();
+        assert_eq!(one.active_count(), 1);
+        assert!((6..12).any(|t| one.is_active(t)));
+    }
 
     fn value(x: f32) -> LayerValues {
         [Rgb::ZERO, Rgb::splat(x), Rgb::ZERO, Rgb::ZERO]

@@ -47,11 +47,11 @@ pub struct Engine<'s> {
 /// whole, and so keeps its images for a fixed seed.
 pub const CAPPED_PHASE_PIXELS: usize = 512 * 512;
 
-/// A phase cap: at most `pixels` a phase, in whole tiles of `tile` pixels, chosen among `wanted`'s active tiles
-/// (the run's adaptive tiles; None: every tile).
+/// A phase cap: at most `pixels` a phase, in whole tiles, chosen among `wanted`'s active tiles (the run's
+/// adaptive tiles) or, without them, among `all` the image's tiles.
 struct PhaseCap {
     pixels: usize,
-    tile: u32,
+    all: ActiveTiles,
     wanted: Option<ActiveTiles>,
 }
 
@@ -109,36 +109,15 @@ impl<'s> Engine<'s> {
     }
 
     /// Renders at most `pixels` pixels a phase from the next phase on: the tiles (of `tile` pixels) with the
-    /// fewest phases, whole, until they hold `pixels`. Each pixel's phase j and radius stay its own, and a
+    /// fewest phases, whole, as many as fit (`ActiveTiles::fewest_phases_first`, as the parallel engine's cap
+    /// chooses them). Each pixel's phase j and radius stay its own, and a
     /// phase's light shrinks with its pixels, as with adaptive tiles; an image of at most `pixels` pixels
     /// renders whole.
     pub fn set_phase_cap(&mut self, pixels: usize, tile: u32) {
-        let wanted = self.cap.take().and_then(|c| c.wanted);
-        self.cap = Some(PhaseCap { pixels: pixels.max(1), tile: tile.max(1), wanted });
-    }
-
-    /// The tiles a capped phase renders: those with the fewest phases among the wanted ones, until they hold
-    /// the cap's pixels.
-    fn capped_tiles(&self, cap: &PhaseCap) -> ActiveTiles {
         let cam = &self.scene.camera;
-        let all = || ActiveTiles::all(cam.width, cam.height, cap.tile).expect("a tile of at least one pixel");
-        let base = cap.wanted.clone().unwrap_or_else(all);
-        let phases = &self.sums.pixels;
-        let mut fewest: Vec<(u32, usize)> = (0..base.len())
-            .filter(|&t| base.is_active(t))
-            .map(|t| (base.pixels_of(t).map(|p| phases[p as usize].phases).min().unwrap_or(0), t))
-            .collect();
-        fewest.sort_unstable();
-        let mut flags = vec![false; base.len()];
-        let mut taken = 0;
-        for (_, t) in fewest {
-            if taken >= cap.pixels {
-                break;
-            }
-            flags[t] = true;
-            taken += base.pixels_of(t).count();
-        }
-        ActiveTiles::from_flags(base.width, base.height, base.tile, flags).expect("flags of the base's own tiles")
+        let all = ActiveTiles::all(cam.width, cam.height, tile.max(1)).expect("a tile of at least one pixel");
+        let wanted = self.cap.take().and_then(|c| c.wanted);
+        self.cap = Some(PhaseCap { pixels: pixels.max(1), all, wanted });
     }
 
     /// Renders only `tiles`' active tiles from the next phase on (adaptive tiles); every pixel keeps its own
@@ -223,8 +202,16 @@ impl<'s> Engine<'s> {
     pub fn run_phase(&mut self) -> PhaseReport {
         let started = std::time::Instant::now();
         if let Some(cap) = &self.cap {
-            let tiles = self.capped_tiles(cap);
-            if !(tiles.all_active() && self.tiles.is_none()) {
+            let candidates = cap.wanted.as_ref().unwrap_or(&cap.all);
+            let phases = &self.sums.pixels;
+            let (seed, number) = (self.settings.seed, self.totals.phases);
+            let next = match candidates.fewest_phases_first(|p| phases[p as usize].phases, cap.pixels, seed, number) {
+                Some(tiles) => Some(tiles),
+                // Every candidate fits: a phase over the whole image needs no new tiles.
+                None if candidates.all_active() && self.tiles.is_none() => None,
+                None => Some(candidates.clone()),
+            };
+            if let Some(tiles) = next {
                 self.render_tiles(&tiles);
             }
         }

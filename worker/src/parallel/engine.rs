@@ -319,7 +319,7 @@ impl<'s> ParallelEngine<'s> {
             }
         };
         let pixels = &self.sums.pixels;
-        mask::fewest_phases_first(candidates, |p| pixels[p as usize].phases, max_pixels, self.settings.seed, self.deals)
+        candidates.fewest_phases_first(|p| pixels[p as usize].phases, max_pixels, self.settings.seed, self.deals)
     }
 
     /// Records the round's wall time per pixel-phase of the groups' closed phases from the stats they had

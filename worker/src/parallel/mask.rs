@@ -8,21 +8,13 @@ use photonfarm::sampling::{Pass, Sampler};
 /// stay within a small fraction of each other when few tiles are left.
 const UNITS_PER_GROUP: usize = 4;
 
-/// Puts `items` in a random order drawn from `sampler` (Fisher–Yates), the job's stream for a deal.
-fn shuffle<T>(items: &mut [T], sampler: &mut Sampler) {
-    for i in (1..items.len()).rev() {
-        let j = ((sampler.next_f32() * (i + 1) as f32) as usize).min(i);
-        items.swap(i, j);
-    }
-}
-
 /// Deals the tiles of a `width` × `height` image into `groups` masks at random. Each mask lists its pixels
 /// (row-major image indices) tile by tile, so a group's threads walk memory tile-coherently.
 pub fn deal(width: u32, height: u32, tile: u32, groups: usize, seed: u64, deal_index: u64) -> Vec<Vec<u32>> {
     assert!(groups > 0 && tile > 0);
     let (tx, ty) = (width.div_ceil(tile), height.div_ceil(tile));
     let mut tiles: Vec<u32> = (0..tx * ty).collect();
-    shuffle(&mut tiles, &mut Sampler::new(seed, Pass::Camera, deal_index, u64::MAX));
+    Sampler::new(seed, Pass::Camera, deal_index, u64::MAX).shuffle(&mut tiles);
     let mut masks = vec![Vec::new(); groups];
     for (k, t) in tiles.iter().enumerate() {
         let (x0, y0) = ((t % tx) * tile, (t / tx) * tile);
@@ -54,7 +46,7 @@ pub fn deal_tiles(tiles: &ActiveTiles, groups: usize, seed: u64, deal_index: u64
             .filter(|&(_, _, w, h)| w > 0 && h > 0)
             .collect();
     }
-    shuffle(&mut units, &mut Sampler::new(seed, Pass::Camera, deal_index, u64::MAX));
+    Sampler::new(seed, Pass::Camera, deal_index, u64::MAX).shuffle(&mut units);
     let mut masks = vec![Vec::new(); groups];
     for (x0, y0, w, h) in units {
         let mask = masks.iter_mut().min_by_key(|m| m.len()).expect("at least one group");
@@ -63,42 +55,6 @@ pub fn deal_tiles(tiles: &ActiveTiles, groups: usize, seed: u64, deal_index: u64
         }
     }
     masks
-}
-
-/// The active tiles of `tiles` that a capped round renders: those with the fewest phases (a tile's phases being
-/// its pixels' fewest, `phases` of an image pixel), ties in a random order, as many as fit in `max_pixels` and at
-/// least one. None when every active tile fits, so that the round renders them all as without a cap.
-pub fn fewest_phases_first(
-    tiles: &ActiveTiles,
-    phases: impl Fn(u32) -> u32,
-    max_pixels: usize,
-    seed: u64,
-    deal_index: u64,
-) -> Option<ActiveTiles> {
-    let area = |t: usize| {
-        let (_, _, w, h) = tiles.rect(t);
-        (w * h) as usize
-    };
-    let mut order: Vec<usize> = (0..tiles.len()).filter(|&t| tiles.is_active(t)).collect();
-    if order.iter().map(|&t| area(t)).sum::<usize>() <= max_pixels {
-        return None;
-    }
-    // Shuffled, then sorted stably by phases: ties fall in a random order, so that no tile is always left for
-    // the next round. A stream of its own leaves `deal_tiles`'s draws as they are without a cap.
-    shuffle(&mut order, &mut Sampler::new(seed, Pass::Camera, deal_index, u64::MAX - 1));
-    let mut keyed: Vec<(u32, usize)> =
-        order.into_iter().map(|t| (tiles.pixels_of(t).map(&phases).min().unwrap_or(0), t)).collect();
-    keyed.sort_by_key(|&(n, _)| n);
-    let mut flags = vec![false; tiles.len()];
-    let mut taken = 0;
-    for (_, t) in keyed {
-        if taken > 0 && taken + area(t) > max_pixels {
-            break;
-        }
-        flags[t] = true;
-        taken += area(t);
-    }
-    Some(ActiveTiles::from_flags(tiles.width, tiles.height, tiles.tile, flags).expect("the same image's tiles"))
 }
 
 /// Every pixel of the image, for methods without masks.
@@ -149,29 +105,6 @@ mod tests {
         // One active tile of one pixel and more groups than pixels: the others get nothing, none a pixel twice.
         let one = ActiveTiles::from_flags(3, 1, 1, vec![false, true, false]).unwrap();
         assert_eq!(deal_tiles(&one, 2, 1, 1).concat(), vec![1]);
-    }
-
-    #[test]
-    fn a_capped_round_takes_the_tiles_with_the_fewest_phases_and_breaks_ties_at_random() {
-        // 100 × 70 in 32-pixel tiles: 4 × 3 tiles, the right column 4 and the bottom row 6 pixels short.
-        let all = ActiveTiles::all(100, 70, 32).unwrap();
-        assert_eq!(fewest_phases_first(&all, |_| 0, 7000, 1, 1), None, "every tile fits");
-        // Tile t = column + 4 × row has t mod 3 phases: 0, 3, 6 and 9 have none, and hold 1024 + 128 + 1024 +
-        // 192 = 2368 pixels, which fit in 2400 where no other tile fits beside them.
-        let phases = |p: u32| ((p % 100) / 32 + 4 * ((p / 100) / 32)) % 3;
-        let capped = fewest_phases_first(&all, phases, 2400, 1, 1).unwrap();
-        let chosen: Vec<usize> = (0..all.len()).filter(|&t| capped.is_active(t)).collect();
-        assert_eq!(chosen, vec![0, 3, 6, 9]);
-        // Ties go another way in another deal, the same way for the same seed and deal.
-        let sets: std::collections::BTreeSet<Vec<bool>> =
-            (0..20).map(|d| fewest_phases_first(&all, phases, 1024, 1, d).unwrap().flags().to_vec()).collect();
-        assert!(sets.len() > 1);
-        assert_eq!(fewest_phases_first(&all, phases, 1024, 1, 3), fewest_phases_first(&all, phases, 1024, 1, 3));
-        // Retired tiles are never taken, and a cap below one tile still renders one.
-        let some = ActiveTiles::from_flags(100, 70, 32, (0..12).map(|t| t >= 6).collect()).unwrap();
-        let one = fewest_phases_first(&some, |_| 0, 10, 2, 2).unwrap();
-        assert_eq!(one.active_count(), 1);
-        assert!((6..12).any(|t| one.is_active(t)));
     }
 
     #[test]
