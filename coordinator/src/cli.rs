@@ -339,7 +339,8 @@ pub struct RenderArgs {
     /// A reference EXR (layer "total", or a plain RGB EXR) to measure the true error against.
     #[arg(long, value_name = "EXR")]
     pub reference: Option<PathBuf>,
-    /// Seconds between refreshes of the output files during the run.
+    /// Seconds from the end of one refresh of the output files during the run to the start of the next, and
+    /// at least as long as the last refresh took (merges wait while one reads the sums).
     #[arg(long, default_value_t = 10.0, value_name = "SECONDS")]
     pub save_interval: f64,
     /// No progress bar (for logs and scripts).

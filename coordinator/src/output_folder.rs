@@ -3,12 +3,16 @@
 use anyhow::{Context, Result};
 use photonfarm::accumulation::{relative_mean_difference, relative_rmse, Accumulator, LitMask};
 use photonfarm::color::luminance_f64;
-use photonfarm::image_io::exr_file::{find_layer, read_exr, write_exr, LayerImage};
+use photonfarm::image_io::exr_file::{find_layer, read_exr, write_computed_exr, ComputedLayer};
 use photonfarm::image_io::preview::{auto_exposure, write_preview_png};
+use photonfarm::image_io::OutputError;
 use photonfarm::render::images::luminance_of;
-use photonfarm::render::images::{layer_images, lit_layer, phases_layer, total_image, total_layer};
+use photonfarm::render::images::{
+    computed_layers, computed_lit_layer, computed_phases_layer, total_image, total_layer,
+};
 use photonfarm::render::record::{RunRecord, TrueError};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
 
 /// A reference image loaded once and compared against after every save.
 pub struct Reference {
@@ -71,7 +75,8 @@ impl Reference {
 /// Writes preview.png, then runs `between` (the preview is the cheapest file, and the one a user waits for; a
 /// large image's EXR takes seconds), then image.exr (with the lit mask as its `lit` layer and the phases per
 /// pixel as its `phases` layer) and run.json; each file is replaced atomically. Besides the sums it holds the
-/// preview's total layer, then what `between` holds, then the EXR's layers, never two of them at once.
+/// preview's total layer, then what `between` holds, then a row of each of the EXR's layers, never two of them
+/// at once.
 pub fn save(
     dir: &Path,
     sums: &Accumulator,
@@ -81,7 +86,8 @@ pub fn save(
 ) -> Result<()> {
     write_preview(dir, sums)?;
     between()?;
-    write_image_and_record(dir, exr_layers(sums, lit), record)
+    write_image_and_record(dir, sums, lit, record, None)?;
+    Ok(())
 }
 
 /// Writes preview.png from the total layer alone.
@@ -91,24 +97,43 @@ pub fn write_preview(dir: &Path, sums: &Accumulator) -> Result<()> {
     Ok(())
 }
 
-/// The layers of image.exr: `layer_images`, the lit mask as `lit` and the phases per pixel as `phases`.
-pub fn exr_layers(sums: &Accumulator, lit: &LitMask) -> Vec<LayerImage> {
-    let mut layers = layer_images(sums);
-    layers.push(lit_layer(lit));
-    layers.push(phases_layer(sums));
+/// The layers of image.exr, made from the sums as the file is written: the sums' layers
+/// (`photonfarm::render::images::layer_images`), the lit mask as `lit` and the phases per pixel as `phases`.
+fn exr_layers<'a>(sums: &'a Accumulator, lit: &'a LitMask) -> Vec<ComputedLayer<'a>> {
+    let mut layers = computed_layers(sums);
+    layers.push(computed_lit_layer(lit));
+    layers.push(computed_phases_layer(sums));
     layers
 }
 
-/// Writes image.exr from its layers (`exr_layers`), then run.json; a large image's EXR takes seconds to
-/// compress, with no need of the sums.
-pub fn write_image_and_record(dir: &Path, layers: Vec<LayerImage>, record: &RunRecord) -> Result<()> {
-    write_exr(&dir.join("image.exr"), layers)?;
+/// What became of a write of the image and the record that could be abandoned.
+#[derive(Debug, PartialEq)]
+pub enum Written {
+    Done,
+    /// `abandon` was set while the EXR was written: neither file changed.
+    Abandoned,
+}
+
+/// Writes image.exr from the sums (`exr_layers`), then run.json. A large image's EXR takes seconds to compress,
+/// all the while reading the sums; with `abandon`, a write under way when it is set stops at its next block.
+pub fn write_image_and_record(
+    dir: &Path,
+    sums: &Accumulator,
+    lit: &LitMask,
+    record: &RunRecord,
+    abandon: Option<&AtomicBool>,
+) -> Result<Written> {
+    let size = (sums.width as usize, sums.height as usize);
+    match write_computed_exr(&dir.join("image.exr"), size, &exr_layers(sums, lit), abandon) {
+        Err(OutputError::Abandoned { .. }) => return Ok(Written::Abandoned),
+        written => written?,
+    }
     let json = serde_json::to_vec_pretty(record)?;
     let tmp = dir.join(".run.json.tmp");
     std::fs::write(&tmp, json).with_context(|| format!("cannot write {}", tmp.display()))?;
     std::fs::rename(&tmp, dir.join("run.json"))
         .with_context(|| format!("cannot write {}", dir.join("run.json").display()))?;
-    Ok(())
+    Ok(Written::Done)
 }
 
 /// A fresh folder under out/ named after the scene and the UTC time.

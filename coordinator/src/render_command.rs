@@ -698,9 +698,10 @@ struct CheckpointInputs {
 }
 
 /// A periodic save on a thread of its own: the preview first (what a user waits for), then the checkpoint (what
-/// a resumed run needs) and the EXR's layers from the shared sums, which it then lets go, so that merges wait
-/// only for what needs them and not for the EXR's compression; then the image and the record. Once the run
-/// stops, what is left of it is abandoned, as the final save writes everything again.
+/// a resumed run needs), then the image, its layers made from the shared sums as it is compressed, and the
+/// record. Merges wait for all of it (on a 4K image, seconds): making the EXR's f32 layers first, to let the
+/// sums go before the compression, would hold about 130 bytes a pixel more at the run's peak. Once the run
+/// stops, what is left of the save is abandoned, as the final save writes everything again.
 fn save_periodically(
     dir: &Path,
     sums: Arc<Accumulator>,
@@ -721,9 +722,8 @@ fn save_periodically(
     if stopped() {
         return Ok(());
     }
-    let layers = output_folder::exr_layers(&sums, lit);
-    drop(sums);
-    output_folder::write_image_and_record(dir, layers, record)
+    output_folder::write_image_and_record(dir, &sums, lit, record, Some(stopping))?;
+    Ok(())
 }
 
 fn write_checkpoint(
@@ -771,12 +771,14 @@ fn run_until_stop(
 ) -> Result<StopReason> {
     let save_interval = Duration::from_secs_f64(outputs.args.save_interval.max(0.5));
     // The first step is saved at once: on a large image it comes a phase or so into the run, and the preview
-    // and δ should not wait a whole interval more.
+    // and δ should not wait a whole interval more. `last_save` is when the latest save ended.
     let mut last_save: Option<Instant> = None;
     let mut save_error: Option<anyhow::Error> = None;
     // A save falls due only once the previous one (`saving`: distributed methods, whose engine is the workers)
-    // has ended. How long the latest save took: a timed run starts none that would still be writing at its end,
-    // where the final save waits for it.
+    // has ended, and the interval after it is at least as long as it took: merges (distributed) or the
+    // engine (in-process) wait while a save reads the sums, which on a large image takes seconds, and get at
+    // least half the time. How long the latest save took also keeps a timed run from starting one that would
+    // still be writing at its end, where the final save waits for it.
     let (mut save_started, mut save_took) = (Instant::now(), Duration::ZERO);
     let stop = outputs.stop;
     let tracking = Tracking { lit: outputs.lit, forecast, elapsed_before: outputs.elapsed_before, tiles };
@@ -795,11 +797,11 @@ fn run_until_stop(
         if saving.as_ref().is_some_and(|h| h.is_finished()) {
             join_save(saving, &mut save_error);
             save_took = save_started.elapsed();
+            last_save = Some(Instant::now());
         }
-        let due = last_save.is_none_or(|t| t.elapsed() >= save_interval);
+        let due = last_save.is_none_or(|t| t.elapsed() >= save_interval.max(save_took));
         let ends_in_time = stop.time.is_none_or(|t| outputs.elapsed_s() + save_took.as_secs_f64() < t.as_secs_f64());
         if !over && due && ends_in_time && saving.is_none() && save_error.is_none() {
-            last_save = Some(Instant::now());
             save_started = Instant::now();
             if outputs.args.method.is_distributed() {
                 match outputs.save_in_background(engine, history, forecast) {
@@ -813,6 +815,7 @@ fn run_until_stop(
                 // and a copy of its sums would be memory that --memory-limit's estimate does not count.
                 save_error = outputs.save(engine, history, StopReason::Running, forecast).err();
                 save_took = save_started.elapsed();
+                last_save = Some(Instant::now());
             }
         }
     });
@@ -962,12 +965,12 @@ fn memory_plan(
             // The coordinator renders nothing, so --memory-limit (per worker process) is not its budget. It
             // holds the merged sums and the lit mask and, at its peak, a snapshot being merged (its frame
             // and the message read from it, then the message and its decompressed delta; a whole image's at
-            // most, which zstd bounds by the raw size) and a save (the preview's layer, a checkpoint piece, or the
-            // EXR's channels, one after the other; merges wait while a save reads the sums, not while it writes
-            // the EXR). The workers check their own engines when their job arrives.
+            // most, which zstd bounds by the raw size) and a save (the preview's layer, a checkpoint piece, or a
+            // row of each EXR layer, one after the other; merges wait while a save reads the sums). The workers
+            // check their own engines when their job arrives.
             let sums = photonfarm::accumulation::Accumulator::bytes_per_pixel(&aux) as u64 * pixels as u64;
             let merge = 2 * photonfarm::accumulation::delta::max_delta_bytes(pixels as u64, &aux);
-            let save = (images::exr_bytes_per_pixel(&aux) as u64 * pixels as u64).max(Checkpoint::max_save_bytes(&aux));
+            let save = (images::SAVE_BYTES_PER_PIXEL as u64 * pixels as u64).max(Checkpoint::max_save_bytes(&aux));
             let need = base + sums + pixels as u64 + merge + save;
             if let Some(budget) = MemoryBudget::new(None) {
                 if need > budget.bytes() {

@@ -4,12 +4,19 @@
 //! (multi-part files are still unsupported by several viewers).
 
 use std::fs::File;
-use std::io::{BufReader, BufWriter};
+use std::io::{BufReader, BufWriter, Seek, SeekFrom, Write};
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Mutex;
 
+use exr::block::lines::LineRefMut;
+use exr::image::write::samples::{SamplesWriter, WritableSamples};
+use exr::math::RoundingMode;
+use exr::meta::attribute::{LevelMode, SampleType};
+use exr::meta::header::Header;
 use exr::prelude::{
-    AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, ReadChannels, ReadLayers, Text,
-    Vec2, WritableImage,
+    AnyChannel, AnyChannels, Encoding, Image, Layer, LayerAttributes, ReadChannels, ReadLayers, Text, Vec2,
+    WritableImage,
 };
 
 use super::{write_atomically, OutputError};
@@ -52,6 +59,27 @@ impl LayerImage {
     }
 }
 
+/// One named RGB layer whose pixels are made as the file is written, from whatever holds them (a render's running
+/// sums), so that writing an image never holds all its layers as f32 at once.
+pub struct ComputedLayer<'a> {
+    /// Layer name, as for [`LayerImage`].
+    pub name: String,
+    /// The linear RGB pixel at index `y * width + x` (row 0 at the top).
+    pub pixel: Box<dyn Fn(usize) -> [f32; 3] + Sync + 'a>,
+}
+
+impl<'a> ComputedLayer<'a> {
+    /// A layer named `name` whose pixel `i` is `pixel(i)`.
+    pub fn new(name: impl Into<String>, pixel: impl Fn(usize) -> [f32; 3] + Sync + 'a) -> Self {
+        Self { name: name.into(), pixel: Box::new(pixel) }
+    }
+
+    /// The layer made whole, `width` × `height` pixels.
+    pub fn to_image(&self, width: usize, height: usize) -> LayerImage {
+        LayerImage { name: self.name.clone(), width, height, rgb: (0..width * height).map(&self.pixel).collect() }
+    }
+}
+
 /// Writes all layers into one multi-layer OpenEXR file (channels `<name>.R/G/B` as f32,
 /// lossless ZIP compression) so every pass of a render travels in a single file that
 /// viewers show as layers "total", "direct", ...
@@ -61,10 +89,33 @@ impl LayerImage {
 /// printable ASCII, and all layers must have the same, non-zero size.
 pub fn write_exr(path: &Path, layers: Vec<LayerImage>) -> Result<(), OutputError> {
     let (width, height) = check_layers(path, &layers)?;
+    let computed: Vec<ComputedLayer> =
+        layers.iter().map(|layer| ComputedLayer::new(layer.name.clone(), |i| layer.rgb[i])).collect();
+    write_computed_exr(path, (width, height), &computed, None)
+}
 
-    // Each layer goes once its channels are made: a large image's layers and channels are never all held twice.
+/// Writes `layers` of an image of `size` (width, height) as [`write_exr`] does, making each row of each layer only
+/// as its block is compressed: besides what the layers read, the write holds one row per layer. With `abandon`,
+/// a write still under way when it is set stops at its next block and leaves the file as it was
+/// ([`OutputError::Abandoned`]).
+pub fn write_computed_exr(
+    path: &Path,
+    size: (usize, usize),
+    layers: &[ComputedLayer],
+    abandon: Option<&AtomicBool>,
+) -> Result<(), OutputError> {
+    let (width, height) = size;
+    check_names(path, layers.iter().map(|l| l.name.as_str()))?;
+    if width == 0 || height == 0 {
+        return Err(OutputError::Exr {
+            path: path.to_path_buf(),
+            operation: "write",
+            message: format!("the image is empty ({width}x{height})"),
+        });
+    }
+    let rows: Vec<RowCache> = layers.iter().map(|_| Mutex::new((usize::MAX, Vec::new()))).collect();
     let mut channels = Vec::with_capacity(layers.len() * 3);
-    for layer in layers {
+    for (layer, row) in layers.iter().zip(&rows) {
         for (component, suffix) in ["R", "G", "B"].into_iter().enumerate() {
             let channel_name = format!("{}.{suffix}", layer.name);
             let text = Text::new_or_none(&channel_name).ok_or_else(|| OutputError::Exr {
@@ -72,8 +123,7 @@ pub fn write_exr(path: &Path, layers: Vec<LayerImage>) -> Result<(), OutputError
                 operation: "write",
                 message: format!("channel name \"{channel_name}\" is not representable"),
             })?;
-            let samples = layer.rgb.iter().map(|pixel| pixel[component]).collect();
-            channels.push(AnyChannel::new(text, FlatSamples::F32(samples)));
+            channels.push(AnyChannel::new(text, ComputedChannel { layer, row, component, width }));
         }
     }
 
@@ -87,11 +137,86 @@ pub fn write_exr(path: &Path, layers: Vec<LayerImage>) -> Result<(), OutputError
     );
     let image = Image::from_layer(layer);
 
-    write_atomically(path, |file| {
+    let abandoned = || abandon.is_some_and(|a| a.load(Ordering::Relaxed));
+    let written = write_atomically(path, |file| {
         // Sequential compression: the exr crate would otherwise spin up a new thread pool
         // with one thread per core on every write, competing with the render threads.
-        image.write().non_parallel().to_buffered(BufWriter::new(file)).map_err(|error| exr_error(path, "write", error))
-    })
+        let out = Abandonable { inner: BufWriter::new(file), abandon };
+        image.write().non_parallel().to_buffered(out).map_err(|error| exr_error(path, "write", error))
+    });
+    match written {
+        Err(_) if abandoned() => Err(OutputError::Abandoned { path: path.to_path_buf() }),
+        other => other,
+    }
+}
+
+/// The row a computed layer made last: the index of its first pixel and its pixels. The exr crate asks for a
+/// block's lines one channel after another, so a layer's three channels of a row share one making of it.
+type RowCache = Mutex<(usize, Vec<[f32; 3]>)>;
+
+/// One channel of a [`ComputedLayer`], as the exr crate writes it.
+#[derive(Clone, Copy)]
+struct ComputedChannel<'l, 'a> {
+    layer: &'l ComputedLayer<'a>,
+    row: &'l RowCache,
+    component: usize,
+    width: usize,
+}
+
+impl<'s> WritableSamples<'s> for ComputedChannel<'_, '_> {
+    fn sample_type(&self) -> SampleType {
+        SampleType::F32
+    }
+
+    fn infer_level_modes(&self) -> (LevelMode, RoundingMode) {
+        (LevelMode::Singular, RoundingMode::Down)
+    }
+
+    type Writer = Self;
+
+    fn create_samples_writer(&'s self, _header: &Header) -> Self::Writer {
+        *self
+    }
+}
+
+impl SamplesWriter for ComputedChannel<'_, '_> {
+    fn extract_line(&self, line: LineRefMut<'_>) {
+        let start = line.location.position.y() * self.width + line.location.position.x();
+        let count = line.location.sample_count;
+        let mut row = self.row.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        if row.0 != start || row.1.len() != count {
+            row.1.clear();
+            row.1.extend((start..start + count).map(&self.layer.pixel));
+            row.0 = start;
+        }
+        // The line's bytes are the exr crate's own buffer of exactly `count` f32 samples.
+        line.write_samples(|i| row.1[i][self.component]).expect("a line holds its samples");
+    }
+}
+
+/// A file writer that fails once `abandon` is set, so that an EXR being compressed stops at its next block.
+struct Abandonable<'f, W> {
+    inner: W,
+    abandon: Option<&'f AtomicBool>,
+}
+
+impl<W: Write> Write for Abandonable<'_, W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        if self.abandon.is_some_and(|a| a.load(Ordering::Relaxed)) {
+            return Err(std::io::Error::other("the write was abandoned"));
+        }
+        self.inner.write(buf)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush()
+    }
+}
+
+impl<W: Seek> Seek for Abandonable<'_, W> {
+    fn seek(&mut self, pos: SeekFrom) -> std::io::Result<u64> {
+        self.inner.seek(pos)
+    }
 }
 
 /// Reads every RGB layer of a multi-layer EXR written by [`write_exr`] (and also a plain
@@ -198,23 +323,18 @@ fn rgb_component(suffix: &str) -> Option<usize> {
     }
 }
 
-/// Checks that the layers form one valid image and returns its size.
+/// Checks that `layers` can be one EXR image and returns its (width, height): the names as
+/// [`check_names`] asks, one non-zero size for all, and each layer's pixels filling it.
 fn check_layers(path: &Path, layers: &[LayerImage]) -> Result<(usize, usize), OutputError> {
-    let invalid = |message: String| OutputError::Exr { path: path.to_path_buf(), operation: "write", message };
-    let first = layers.first().ok_or_else(|| invalid("there are no layers to write".to_string()))?;
+    check_names(path, layers.iter().map(|l| l.name.as_str()))?;
+    let first = &layers[0];
     let (width, height) = (first.width, first.height);
     if width == 0 || height == 0 {
-        return Err(invalid(format!("the image is empty ({width}x{height})")));
+        let message = format!("the image is empty ({width}x{height})");
+        return Err(OutputError::Exr { path: path.to_path_buf(), operation: "write", message });
     }
-
-    for (index, layer) in layers.iter().enumerate() {
+    for layer in layers {
         let name = &layer.name;
-        if name.is_empty() || !name.bytes().all(|byte| (b' '..=b'~').contains(&byte)) {
-            return Err(invalid(format!("layer name \"{name}\" must be non-empty printable ASCII")));
-        }
-        if layers[..index].iter().any(|other| other.name == *name) {
-            return Err(invalid(format!("layer name \"{name}\" is used twice")));
-        }
         if (layer.width, layer.height) != (width, height) {
             return Err(OutputError::SizeMismatch {
                 path: path.to_path_buf(),
@@ -231,6 +351,25 @@ fn check_layers(path: &Path, layers: &[LayerImage]) -> Result<(usize, usize), Ou
         }
     }
     Ok((width, height))
+}
+
+/// Checks the layer names of one EXR image: at least one, each non-empty printable ASCII, none twice.
+fn check_names<'n>(path: &Path, names: impl Iterator<Item = &'n str>) -> Result<(), OutputError> {
+    let invalid = |message: String| OutputError::Exr { path: path.to_path_buf(), operation: "write", message };
+    let mut seen: Vec<&str> = Vec::new();
+    for name in names {
+        if name.is_empty() || !name.bytes().all(|byte| (b' '..=b'~').contains(&byte)) {
+            return Err(invalid(format!("layer name \"{name}\" must be non-empty printable ASCII")));
+        }
+        if seen.contains(&name) {
+            return Err(invalid(format!("layer name \"{name}\" is used twice")));
+        }
+        seen.push(name);
+    }
+    if seen.is_empty() {
+        return Err(invalid("there are no layers to write".to_string()));
+    }
+    Ok(())
 }
 
 /// Converts an exr crate error, keeping genuine file-system failures as [`OutputError::Io`].
@@ -383,6 +522,50 @@ mod tests {
         assert_eq!(read_exr(&path).unwrap(), vec![layer]);
         let files: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
         assert_eq!(files, ["image.exr"]);
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
+    #[test]
+    fn computed_layers_write_the_same_bytes_as_the_layers_they_compute() {
+        // 40 rows: blocks of 16 lines, the last one short, each row made once for its three channels.
+        let (w, h) = (9, 40);
+        let value = |l: usize, i: usize, c: usize| ((l * 7919 + i * 31 + c) % 1013) as f32 * 0.173 - 20.0;
+        let computed: Vec<ComputedLayer> = ["total", "direct", "ghost"]
+            .iter()
+            .enumerate()
+            .map(|(l, name)| ComputedLayer::new(*name, move |i| [value(l, i, 0), value(l, i, 1), value(l, i, 2)]))
+            .collect();
+        let images: Vec<LayerImage> = computed.iter().map(|l| l.to_image(w, h)).collect();
+        let dir = test_dir("computed");
+        let (a, b) = (dir.join("a.exr"), dir.join("b.exr"));
+        write_exr(&a, images.clone()).unwrap();
+        write_computed_exr(&b, (w, h), &computed, None).unwrap();
+        assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+        let mut read = read_exr(&b).unwrap();
+        read.sort_by(|x, y| x.name.cmp(&y.name));
+        let mut expected = images;
+        expected.sort_by(|x, y| x.name.cmp(&y.name));
+        assert_eq!(read.iter().map(bits).collect::<Vec<_>>(), expected.iter().map(bits).collect::<Vec<_>>());
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
+    #[test]
+    fn an_abandoned_write_leaves_the_old_file_and_no_temporary_file() {
+        let dir = test_dir("abandoned");
+        let path = dir.join("image.exr");
+        let old = LayerImage::new("total", 3, 2);
+        write_exr(&path, vec![old.clone()]).unwrap();
+        let new = [ComputedLayer::new("total", |_| [1.0, 2.0, 3.0])];
+        let abandon = AtomicBool::new(true);
+        let error = write_computed_exr(&path, (3, 2), &new, Some(&abandon)).unwrap_err();
+        assert!(matches!(error, OutputError::Abandoned { .. }), "{error}");
+        assert_eq!(read_exr(&path).unwrap(), vec![old]);
+        let files: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(files, ["image.exr"]);
+        // Not set, the same write goes through.
+        abandon.store(false, Ordering::Relaxed);
+        write_computed_exr(&path, (3, 2), &new, Some(&abandon)).unwrap();
+        assert_eq!(read_exr(&path).unwrap()[0].rgb, vec![[1.0, 2.0, 3.0]; 6]);
         let _ = std::fs::remove_dir_all(dir);
     }
 

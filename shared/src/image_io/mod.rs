@@ -55,6 +55,13 @@ pub enum OutputError {
         name: String,
     },
 
+    /// A write was abandoned while under way (the run it saved had stopped); the file is as it was.
+    #[error("the write of {} was abandoned", path.display())]
+    Abandoned {
+        /// The file that was being written.
+        path: PathBuf,
+    },
+
     /// A layer's size disagrees with the other layers or with its own pixel buffer.
     #[error("cannot write {}: layer \"{layer}\" {detail}", path.display())]
     SizeMismatch {

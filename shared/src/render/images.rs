@@ -1,9 +1,9 @@
 //! Images made from the running sums: the mean of every layer, the total and the per-pixel SEM.
 
 use crate::accumulation::blur::{BIAS_PER_DIFFERENCE, BLUR_LAYER, BLUR_SQUARES_LAYER};
-use crate::accumulation::{Accumulator, AuxLayout, LitMask, LIT_LAYER};
+use crate::accumulation::{Accumulator, LitMask, LIT_LAYER};
 use crate::color::luminance_f64;
-use crate::image_io::exr_file::LayerImage;
+use crate::image_io::exr_file::{ComputedLayer, LayerImage};
 use crate::integrator::Layer;
 
 /// Layers written to the EXR: the four components, their total, the total's standard error (grey), and the
@@ -11,42 +11,41 @@ use crate::integrator::Layer;
 /// estimated bias (signed) and without the squares behind it.
 pub fn layer_images(sums: &Accumulator) -> Vec<LayerImage> {
     let (w, h) = (sums.width as usize, sums.height as usize);
-    let mut out: Vec<LayerImage> = Layer::ALL.iter().map(|l| LayerImage::new(l.name(), w, h)).collect();
-    let mut sem = LayerImage::new("sem", w, h);
-    for i in 0..w * h {
-        for (k, l) in Layer::ALL.iter().enumerate() {
-            let m = sums.mean(i, *l);
-            out[k].rgb[i] = [m[0] as f32, m[1] as f32, m[2] as f32];
-        }
+    computed_layers(sums).iter().map(|layer| layer.to_image(w, h)).collect()
+}
+
+/// The layers of [`layer_images`], each pixel made from the sums when it is read.
+pub fn computed_layers(sums: &Accumulator) -> Vec<ComputedLayer<'_>> {
+    let f32s = |m: [f64; 3]| [m[0] as f32, m[1] as f32, m[2] as f32];
+    let mut out: Vec<ComputedLayer> =
+        Layer::ALL.iter().map(|&l| ComputedLayer::new(l.name(), move |i| f32s(sums.mean(i, l)))).collect();
+    out.push(ComputedLayer::new("total", move |i| f32s(sums.mean_total(i))));
+    out.push(ComputedLayer::new("sem", move |i| {
         let s = sums.sem2(i);
-        let s = if s.is_finite() { s.sqrt() as f32 } else { 0.0 };
-        sem.rgb[i] = [s; 3];
-    }
-    out.push(total_layer(sums));
-    out.push(sem);
-    for layer in sums.aux.layout().layers().iter().filter(|l| l.name != BLUR_SQUARES_LAYER) {
-        let mut image = LayerImage::new(layer.name.clone(), w, h);
-        for (i, px) in image.rgb.iter_mut().enumerate() {
-            let m = sums.aux_mean(i, &layer.name).expect("the layer is in the layout");
-            *px = if layer.name == BLUR_LAYER {
-                [(BIAS_PER_DIFFERENCE * m[0]) as f32; 3]
+        [if s.is_finite() { s.sqrt() as f32 } else { 0.0 }; 3]
+    }));
+    let layout = sums.aux.layout();
+    for layer in layout.layers().iter().filter(|l| l.name != BLUR_SQUARES_LAYER) {
+        let offset = layout.offset(&layer.name).expect("the layer is in the layout");
+        let (grey, blur) = (layer.channels != 3, layer.name == BLUR_LAYER);
+        out.push(ComputedLayer::new(layer.name.clone(), move |i| {
+            let n = sums.pixels[i].phases.max(1) as f64;
+            let s = &sums.aux.pixel(i)[offset..];
+            if blur {
+                [(BIAS_PER_DIFFERENCE * (s[0] / n)) as f32; 3]
+            } else if grey {
+                [(s[0] / n) as f32; 3]
             } else {
-                [m[0] as f32, m[1] as f32, m[2] as f32]
-            };
-        }
-        out.push(image);
+                [(s[0] / n) as f32, (s[1] / n) as f32, (s[2] / n) as f32]
+            }
+        }));
     }
     out
 }
 
-/// Bytes per pixel that writing the EXR of sums with the auxiliary layers `layout` holds besides the sums: the
-/// file's f32 channels of `layer_images` with the lit and phases layers, and the one layer being made into
-/// channels.
-pub fn exr_bytes_per_pixel(layout: &AuxLayout) -> usize {
-    let aux = layout.layers().iter().filter(|l| l.name != BLUR_SQUARES_LAYER).count();
-    let layers = Layer::ALL.len() + 2 + aux + 2;
-    (layers + 1) * std::mem::size_of::<[f32; 3]>()
-}
+/// Bytes per pixel that a save of the outputs holds besides the sums, at most: the preview's total layer in f32
+/// and its 8-bit pixels. The EXR's layers are made a row at a time as the file is compressed.
+pub const SAVE_BYTES_PER_PIXEL: usize = std::mem::size_of::<[f32; 3]>() + 4;
 
 /// The mean total image as the `total` layer, alone: the preview's image.
 pub fn total_layer(sums: &Accumulator) -> LayerImage {
@@ -60,21 +59,23 @@ pub fn total_layer(sums: &Accumulator) -> LayerImage {
 
 /// The lit mask as a grey layer: 1 where a pixel sees a light, 0 where δ unlit counts it.
 pub fn lit_layer(lit: &LitMask) -> LayerImage {
-    let mut image = LayerImage::new(LIT_LAYER, lit.width as usize, lit.height as usize);
-    for (i, px) in image.rgb.iter_mut().enumerate() {
-        *px = [if lit.is_lit(i) { 1.0 } else { 0.0 }; 3];
-    }
-    image
+    computed_lit_layer(lit).to_image(lit.width as usize, lit.height as usize)
+}
+
+/// [`lit_layer`], each pixel made when it is read.
+pub fn computed_lit_layer(lit: &LitMask) -> ComputedLayer<'_> {
+    ComputedLayer::new(LIT_LAYER, move |i| [if lit.is_lit(i) { 1.0 } else { 0.0 }; 3])
 }
 
 /// Phases per pixel as a grey layer: where adaptive tiles spent the work (uniform where every tile rendered
 /// every round).
 pub fn phases_layer(sums: &Accumulator) -> LayerImage {
-    let mut image = LayerImage::new(PHASES_LAYER, sums.width as usize, sums.height as usize);
-    for (px, p) in image.rgb.iter_mut().zip(&sums.pixels) {
-        *px = [p.phases as f32; 3];
-    }
-    image
+    computed_phases_layer(sums).to_image(sums.width as usize, sums.height as usize)
+}
+
+/// [`phases_layer`], each pixel made when it is read.
+pub fn computed_phases_layer(sums: &Accumulator) -> ComputedLayer<'_> {
+    ComputedLayer::new(PHASES_LAYER, move |i| [sums.pixels[i].phases as f32; 3])
 }
 
 /// The name of the phases-per-pixel EXR layer.
