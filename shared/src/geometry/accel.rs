@@ -163,6 +163,8 @@ struct ObvhsTriangles {
     bvh: CwBvh,
     triangles: Vec<Triangle>,
     data: Vec<TriangleData>,
+    /// Each triangle's place in `triangles`, by the index it was added with: the BVH's copy is the only one.
+    slot: Vec<u32>,
 }
 
 impl ObvhsTriangles {
@@ -178,7 +180,8 @@ impl ObvhsTriangles {
     }
 }
 
-/// The BVH over the triangles, by backend; `None` when the scene has no triangles.
+/// The BVH over the triangles, by backend, which also keeps their vertices and objects; `None` when the scene
+/// has no triangles.
 enum TriangleAccel {
     None,
     Obvhs(ObvhsTriangles),
@@ -186,13 +189,39 @@ enum TriangleAccel {
     Embree(super::embree::EmbreeTriangles),
 }
 
+impl TriangleAccel {
+    /// Number of triangles.
+    fn count(&self) -> usize {
+        match self {
+            TriangleAccel::None => 0,
+            TriangleAccel::Obvhs(o) => o.slot.len(),
+            #[cfg(feature = "embree")]
+            TriangleAccel::Embree(e) => e.count(),
+        }
+    }
+
+    /// The object and the vertices of the triangle added `index`-th; panics past the last, as indexing does.
+    #[inline]
+    fn triangle(&self, index: u32) -> (u32, [Vec3; 3]) {
+        match self {
+            TriangleAccel::None => panic!("triangle {index} of a geometry without triangles"),
+            TriangleAccel::Obvhs(o) => {
+                let s = o.slot[index as usize] as usize;
+                let t = &o.triangles[s];
+                (o.data[s].object, [t.v0.into(), t.v1.into(), t.v2.into()])
+            }
+            #[cfg(feature = "embree")]
+            TriangleAccel::Embree(e) => e.triangle(index),
+        }
+    }
+}
+
 /// All surfaces of a scene, ready for intersection queries.
 pub struct SceneGeometry {
     backend: Backend,
+    /// The triangles' BVH, vertices and objects.
     accel: TriangleAccel,
-    /// Triangles' vertices and their objects in the order they were added, for light sampling and shading.
-    by_index: Vec<(u32, [Vec3; 3])>,
-    /// The triangles' vertex normals, by the same index.
+    /// The triangles' vertex normals, by the index they were added with.
     normals: PerTriangle<[Vec3; 3]>,
     /// Which triangle edges end their surface, for the photons' gather discs.
     edges: SurfaceEdges,
@@ -250,29 +279,30 @@ impl SceneGeometry {
             };
             extent = extent.max(c.abs().max_element() + r);
         }
-        let accel = if triangles.is_empty() {
-            TriangleAccel::None
-        } else {
-            match backend {
-                Backend::Obvhs(preset) => TriangleAccel::Obvhs(build_obvhs(&triangles, preset, extent)),
-                #[cfg(feature = "embree")]
-                Backend::Embree => TriangleAccel::Embree(
-                    super::embree::EmbreeTriangles::build(&triangles)
-                        .map_err(|message| AccelError::Build { backend: "embree", message })?,
-                ),
-            }
-        };
         let edges = SurfaceEdges::find(&triangles);
         let (lo, hi) = triangles
             .iter()
             .flat_map(|(_, t)| *t)
             .fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(lo, hi), v| (lo.min(v), hi.max(v)));
+        // The backend keeps the only copy of the triangles: obvhs its own in BVH order, so the list as added is
+        // let go once that is made.
+        let accel = if triangles.is_empty() {
+            TriangleAccel::None
+        } else {
+            match backend {
+                Backend::Obvhs(preset) => TriangleAccel::Obvhs(build_obvhs(triangles, preset, extent)),
+                #[cfg(feature = "embree")]
+                Backend::Embree => TriangleAccel::Embree(
+                    super::embree::EmbreeTriangles::build(triangles)
+                        .map_err(|message| AccelError::Build { backend: "embree", message })?,
+                ),
+            }
+        };
         let pad = Vec3::splat(TRIANGLE_BOX_MARGIN * (1.0 + extent));
         Ok(SceneGeometry {
             triangle_box: (lo - pad, hi + pad),
             backend,
             accel,
-            by_index: triangles,
             normals,
             edges,
             culling: AnalyticCulling::new(&analytic),
@@ -326,18 +356,18 @@ impl SceneGeometry {
 
     /// Number of triangles.
     pub fn triangle_count(&self) -> usize {
-        self.by_index.len()
+        self.accel.count()
     }
 
     /// A triangle by the index it was added with.
     #[inline]
     pub fn triangle(&self, index: u32) -> MeshTriangle {
-        MeshTriangle { v: self.by_index[index as usize].1, n: self.normals.get(index).copied() }
+        MeshTriangle { v: self.accel.triangle(index).1, n: self.normals.get(index).copied() }
     }
 
     /// The object a triangle (by the index it was added with) belongs to.
     pub fn object_of_triangle(&self, index: u32) -> u32 {
-        self.by_index[index as usize].0
+        self.accel.triangle(index).0
     }
 
     /// The edges of a triangle (by the index it was added with) beyond which its surface does not go on: bit i
@@ -411,10 +441,10 @@ impl SceneGeometry {
             #[cfg(feature = "embree")]
             TriangleAccel::Embree(e) => {
                 let h = e.intersect(&Ray { t_max, ..*ray }, self.t_min)?;
-                let (object, tri) = &self.by_index[h.index as usize];
+                let (object, tri) = e.triangle(h.index);
                 let v = tri.map(Vec3A::from);
                 let normals = self.normals.get(h.index).copied();
-                Some(triangle_hit(ray, h.t, v, normals, || (h.u, h.v), *object, h.index))
+                Some(triangle_hit(ray, h.t, v, normals, || (h.u, h.v), object, h.index))
             }
         }
     }
@@ -542,7 +572,7 @@ fn bvh_ray(origin: Vec3A, direction: Vec3A, t_min: f32, t_max: f32) -> BvhRay {
 const BVH_BOX_MARGIN: f32 = 1e-5;
 
 /// obvhs's `build_cwbvh_from_tris` over triangle boxes widened by `BVH_BOX_MARGIN` × (1 + `extent`).
-fn build_obvhs(triangles: &[(u32, [Vec3; 3])], preset: ObvhsPreset, extent: f32) -> ObvhsTriangles {
+fn build_obvhs(triangles: Vec<(u32, [Vec3; 3])>, preset: ObvhsPreset, extent: f32) -> ObvhsTriangles {
     use obvhs::{bvh2::reinsertion::ReinsertionOptimizer, cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh, ploc::PlocBuilder};
     // Each intermediate (boxes, the binary BVH) is dropped as soon as the next is built, and the triangles are
     // converted straight into BVH order: a large mesh's build peaks at little more than what it keeps.
@@ -576,7 +606,14 @@ fn build_obvhs(triangles: &[(u32, [Vec3; 3])], preset: ObvhsPreset, extent: f32)
     let triangles_bvh = bvh.primitive_indices.iter().map(|&i| triangle(&triangles[i as usize].1)).collect();
     let data =
         bvh.primitive_indices.iter().map(|&i| TriangleData { object: triangles[i as usize].0, index: i }).collect();
-    ObvhsTriangles { bvh, triangles: triangles_bvh, data }
+    // With spatial splits a triangle may lie in several leaves; any of its places will do.
+    let mut slot = vec![u32::MAX; triangles.len()];
+    drop(triangles);
+    for (place, &i) in bvh.primitive_indices.iter().enumerate() {
+        slot[i as usize] = place as u32;
+    }
+    debug_assert!(slot.iter().all(|&s| s != u32::MAX), "every triangle is in a leaf");
+    ObvhsTriangles { bvh, triangles: triangles_bvh, data, slot }
 }
 
 /// The hit on triangle `v` at distance `t`; `uv` gives the hit's barycentrics (computed only when the

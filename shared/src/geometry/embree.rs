@@ -11,6 +11,8 @@ use glam::Vec3;
 /// A scene's triangles in an Embree BVH.
 pub(super) struct EmbreeTriangles {
     scene: Scene<'static>,
+    /// The triangles' objects and vertices by index, for shading and light sampling.
+    by_index: Vec<(u32, [Vec3; 3])>,
 }
 
 /// A ray's closest triangle as Embree reports it.
@@ -26,7 +28,7 @@ pub(super) struct EmbreeHit {
 impl EmbreeTriangles {
     /// Builds the BVH over `triangles` (not empty), each triangle's three vertices stored apart so that the
     /// primitive id is the triangle's index. The error is Embree's reason; the caller names the backend.
-    pub(super) fn build(triangles: &[(u32, [Vec3; 3])]) -> Result<Self, String> {
+    pub(super) fn build(triangles: Vec<(u32, [Vec3; 3])>) -> Result<Self, String> {
         let count = triangles.len();
         let vertices = count
             .checked_mul(3)
@@ -38,7 +40,7 @@ impl EmbreeTriangles {
             let mut buffer = mesh
                 .set_new_buffer::<[f32; 3]>(BufferUsage::VERTEX, 0, Format::FLOAT3, 12, vertices)
                 .map_err(|e| format!("vertex buffer of {vertices} vertices: {e}"))?;
-            for (slot, (_, t)) in buffer.chunks_exact_mut(3).zip(triangles) {
+            for (slot, (_, t)) in buffer.chunks_exact_mut(3).zip(&triangles) {
                 for (out, v) in slot.iter_mut().zip(t) {
                     *out = v.to_array();
                 }
@@ -62,12 +64,23 @@ impl EmbreeTriangles {
         scene.commit();
         // Embree reports failures of the build (out of memory, above all) through the device, not the call.
         match device.get_error() {
-            embree3::Error::NONE => Ok(EmbreeTriangles { scene }),
+            embree3::Error::NONE => Ok(EmbreeTriangles { scene, by_index: triangles }),
             e => Err(format!("building the BVH over {count} triangles: {e}")),
         }
     }
 
     /// The closest triangle along the ray with t in [t_min, ray.t_max].
+    /// Number of triangles.
+    pub(super) fn count(&self) -> usize {
+        self.by_index.len()
+    }
+
+    /// The object and vertices of the triangle added `index`-th.
+    #[inline]
+    pub(super) fn triangle(&self, index: u32) -> (u32, [Vec3; 3]) {
+        self.by_index[index as usize]
+    }
+
     #[inline]
     pub(super) fn intersect(&self, ray: &Ray, t_min: f32) -> Option<EmbreeHit> {
         let mut rh =
