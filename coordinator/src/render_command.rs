@@ -986,7 +986,8 @@ fn memory_plan(
             // size again once it has allocated.
             let depth = if settings.estimator == Estimator::Path { 0 } else { settings.backward_diffuse_depth };
             let one = EngineConfig::for_method(ParallelMethod::Sync, 1, 1, machine::all_cores())?;
-            let need = of_pixels(one.bytes_per_pixel(pixels, depth, &aux));
+            // Its phase buffers are sized for the whole image, even where its phases are capped.
+            let need = of_pixels(one.bytes_per_pixel(pixels, pixels, depth, &aux));
             if let Some(budget) = MemoryBudget::new(args.memory_limit) {
                 if need > budget.bytes() {
                     bail!("{}", memory::over_limit(budget, need, base, ""));
@@ -999,7 +1000,8 @@ fn memory_plan(
             let threads = args.threads.unwrap_or(cores.len());
             let need = |t: usize| -> Result<u64> {
                 let c = EngineConfig::for_method(method, t, args.group_size, cores.clone())?;
-                Ok(of_pixels(c.bytes_per_pixel(pixels, settings.backward_diffuse_depth, &aux)))
+                let round = worker::parallel::engine::max_round_pixels(pixels);
+                Ok(of_pixels(c.bytes_per_pixel(pixels, round, settings.backward_diffuse_depth, &aux)))
             };
             let threads = match MemoryBudget::new(args.memory_limit) {
                 Some(budget) => fit_memory(budget, method, threads, base, need, notes)?,

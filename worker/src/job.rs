@@ -74,6 +74,7 @@ pub fn engine_config(job: &Job) -> Result<EngineConfig, String> {
     config.processes_per_pixel = spec.processes_per_pixel.max(1);
     config.process_rank = spec.process_rank.min(config.processes_per_pixel - 1);
     config.resumed_phases = spec.resumed_phases;
+    config.snapshots = true;
     Ok(config)
 }
 
@@ -83,7 +84,9 @@ fn memory_need(config: &EngineConfig, scene: &Scene, settings: &photonfarm::rend
     let base = photonfarm::render::memory::current_rss_bytes().unwrap_or(0);
     let pixels = scene.camera.pixel_count();
     let aux = photonfarm::accumulation::AuxLayout::for_scene(scene, settings.spectral_bands);
-    (base + (config.bytes_per_pixel(pixels, settings.backward_diffuse_depth, &aux) * pixels as f64) as u64, base)
+    let round = crate::parallel::engine::max_round_pixels(pixels);
+    let per_pixel = config.bytes_per_pixel(pixels, round, settings.backward_diffuse_depth, &aux);
+    (base + (per_pixel * pixels as f64) as u64, base)
 }
 
 /// Refuses an engine of `config` that needs `need` bytes (`base` of them held now) when that does not fit in

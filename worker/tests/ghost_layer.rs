@@ -150,8 +150,8 @@ fn gather_buffers(config: &EngineConfig) -> usize {
     config.threads_per_group + config.shared_maps as usize
 }
 
-/// `EngineConfig::bytes_per_pixel` as it was before auxiliary layers: the merged sums, the announced share of
-/// the phases, the held-back light vertices, and per pixel a group
+/// `EngineConfig::bytes_per_pixel` without auxiliary layers or snapshots: the merged sums, the announced share of
+/// the phases, the light balance, the held-back light vertices, and per pixel a group
 /// covers its phase values, sums, mask and phase count entries, gathered light, and its photons (held twice,
 /// eight grid entries each in buffers with room to double, half a hash bucket, a u32 of its place in grid order).
 fn estimate_without_auxiliary_layers(config: &EngineConfig, pixels: usize, backward_diffuse_depth: u32) -> f64 {
@@ -167,9 +167,11 @@ fn estimate_without_auxiliary_layers(config: &EngineConfig, pixels: usize, backw
         + backward_diffuse_depth as usize * photon;
     // The light vertices held back for sorted gathers, at most one per image pixel.
     let held_back = worker::parallel::thread_gathers::held_back_bytes_per_pixel(pixels);
-    // The share of the pixels' phases the coordinator announces to a worker process.
+    // The share of the pixels' phases the coordinator announces to a worker process, and the run's light
+    // balance.
     let share = photonfarm::pbpm::ProcessShare::BYTES_PER_PIXEL;
-    (std::mem::size_of::<PixelSums>() + share + coverage * per_pixel) as f64 + held_back
+    let balance = photonfarm::render::light_balance::LightBalance::BYTES_PER_PIXEL;
+    (std::mem::size_of::<PixelSums>() + share + balance + coverage * per_pixel) as f64 + held_back
 }
 
 #[test]
@@ -188,11 +190,15 @@ fn the_memory_estimate_adds_exactly_the_ghost_planes_and_covers_what_an_engine_w
         let blur = 2.0 * (8.0 + coverage * (8.0 + 4.0 + 4.0 * gather_buffers(&config) as f64));
         let before = estimate_without_auxiliary_layers(&config, pixels, bdd) + blur;
         // No ghost planes: the estimate is the one without auxiliary layers and the blur layers.
-        assert_eq!(config.bytes_per_pixel(pixels, bdd, &AuxLayout::for_scene(&cornell, 0)), before, "{method:?}");
+        assert_eq!(
+            config.bytes_per_pixel(pixels, pixels, bdd, &AuxLayout::for_scene(&cornell, 0)),
+            before,
+            "{method:?}"
+        );
         // Ghost planes: 3 f64 sums in the merged image, and per pixel a group covers 3 f64 sums and f32 buffers
         // of the camera pass and of each buffer of gathered light, twice there (the ghost layer and the visible
         // light registered on the sensor); a group with a mask holds a u32 per image pixel for the sensor.
-        let estimate = config.bytes_per_pixel(pixels, bdd, &AuxLayout::for_scene(&lens, 0));
+        let estimate = config.bytes_per_pixel(pixels, pixels, bdd, &AuxLayout::for_scene(&lens, 0));
         let gathered = 2.0 * 4.0 * gather_buffers(&config) as f64;
         let tables = if config.masks { 4.0 * config.groups as f64 } else { 0.0 };
         assert_eq!(estimate, before + tables + 3.0 * (8.0 + coverage * (8.0 + 4.0 + gathered)), "{method:?}");

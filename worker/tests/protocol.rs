@@ -84,12 +84,39 @@ fn stopping_rounds_at_random_moments_does_not_change_the_expected_image() {
 }
 
 #[test]
+fn only_an_engine_with_snapshots_keeps_the_changed_pixels_earlier_sums_and_its_estimate_counts_them() {
+    let sc = scene("caustic.toml", 64);
+    let settings = RenderSettings::for_scene(&sc, Method::Pbpm, 4);
+    let aux = AuxLayout::for_scene(&sc, settings.spectral_bands);
+    let pixels = 64 * 64;
+    let held = |snapshots: bool| {
+        let mut config = EngineConfig::for_method(ParallelMethod::TwoLevel, 2, 1, vec![0, 1]).unwrap();
+        config.snapshots = snapshots;
+        let estimate = config.bytes_per_pixel(pixels, pixels, settings.backward_diffuse_depth, &aux) * pixels as f64;
+        let mut engine = ParallelEngine::new(&sc, settings, config).unwrap();
+        engine.run_round(&AtomicBool::new(false), None);
+        let held = engine.capacity_bytes() as f64;
+        assert!(estimate >= held, "snapshots {snapshots}: estimated {estimate} bytes, holds {held}");
+        (held, estimate, engine.take_changed().len())
+    };
+    let (with, with_estimate, changed) = held(true);
+    let (without, without_estimate, none) = held(false);
+    eprintln!("held {with} with snapshots, {without} without; estimated {with_estimate}, {without_estimate}");
+    // One round over the whole image changes every pixel: a snapshot's engine keeps each one's earlier sums.
+    assert_eq!((changed, none), (pixels, 0));
+    let sums = photonfarm::accumulation::Accumulator::bytes_per_pixel(&aux) * pixels;
+    assert!(with - without >= sums as f64, "the earlier sums are {sums} bytes; held {with} against {without}");
+    assert!(with_estimate - without_estimate >= sums as f64);
+}
+
+#[test]
 fn async_memory_grows_with_threads_and_the_other_methods_do_not() {
     let sc = scene("caustic.toml", 64);
     let settings = RenderSettings::for_scene(&sc, Method::Pbpm, 4);
     let bytes = |method: ParallelMethod, threads: usize| {
         let config = EngineConfig::for_method(method, threads, 2, vec![0, 1]).unwrap();
         let estimate = config.bytes_per_pixel(
+            64 * 64,
             64 * 64,
             settings.backward_diffuse_depth,
             &AuxLayout::for_scene(&sc, settings.spectral_bands),

@@ -192,6 +192,13 @@ impl Changes {
         self.pixels.len()
     }
 
+    /// Bytes held, as allocated.
+    pub fn capacity_bytes(&self) -> usize {
+        self.pixels.capacity() * 4
+            + self.before.capacity() * std::mem::size_of::<PixelSums>()
+            + self.before_aux.capacity() * 8
+    }
+
     /// True when no pixel is kept.
     pub fn is_empty(&self) -> bool {
         self.pixels.is_empty()

@@ -130,6 +130,9 @@ pub struct LightBalance {
 }
 
 impl LightBalance {
+    /// Bytes a run's light balance holds per image pixel: each pixel's sums at its previous step.
+    pub const BYTES_PER_PIXEL: usize = std::mem::size_of::<PixelMoments>();
+
     /// A controller of L alone that starts from `start` light paths per pixel.
     pub fn new(start: f32) -> Self {
         LightBalance {

@@ -9,6 +9,7 @@ use photonfarm::accumulation::delta::Changes;
 use photonfarm::accumulation::{Accumulator, AuxLayout};
 use photonfarm::pbpm::ProcessShare;
 use photonfarm::ray_map::Recorder;
+use photonfarm::render::light_balance::LightBalance;
 use photonfarm::render::record::StageSeconds;
 use photonfarm::render::session::{Deadline, Progressive};
 use photonfarm::render::{ActiveTiles, RayTotals, RenderSettings};
@@ -42,6 +43,9 @@ pub struct EngineConfig {
     pub process_rank: u32,
     /// Phases every pixel had before this run (a resumed run), for the radius schedule.
     pub resumed_phases: u32,
+    /// Keeps, for the next snapshot, the earlier sums of the pixels the rounds change (a worker process, whose
+    /// snapshots are deltas); an engine in the coordinator's process keeps none.
+    pub snapshots: bool,
 }
 
 /// Why an engine configuration cannot run.
@@ -79,6 +83,7 @@ impl EngineConfig {
             processes_per_pixel: 1,
             process_rank: 0,
             resumed_phases: 0,
+            snapshots: false,
         })
     }
 
@@ -87,14 +92,22 @@ impl EngineConfig {
         self.groups * self.threads_per_group
     }
 
-    /// Bytes per image pixel of an engine with this configuration over an image of `pixels` pixels and the
-    /// auxiliary layers of `aux`: the merged sums, plus each group's per-pixel buffers over the pixels it renders
-    /// (its mask, or the whole image without masks) and its photons. Known before anything is allocated, so
+    /// Bytes per image pixel of an engine with this configuration over an image of `pixels` pixels, rounds of at
+    /// most `round_pixels` (`max_round_pixels`) and the auxiliary layers of `aux`: over the whole image, the
+    /// merged sums, the process share, the run's light balance and, with snapshots, the changed pixels' earlier
+    /// sums; over the pixels of a round, each group's per-pixel buffers over the pixels it renders (its mask, or
+    /// all of the round's without masks) and its photons. Known before anything is allocated, so
     /// `--memory-limit` can be checked up front.
-    pub fn bytes_per_pixel(&self, pixels: usize, backward_diffuse_depth: u32, aux: &AuxLayout) -> f64 {
+    pub fn bytes_per_pixel(
+        &self,
+        pixels: usize,
+        round_pixels: usize,
+        backward_diffuse_depth: u32,
+        aux: &AuxLayout,
+    ) -> f64 {
         use photonfarm::accumulation::PixelSums;
         use photonfarm::integrator::LayerValues;
-        // Masks partition the image among the groups; without masks every group covers all of it.
+        // Masks partition a round's pixels among the groups; without masks every group covers all of them.
         let coverage = if self.masks { 1 } else { self.groups };
         // A photon is held twice (the backward pass's list, then the map's copy), and the grid enters it in at
         // most eight cells (its sphere spans at most two cells of three mean radii per axis), each entry a u32
@@ -104,14 +117,14 @@ impl EngineConfig {
         // Gathered light: a plain buffer per thread of the group for its own paths, and the map's atomic one
         // where other groups add into it; each holds (indirect, caustic) RGB in f32 and the auxiliary channels,
         // and with a ghost layer the visible light registered on the sensor. A group with a mask then also
-        // holds the sensor's image-pixel-to-mask table.
+        // holds the sensor's image-pixel-to-mask table, over the whole image.
         let sensor = aux.offset(photonfarm::ghost::GHOST_LAYER).is_some();
         let gather_buffers = self.threads_per_group + self.shared_maps as usize;
         let gathered = gather_buffers * (6 * 4 + aux.phase_bytes_per_pixel() + if sensor { 12 } else { 0 });
         let sensor_tables = if sensor && self.masks { self.groups * 4 } else { 0 };
-        // The camera pass's values and replicate, and the sums; the mask and the phases before the deal (over
-        // every process and this one's own) take 12 bytes.
-        let per_pixel = std::mem::size_of::<LayerValues>()
+        // Per pixel of a round: the camera pass's values and replicate, the group's sums, and the mask and the
+        // phases before the deal (over every process and this one's own), 12 bytes.
+        let per_round_pixel = std::mem::size_of::<LayerValues>()
             + 1
             + std::mem::size_of::<PixelSums>()
             + 12
@@ -119,11 +132,16 @@ impl EngineConfig {
             + backward_diffuse_depth as usize * photon
             + aux.phase_bytes_per_pixel()
             + aux.sum_bytes_per_pixel();
+        // Snapshots keep a changed pixel's flag, index and earlier sums, at most every pixel's.
+        let snapshot = if self.snapshots { 1 + 4 + Accumulator::bytes_per_pixel(aux) } else { 0 };
         // The light vertices held back for sorted gathers: bounded over the whole engine, not per group.
         let held_back = super::thread_gathers::held_back_bytes_per_pixel(pixels);
         // A worker process also holds the share of the pixels' phases the coordinator announces to it.
         let share = ProcessShare::BYTES_PER_PIXEL;
-        (Accumulator::bytes_per_pixel(aux) + sensor_tables + share + coverage * per_pixel) as f64 + held_back
+        let whole_image =
+            Accumulator::bytes_per_pixel(aux) + sensor_tables + share + LightBalance::BYTES_PER_PIXEL + snapshot;
+        let round_share = round_pixels.min(pixels) as f64 / pixels.max(1) as f64;
+        whole_image as f64 + (coverage * per_round_pixel) as f64 * round_share + held_back
     }
 
     /// The layout in words, e.g. "2 groups × 1 thread, 32-pixel tile masks, shared maps".
@@ -153,6 +171,16 @@ pub const PHASE_TARGET: Duration = Duration::from_secs(1);
 /// time per pixel-phase). Every image up to 512 × 512 (every shipped scene) keeps whole-image masks, and so
 /// its images for a fixed seed.
 pub const MIN_CAPPED_ROUND_PIXELS: usize = 512 * 512;
+
+/// The most pixels a round renders under `PhaseCap::Duration`, however fast its phases: the groups' per-pixel
+/// buffers and photons then stay within what the memory estimate counts for a round (a 1080p image renders
+/// whole; a 4K image a quarter at a time at most).
+pub const MAX_CAPPED_ROUND_PIXELS: usize = 2048 * 1024;
+
+/// The most pixels a round of the parallel engine renders on an image of `pixels` pixels.
+pub fn max_round_pixels(pixels: usize) -> usize {
+    pixels.min(MAX_CAPPED_ROUND_PIXELS)
+}
 
 /// How many pixels a group's phase covers at most (docs/parallel-engine.md, "Phase cap"): beyond it a round
 /// renders only the tiles with the fewest phases.
@@ -242,6 +270,7 @@ impl<'s> ParallelEngine<'s> {
             groups.push(Group::new(k, cores, slot.take_owner(), aux.clone())?);
         }
         let share = ProcessShare::planned(config.processes_per_pixel, config.process_rank, config.resumed_phases);
+        let changed = if config.snapshots { vec![false; scene.camera.pixel_count()] } else { Vec::new() };
         Ok(ParallelEngine {
             scene,
             settings,
@@ -258,7 +287,7 @@ impl<'s> ParallelEngine<'s> {
             between_nanos: 0,
             last_round_end: None,
             recorder: None,
-            changed: vec![false; scene.camera.pixel_count()],
+            changed,
             changes: Changes::default(),
         })
     }
@@ -304,7 +333,7 @@ impl<'s> ParallelEngine<'s> {
             PhaseCap::Pixels(n) => n.saturating_mul(groups_per_round),
             PhaseCap::Duration(target) => {
                 let per_group = self.nanos_per_pixel_phase.map_or(0.0, |r| target.as_nanos() as f64 / r);
-                ((per_group * groups_per_round as f64) as usize).max(MIN_CAPPED_ROUND_PIXELS)
+                ((per_group * groups_per_round as f64) as usize).clamp(MIN_CAPPED_ROUND_PIXELS, MAX_CAPPED_ROUND_PIXELS)
             }
         };
         if (w as usize * h as usize) <= max_pixels {
@@ -355,7 +384,8 @@ impl<'s> ParallelEngine<'s> {
     pub fn capacity_bytes(&mut self) -> usize {
         let sums = self.sums.pixels.capacity() * std::mem::size_of::<photonfarm::accumulation::PixelSums>()
             + self.sums.aux.capacity_bytes();
-        sums + self.groups.iter_mut().zip(&self.slots).map(|(g, s)| g.capacity_bytes(s)).sum::<usize>()
+        let snapshots = self.changed.capacity() + self.changes.capacity_bytes();
+        sums + snapshots + self.groups.iter_mut().zip(&self.slots).map(|(g, s)| g.capacity_bytes(s)).sum::<usize>()
     }
 
     /// One synchronisation round: deal masks, run every group until one has finished K phases (or the
@@ -454,10 +484,12 @@ impl<'s> ParallelEngine<'s> {
             self.waiting_nanos += per_group * round_end.duration_since(end).as_nanos() as u64;
         }
         self.measure_phases(&stats_before);
-        for g in &self.groups {
-            for &p in g.mask() {
-                if !std::mem::replace(&mut self.changed[p as usize], true) {
-                    self.changes.keep(p as usize, &self.sums);
+        if self.config.snapshots {
+            for g in &self.groups {
+                for &p in g.mask() {
+                    if !std::mem::replace(&mut self.changed[p as usize], true) {
+                        self.changes.keep(p as usize, &self.sums);
+                    }
                 }
             }
         }
@@ -470,6 +502,7 @@ impl<'s> ParallelEngine<'s> {
 
     /// The pixels whose sums changed since the previous call (every pixel a round's masks held), in increasing
     /// order with the sums each had at that call, and forgets them: only their sums differ from the sums then.
+    /// None without `EngineConfig::snapshots`.
     pub fn take_changed(&mut self) -> Changes {
         let changes = std::mem::take(&mut self.changes).into_sorted();
         for i in changes.pixels() {
@@ -547,7 +580,8 @@ impl Progressive for ParallelEngine<'_> {
     fn bytes_per_pixel(&self) -> f64 {
         // A formula, not a measurement: exact capacities need the owner tokens (`capacity_bytes`, between rounds).
         let pixels = self.scene.camera.pixel_count();
-        self.config.bytes_per_pixel(pixels, self.settings.backward_diffuse_depth, self.sums.aux.layout())
+        let round = max_round_pixels(pixels);
+        self.config.bytes_per_pixel(pixels, round, self.settings.backward_diffuse_depth, self.sums.aux.layout())
     }
 
     fn threads(&self) -> usize {
