@@ -3,7 +3,7 @@
 use anyhow::{Context, Result};
 use photonfarm::accumulation::{relative_mean_difference, relative_rmse, Accumulator, LitMask};
 use photonfarm::color::luminance_f64;
-use photonfarm::image_io::exr_file::{find_layer, read_exr, write_computed_exr, ComputedLayer};
+use photonfarm::image_io::exr_file::{find_layer, read_exr, write_computed_exr, Compressing, ComputedLayer};
 use photonfarm::image_io::preview::{auto_exposure, write_preview_png};
 use photonfarm::image_io::OutputError;
 use photonfarm::render::images::luminance_of;
@@ -76,7 +76,8 @@ impl Reference {
 /// large image's EXR takes seconds), then image.exr (with the lit mask as its `lit` layer and the phases per
 /// pixel as its `phases` layer) and run.json; each file is replaced atomically. Besides the sums it holds the
 /// preview's total layer, then what `between` holds, then a row of each of the EXR's layers, never two of them
-/// at once.
+/// at once. Nothing renders meanwhile (it is called between an in-process engine's steps, and at the end), so
+/// the EXR is compressed on every core.
 pub fn save(
     dir: &Path,
     sums: &Accumulator,
@@ -86,7 +87,7 @@ pub fn save(
 ) -> Result<()> {
     write_preview(dir, sums)?;
     between()?;
-    write_image_and_record(dir, sums, lit, record, None)?;
+    write_image_and_record(dir, sums, lit, record, Compressing::OnEveryCore, None)?;
     Ok(())
 }
 
@@ -121,10 +122,11 @@ pub fn write_image_and_record(
     sums: &Accumulator,
     lit: &LitMask,
     record: &RunRecord,
+    compressing: Compressing,
     abandon: Option<&AtomicBool>,
 ) -> Result<Written> {
     let size = (sums.width as usize, sums.height as usize);
-    match write_computed_exr(&dir.join("image.exr"), size, &exr_layers(sums, lit), abandon) {
+    match write_computed_exr(&dir.join("image.exr"), size, &exr_layers(sums, lit), compressing, abandon) {
         Err(OutputError::Abandoned { .. }) => return Ok(Written::Abandoned),
         written => written?,
     }

@@ -722,7 +722,9 @@ fn save_periodically(
     if stopped() {
         return Ok(());
     }
-    output_folder::write_image_and_record(dir, &sums, lit, record, Some(stopping))?;
+    // The workers render meanwhile: one thread.
+    let compressing = photonfarm::image_io::exr_file::Compressing::OnThisThread;
+    output_folder::write_image_and_record(dir, &sums, lit, record, compressing, Some(stopping))?;
     Ok(())
 }
 

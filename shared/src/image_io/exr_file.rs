@@ -91,17 +91,28 @@ pub fn write_exr(path: &Path, layers: Vec<LayerImage>) -> Result<(), OutputError
     let (width, height) = check_layers(path, &layers)?;
     let computed: Vec<ComputedLayer> =
         layers.iter().map(|layer| ComputedLayer::new(layer.name.clone(), |i| layer.rgb[i])).collect();
-    write_computed_exr(path, (width, height), &computed, None)
+    write_computed_exr(path, (width, height), &computed, Compressing::OnThisThread, None)
+}
+
+/// Where a write compresses the file's blocks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Compressing {
+    /// On the calling thread alone: a write beside a render must not compete with its threads.
+    OnThisThread,
+    /// On every core, the blocks made one after another on the calling thread: for a write while nothing
+    /// renders (between an in-process engine's steps, or at the end of a run).
+    OnEveryCore,
 }
 
 /// Writes `layers` of an image of `size` (width, height) as [`write_exr`] does, making each row of each layer only
-/// as its block is compressed: besides what the layers read, the write holds one row per layer. With `abandon`,
-/// a write still under way when it is set stops at its next block and leaves the file as it was
-/// ([`OutputError::Abandoned`]).
+/// as its block is compressed: besides what the layers read, the write holds one row per layer (and the blocks
+/// being compressed). With `abandon`, a write still under way when it is set stops at its next block and leaves
+/// the file as it was ([`OutputError::Abandoned`]).
 pub fn write_computed_exr(
     path: &Path,
     size: (usize, usize),
     layers: &[ComputedLayer],
+    compressing: Compressing,
     abandon: Option<&AtomicBool>,
 ) -> Result<(), OutputError> {
     let (width, height) = size;
@@ -139,10 +150,13 @@ pub fn write_computed_exr(
 
     let abandoned = || abandon.is_some_and(|a| a.load(Ordering::Relaxed));
     let written = write_atomically(path, |file| {
-        // Sequential compression: the exr crate would otherwise spin up a new thread pool
-        // with one thread per core on every write, competing with the render threads.
         let out = Abandonable { inner: BufWriter::new(file), abandon };
-        image.write().non_parallel().to_buffered(out).map_err(|error| exr_error(path, "write", error))
+        // In parallel the exr crate starts a thread pool of one thread per core for the write.
+        let written = match compressing {
+            Compressing::OnThisThread => image.write().non_parallel().to_buffered(out),
+            Compressing::OnEveryCore => image.write().to_buffered(out),
+        };
+        written.map_err(|error| exr_error(path, "write", error))
     });
     match written {
         Err(_) if abandoned() => Err(OutputError::Abandoned { path: path.to_path_buf() }),
@@ -526,7 +540,7 @@ mod tests {
     }
 
     #[test]
-    fn computed_layers_write_the_same_bytes_as_the_layers_they_compute() {
+    fn computed_layers_write_the_same_bytes_as_the_layers_they_compute_on_one_thread_or_all() {
         // 40 rows: blocks of 16 lines, the last one short, each row made once for its three channels.
         let (w, h) = (9, 40);
         let value = |l: usize, i: usize, c: usize| ((l * 7919 + i * 31 + c) % 1013) as f32 * 0.173 - 20.0;
@@ -539,7 +553,9 @@ mod tests {
         let dir = test_dir("computed");
         let (a, b) = (dir.join("a.exr"), dir.join("b.exr"));
         write_exr(&a, images.clone()).unwrap();
-        write_computed_exr(&b, (w, h), &computed, None).unwrap();
+        write_computed_exr(&b, (w, h), &computed, Compressing::OnThisThread, None).unwrap();
+        assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+        write_computed_exr(&b, (w, h), &computed, Compressing::OnEveryCore, None).unwrap();
         assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
         let mut read = read_exr(&b).unwrap();
         read.sort_by(|x, y| x.name.cmp(&y.name));
@@ -557,14 +573,14 @@ mod tests {
         write_exr(&path, vec![old.clone()]).unwrap();
         let new = [ComputedLayer::new("total", |_| [1.0, 2.0, 3.0])];
         let abandon = AtomicBool::new(true);
-        let error = write_computed_exr(&path, (3, 2), &new, Some(&abandon)).unwrap_err();
+        let error = write_computed_exr(&path, (3, 2), &new, Compressing::OnThisThread, Some(&abandon)).unwrap_err();
         assert!(matches!(error, OutputError::Abandoned { .. }), "{error}");
         assert_eq!(read_exr(&path).unwrap(), vec![old]);
         let files: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
         assert_eq!(files, ["image.exr"]);
         // Not set, the same write goes through.
         abandon.store(false, Ordering::Relaxed);
-        write_computed_exr(&path, (3, 2), &new, Some(&abandon)).unwrap();
+        write_computed_exr(&path, (3, 2), &new, Compressing::OnThisThread, Some(&abandon)).unwrap();
         assert_eq!(read_exr(&path).unwrap()[0].rgb, vec![[1.0, 2.0, 3.0]; 6]);
         let _ = std::fs::remove_dir_all(dir);
     }
