@@ -17,6 +17,8 @@ fn snapshots_of_the_changed_pixels_merge_to_the_sums_of_whole_image_snapshots() 
     let sc = scene("cornell.toml", 64);
     let mut config = EngineConfig::for_method(ParallelMethod::TwoLevel, 2, 1, vec![0, 1]).unwrap();
     config.tile_size = 8;
+    // As a worker's engine, which keeps the changed pixels' earlier sums for its snapshots.
+    config.snapshots = true;
     let mut engine = ParallelEngine::new(&sc, RenderSettings::for_scene(&sc, Method::Pbpm, 5), config).unwrap();
     // 512 pixels per group phase: a round renders 16 of the 64 tiles.
     engine.set_phase_cap(PhaseCap::Pixels(512));
