@@ -65,8 +65,11 @@ impl LitMask {
     /// may cover a sliver of such a pixel that a few rays per pixel miss, and the sliver's rare, bright samples
     /// would then hold most of δ unlit.
     pub fn with_neighbours_lit(self) -> Self {
+        use rayon::prelude::*;
         let (w, h) = (self.width as usize, self.height as usize);
         let lit = (0..w * h)
+            .into_par_iter()
+            .with_min_len(4096)
             .map(|i| {
                 let (x, y) = (i % w, i / w);
                 (y.saturating_sub(1)..(y + 2).min(h))
