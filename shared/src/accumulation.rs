@@ -155,10 +155,21 @@ impl Accumulator {
     pub fn aux_mean(&self, pixel: usize, name: &str) -> Option<[f64; 3]> {
         let layout = self.aux.layout();
         let offset = layout.offset(name)?;
-        let channels = layout.layers().iter().find(|l| l.name == name)?.channels as usize;
+        let channels = layout.layers().iter().find(|l| l.name == name)?.channels;
+        Some(self.aux_mean_at(pixel, offset, channels))
+    }
+
+    /// `aux_mean` of the layer of `channels` channels at `offset` in the auxiliary layout, found once for many
+    /// pixels.
+    #[inline]
+    pub fn aux_mean_at(&self, pixel: usize, offset: usize, channels: u8) -> [f64; 3] {
         let n = self.pixels[pixel].phases.max(1) as f64;
-        let s = &self.aux.pixel(pixel)[offset..offset + channels];
-        Some(if channels == 3 { [s[0] / n, s[1] / n, s[2] / n] } else { [s[0] / n; 3] })
+        let s = &self.aux.pixel(pixel)[offset..offset + channels as usize];
+        if channels == 3 {
+            [s[0] / n, s[1] / n, s[2] / n]
+        } else {
+            [s[0] / n; 3]
+        }
     }
 
     /// Mean of the total at a pixel.

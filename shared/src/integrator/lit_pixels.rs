@@ -110,64 +110,38 @@ fn plain_pixels_with_stride(scene: &Scene, stride: usize) -> Option<Vec<bool>> {
         .map(|c| class(edge(c % (bw + 1), w), edge(c / (bw + 1), h)))
         .collect();
     let boxes = emitter_boxes(scene);
-    // Per block, its pixels' flags in row order within the block.
-    let blocks: Vec<Vec<bool>> = (0..bw * bh)
-        .into_par_iter()
-        .with_min_len(64)
-        .map(|b| {
-            let (bx, by) = (b % bw, b / bw);
-            let (x0, x1, y0, y1) = (edge(bx, w), edge(bx + 1, w), edge(by, h), edge(by + 1, h));
+    // Four corner classes of one surface that neither emits nor has a delta lobe.
+    let same_plain = |k: [u32; 4]| k[0] != COMPLEX && k.iter().all(|&c| c == k[0]);
+    let mut plain = vec![false; w * h];
+    // One row of blocks at a time, each its pixel rows of the image.
+    plain.par_chunks_mut(w * stride).enumerate().for_each(|(by, rows)| {
+        let (y0, y1) = (edge(by, h), edge(by + 1, h));
+        for bx in 0..bw {
+            let (x0, x1) = (edge(bx, w), edge(bx + 1, w));
             let at = |cx: usize, cy: usize| coarse[cy * (bw + 1) + cx];
-            let k = [at(bx, by), at(bx + 1, by), at(bx, by + 1), at(bx + 1, by + 1)];
-            let uniform = k[0] != COMPLEX && k.iter().all(|&c| c == k[0]);
-            // A block whose corners differ traces every corner within it (those it has already are reused).
-            let fine: Vec<u32> = if uniform || stride == 1 {
+            let uniform = same_plain([at(bx, by), at(bx + 1, by), at(bx, by + 1), at(bx + 1, by + 1)]);
+            // A block whose corners differ traces the corners of its pixels (its own four are known).
+            let fine: Vec<u32> = if uniform {
                 Vec::new()
             } else {
                 (y0..=y1)
                     .flat_map(|cy| (x0..=x1).map(move |cx| (cx, cy)))
-                    .map(|(cx, cy)| {
-                        let known = (cx == x0 || cx == x1) && (cy == y0 || cy == y1);
-                        if known {
-                            at(if cx == x0 { bx } else { bx + 1 }, if cy == y0 { by } else { by + 1 })
-                        } else {
-                            class(cx, cy)
-                        }
+                    .map(|(cx, cy)| match ((cx == x0 || cx == x1), (cy == y0 || cy == y1)) {
+                        (true, true) => at(if cx == x0 { bx } else { bx + 1 }, if cy == y0 { by } else { by + 1 }),
+                        _ => class(cx, cy),
                     })
                     .collect()
             };
             let fw = x1 - x0 + 1;
-            let mut flags = Vec::with_capacity((x1 - x0) * (y1 - y0));
             for y in y0..y1 {
                 for x in x0..x1 {
-                    let same = if uniform {
-                        true
-                    } else if stride == 1 {
-                        false
-                    } else {
-                        let (fx, fy) = (x - x0, y - y0);
-                        let c = [
-                            fine[fy * fw + fx],
-                            fine[fy * fw + fx + 1],
-                            fine[(fy + 1) * fw + fx],
-                            fine[(fy + 1) * fw + fx + 1],
-                        ];
-                        c[0] != COMPLEX && c.iter().all(|&k| k == c[0])
-                    };
-                    flags.push(same && !boxes[y * w + x]);
+                    let f = |dx: usize, dy: usize| fine[(y - y0 + dy) * fw + x - x0 + dx];
+                    let same = uniform || same_plain([f(0, 0), f(1, 0), f(0, 1), f(1, 1)]);
+                    rows[(y - y0) * w + x] = same && !boxes[y * w + x];
                 }
             }
-            flags
-        })
-        .collect();
-    let mut plain = vec![false; w * h];
-    for (b, flags) in blocks.iter().enumerate() {
-        let (x0, x1, y0) = (edge(b % bw, w), edge(b % bw + 1, w), edge(b / bw, h));
-        for (k, &f) in flags.iter().enumerate() {
-            let (x, y) = (x0 + k % (x1 - x0), y0 + k / (x1 - x0));
-            plain[y * w + x] = f;
         }
-    }
+    });
     Some(plain)
 }
 

@@ -19,24 +19,21 @@ pub fn computed_layers(sums: &Accumulator) -> Vec<ComputedLayer<'_>> {
     let f32s = |m: [f64; 3]| [m[0] as f32, m[1] as f32, m[2] as f32];
     let mut out: Vec<ComputedLayer> =
         Layer::ALL.iter().map(|&l| ComputedLayer::new(l.name(), move |i| f32s(sums.mean(i, l)))).collect();
-    out.push(ComputedLayer::new("total", move |i| f32s(sums.mean_total(i))));
+    out.push(computed_total_layer(sums));
     out.push(ComputedLayer::new("sem", move |i| {
         let s = sums.sem2(i);
         [if s.is_finite() { s.sqrt() as f32 } else { 0.0 }; 3]
     }));
     let layout = sums.aux.layout();
     for layer in layout.layers().iter().filter(|l| l.name != BLUR_SQUARES_LAYER) {
-        let offset = layout.offset(&layer.name).expect("the layer is in the layout");
-        let (grey, blur) = (layer.channels != 3, layer.name == BLUR_LAYER);
+        let (offset, channels) = (layout.offset(&layer.name).expect("the layer is in the layout"), layer.channels);
+        let blur = layer.name == BLUR_LAYER;
         out.push(ComputedLayer::new(layer.name.clone(), move |i| {
-            let n = sums.pixels[i].phases.max(1) as f64;
-            let s = &sums.aux.pixel(i)[offset..];
+            let m = sums.aux_mean_at(i, offset, channels);
             if blur {
-                [(BIAS_PER_DIFFERENCE * (s[0] / n)) as f32; 3]
-            } else if grey {
-                [(s[0] / n) as f32; 3]
+                [(BIAS_PER_DIFFERENCE * m[0]) as f32; 3]
             } else {
-                [(s[0] / n) as f32, (s[1] / n) as f32, (s[2] / n) as f32]
+                f32s(m)
             }
         }));
     }
@@ -49,12 +46,15 @@ pub const SAVE_BYTES_PER_PIXEL: usize = std::mem::size_of::<[f32; 3]>() + 4;
 
 /// The mean total image as the `total` layer, alone: the preview's image.
 pub fn total_layer(sums: &Accumulator) -> LayerImage {
-    let mut total = LayerImage::new("total", sums.width as usize, sums.height as usize);
-    for (i, px) in total.rgb.iter_mut().enumerate() {
+    computed_total_layer(sums).to_image(sums.width as usize, sums.height as usize)
+}
+
+/// [`total_layer`], each pixel made when it is read.
+pub fn computed_total_layer(sums: &Accumulator) -> ComputedLayer<'_> {
+    ComputedLayer::new("total", move |i| {
         let t = sums.mean_total(i);
-        *px = [t[0] as f32, t[1] as f32, t[2] as f32];
-    }
-    total
+        [t[0] as f32, t[1] as f32, t[2] as f32]
+    })
 }
 
 /// The lit mask as a grey layer: 1 where a pixel sees a light, 0 where δ unlit counts it.
