@@ -37,6 +37,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let launched = Instant::now();
     let stop = stop_rule(&args)?;
     let mut scene = Scene::load_with_options(&args.scene, &mitsuba_options(&args))?;
+    let scene_load_s = launched.elapsed().as_secs_f64();
     check_method_options(&args)?;
     let mut settings = settings_of(&args, &scene)?;
     let reference = match &args.reference {
@@ -106,6 +107,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         reference: reference.as_ref(),
         lit: &lit,
         lit_seconds,
+        scene_load_s,
         stop: &stop,
         notes,
         memory_estimate,
@@ -564,6 +566,8 @@ struct Outputs<'a> {
     /// The pixels that see a light, decided before the render, and the seconds that took.
     lit: &'a LitMask,
     lit_seconds: f64,
+    /// Seconds this process took to read and build the scene.
+    scene_load_s: f64,
     /// The stop rule, whose δ the forecast follows.
     stop: &'a StopRule,
     /// What the run changed from what it was asked (flags of the record).
@@ -616,6 +620,7 @@ impl Outputs<'_> {
             stage_seconds: engine.stage_seconds(),
             wall_time_s: self.elapsed_s(),
             started_s: Some(self.start.duration_since(self.launched).as_secs_f64()),
+            scene_load_s: Some(self.scene_load_s),
             peak_memory_bytes: memory::peak_rss_bytes(),
             memory_estimate_bytes: Some(self.memory_estimate),
             bytes_per_pixel: engine.bytes_per_pixel(),

@@ -93,7 +93,11 @@ fn three_level_and_combination_on_two_synthetic_nodes_converge_to_the_single_pro
         assert!(w["binding"].as_str().unwrap().contains("synthetic"), "{w}");
         let started = w["started_after_s"].as_f64().unwrap();
         assert!(started > 0.0 && started < r["wall_time_s"].as_f64().unwrap(), "{w}");
+        let loaded = w["scene_load_s"].as_f64().unwrap();
+        assert!(loaded > 0.0 && loaded < started, "a worker builds the scene before it renders: {w}");
     }
+    let loaded = r["scene_load_s"].as_f64().unwrap();
+    assert!(loaded > 0.0 && loaded < r["started_s"].as_f64().unwrap(), "{r}");
     assert_ne!(workers[0]["numa_node"], workers[1]["numa_node"]);
     assert!(r["error"]["min_phases"].as_u64().unwrap() >= 500);
     assert_same_image(&single, &three, "three-level against one process");

@@ -203,6 +203,8 @@ pub fn run(
             if slowdown > 1.0 { format!("; slowed down {slowdown}× (--slowdown)") } else { String::new() }
         ),
         layout,
+        // The link, which loaded the scene, fills this in.
+        scene_load_s: 0.0,
     };
     if !emit(JobEvent::Started(info)) {
         return;

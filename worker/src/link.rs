@@ -5,7 +5,7 @@ use crate::files::{Arrivals, FileCache};
 use crate::job::{self, JobEvent};
 use photonfarm::accumulation::delta::Compression;
 use photonfarm::protocol::auth::{handshake, Peer};
-use photonfarm::protocol::{Connection, Job, Message, ProtocolError, RayMapPortion, Role, Secret};
+use photonfarm::protocol::{Connection, Job, Message, ProtocolError, RayMapPortion, Role, Secret, WorkerInfo};
 use photonfarm::ray_map::{Portion, PortionSink};
 use photonfarm::render::session::Deadline;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -90,6 +90,7 @@ pub async fn serve_job(
     }
     let meshes = cache.take(&job.files);
     let job = Arc::new(*job);
+    let loading_since = Instant::now();
     let scene = {
         let loading = job.clone();
         let mut load = tokio::task::spawn_blocking(move || {
@@ -111,6 +112,7 @@ pub async fn serve_job(
             }
         }
     };
+    let scene_load_s = loading_since.elapsed().as_secs_f64();
     let scene = match scene {
         Ok(s) => s,
         Err(reason) => {
@@ -186,7 +188,7 @@ pub async fn serve_job(
         tokio::select! {
             event = events.recv(), if !finished => {
                 let message = match event {
-                    Some(JobEvent::Started(info)) => Message::Started(info),
+                    Some(JobEvent::Started(info)) => Message::Started(WorkerInfo { scene_load_s, ..info }),
                     Some(JobEvent::Snapshot(mut s)) => {
                         sent += 1;
                         last_seq = s.seq;

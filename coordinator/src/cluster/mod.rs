@@ -264,6 +264,7 @@ impl Cluster {
                     r.numa_node = info.numa_node;
                 }
                 r.started_after_s = self.started.elapsed().as_secs_f64();
+                r.scene_load_s = info.scene_load_s;
                 self.set_state(worker, WorkerState::Running);
             }
             Event::Snapshot { worker, snapshot, frame_bytes } => {

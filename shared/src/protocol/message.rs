@@ -21,7 +21,8 @@ use serde::{Deserialize, Serialize};
 /// 13: jobs carry the scene's description (`Job::scene`) instead of its file's text and import options.
 /// 14: a snapshot's delta holds only the pixels rendered since the previous one (`delta::SPARSE_MAGIC`).
 /// 16: files travel in pieces (`FilePiece`), so that a mesh larger than a frame can be sent.
-pub const PROTOCOL_VERSION: u32 = 16;
+/// 17: a worker says how long it took to build the scene (`WorkerInfo::scene_load_s`).
+pub const PROTOCOL_VERSION: u32 = 17;
 
 /// The most bytes of a file one `FilePiece` carries: far below the frame limit, and small enough that neither
 /// end holds a second copy of a large mesh while it is sent.
@@ -145,6 +146,8 @@ pub struct WorkerInfo {
     pub binding: String,
     /// e.g. "2 groups × 1 thread, tile masks, shared maps".
     pub layout: String,
+    /// Seconds the worker took to build the scene from the files received (meshes read, their BVH built).
+    pub scene_load_s: f64,
 }
 
 /// Phases a worker completed since its previous snapshot.

@@ -142,6 +142,10 @@ pub struct WorkerRecord {
     /// meshes, scene and engine set-up): the distribution's fixed cost.
     #[serde(default)]
     pub started_after_s: f64,
+    /// Of those, the seconds the worker took to build the scene from the files received (meshes read, their
+    /// BVH built).
+    #[serde(default)]
+    pub scene_load_s: f64,
     /// The worker process's peak resident memory at its last snapshot.
     #[serde(default)]
     pub peak_memory_bytes: Option<u64>,
@@ -294,6 +298,9 @@ pub struct RunRecord {
     /// `wall_time_s`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub started_s: Option<f64>,
+    /// Of those, the seconds this process took to read the scene and build it (meshes read, their BVH built).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scene_load_s: Option<f64>,
     pub peak_memory_bytes: Option<u64>,
     /// This process's peak memory as estimated before it allocated what the image's size scales (the scene
     /// loaded, plus the engine's buffers or, in a distributed run's coordinator, the merged sums, the copy a save

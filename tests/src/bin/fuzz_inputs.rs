@@ -314,6 +314,7 @@ fn main() -> Result<()> {
             numa_node: None,
             binding: "b".into(),
             layout: "l".into(),
+            scene_load_s: 1.5,
         }),
         Message::Snapshot(Snapshot {
             seq: 1,
