@@ -49,9 +49,11 @@ pub fn run(args: RenderArgs) -> Result<()> {
         settings = c.settings;
     }
     // Before anything the image's size scales (the lit mask, the engine's buffers, the workers): a render that
-    // cannot fit is refused now, and async gives up threads to fit.
+    // cannot fit is refused now, and async gives up threads to fit. A distributed run's coordinator renders
+    // nothing: what it will hold is known once it has let the scene's geometry go, after the lit mask.
     let mut notes = Vec::new();
-    let MemoryPlan { threads, estimate: memory_estimate } = memory_plan(&args, &scene, &settings, &mut notes)?;
+    let distributed = args.method.layout().processes == Processes::PerNumaNode;
+    let plan = if distributed { None } else { Some(memory_plan(&args, &scene, &settings, &mut notes)?) };
     // Decided once, before the render, from the scene and the path depth alone: every figure over unlit pixels
     // (δ, the stop on the target error, the true error) measures the same pixels from the first phase on.
     // It takes as long as some renders through a lens, so the terminal says what is going on meanwhile.
@@ -61,12 +63,15 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let lit = Arc::new(LitMask::of_scene(&scene, settings.max_depth));
     spinner.finish_and_clear();
     let lit_seconds = deciding.elapsed().as_secs_f64();
-    let distributed = args.method.layout().processes == Processes::PerNumaNode;
     if distributed {
         // The workers trace; this process merges and saves. The mesh and its BVH, the largest part of a large
         // scene, are let go before the workers load their own.
         scene.release_geometry();
     }
+    let MemoryPlan { threads, estimate: memory_estimate } = match plan {
+        Some(plan) => plan,
+        None => memory_plan(&args, &scene, &settings, &mut notes)?,
+    };
     if let (Some(c), Some(sums), Some(from)) = (&checkpoint, &resumed_sums, &args.resume) {
         check_resume_has_work(c, sums, &stop, args.uniform, from, &lit)?;
     }
@@ -975,10 +980,12 @@ fn memory_plan(
             // most, which zstd bounds by the raw size) and a save (the preview's layer, a checkpoint piece, or a
             // row of each EXR layer, one after the other; merges wait while a save reads the sums). The workers
             // check their own engines when their job arrives.
+            // Called again once the geometry is let go: its peak may already be behind it (reading and building
+            // the scene for the lit mask).
             let sums = photonfarm::accumulation::Accumulator::bytes_per_pixel(&aux) as u64 * pixels as u64;
             let merge = 2 * photonfarm::accumulation::delta::max_delta_bytes(pixels as u64, &aux);
             let save = (images::SAVE_BYTES_PER_PIXEL as u64 * pixels as u64).max(Checkpoint::max_save_bytes(&aux));
-            let need = base + sums + pixels as u64 + merge + save;
+            let need = (base + sums + pixels as u64 + merge + save).max(memory::peak_rss_bytes().unwrap_or(0));
             if let Some(budget) = MemoryBudget::new(None) {
                 if need > budget.bytes() {
                     let detail = " in the coordinator, which merges the workers' sums and writes the image from them";
