@@ -262,6 +262,8 @@ impl<'a> Builder<'a> {
         emission_texture: Option<Arc<Bitmap>>,
     ) {
         let parts = &mut self.parts;
+        // A mesh of millions of triangles would otherwise grow the list by doubling, each time into new pages.
+        parts.triangles.reserve(triangles.len());
         for (k, t) in triangles.into_iter().enumerate() {
             let uv = uvs.as_ref().map(|u| u[k]);
             if let Some(le) = emission.filter(|&e| e != Rgb::ZERO) {
