@@ -657,7 +657,7 @@ impl Objects {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use rand_core::{RngCore, SeedableRng};
     use rand_pcg::Pcg32;
@@ -923,7 +923,7 @@ mod tests {
     /// reads, faces of 3 to 7 corners in every corner form with 1-based and negative indices to lines already
     /// read, objects and groups, polylines, points, other statements, comments where tobj skips them, CRLF line
     /// ends, tabs and runs of spaces.
-    fn random_obj(rng: &mut Pcg32) -> String {
+    pub(crate) fn random_obj(rng: &mut Pcg32) -> String {
         let mut below = |n: u32| rng.next_u32() % n;
         let crlf = below(3);
         let colors = below(6) == 0;
