@@ -25,6 +25,7 @@ use rayon::prelude::*;
 use sha2::{Digest, Sha256};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, OnceLock};
 
 impl Scene {
@@ -311,8 +312,6 @@ impl<'a> Builder<'a> {
                 return Err(partial("texture coordinates", "f v/vt"));
             }
             let start = mesh.triangles.len();
-            let normals = normals == Coverage::All;
-            mesh.triangles.par_extend(range.clone().into_par_iter().map(|t| obj_triangle(&obj, t, normals)));
             if let Some(list) = &mut uvs {
                 if texcoords == Coverage::All {
                     list.par_extend(
@@ -325,13 +324,22 @@ impl<'a> Builder<'a> {
                     uvs = None;
                 }
             }
-            // The first problem in file order, as a serial check would stop at.
-            let problem = |k: usize| {
-                let uv = uvs.as_ref().map(|list| &list[start + k]);
-                triangle_problem(&mesh.triangles[start + k], uv)
-            };
-            if let Some(k) = (0..range.len()).into_par_iter().position_first(|k| problem(k).is_some()) {
-                let what = problem(k).unwrap_or_default();
+            // Each triangle is checked as it is made; the smallest index that fails is the error a serial pass
+            // would stop at.
+            let normals = normals == Coverage::All;
+            let uv = |k: usize| uvs.as_ref().map(|list| &list[start + k]);
+            let first_bad = AtomicUsize::new(usize::MAX);
+            mesh.triangles.par_extend(range.clone().into_par_iter().map(|t| {
+                let triangle = obj_triangle(&obj, t, normals);
+                let k = t - range.start;
+                if triangle_problem(&triangle, uv(k)).is_some() {
+                    first_bad.fetch_min(k, Ordering::Relaxed);
+                }
+                triangle
+            }));
+            let k = first_bad.into_inner();
+            if k < range.len() {
+                let what = triangle_problem(&mesh.triangles[start + k], uv(k)).unwrap_or_default();
                 return Err(source.error(format!("{path}: triangle {k} of '{}' {what}", object.name)));
             }
         }
