@@ -583,7 +583,7 @@ fn join(chunks: Vec<Chunk>, bytes: &[u8]) -> ObjMesh {
         triangles,
         triangle_texcoords,
         triangle_normals,
-        objects: objects.finish(before),
+        objects: objects.finish(before, bytes),
     }
 }
 
@@ -611,17 +611,13 @@ fn concat_optional(lists: Vec<(Vec<[u32; 3]>, usize)>) -> Vec<[u32; 3]> {
 
 /// The objects as tobj makes its models: an `o` or `g` line ends the current one when it has faces (an `l` line
 /// counts as one), and names the next.
+#[derive(Default)]
 struct Objects {
     done: Vec<ObjObject>,
-    name: String,
+    /// The byte range of the current object's name, which is made a string only for an object with triangles.
+    name: Option<Range<usize>>,
     start: usize,
     polyline: bool,
-}
-
-impl Default for Objects {
-    fn default() -> Self {
-        Objects { done: Vec::new(), name: UNNAMED.into(), start: 0, polyline: false }
-    }
 }
 
 /// tobj's name for a model before any `o` or `g` line, or after one without a name.
@@ -633,25 +629,25 @@ impl Objects {
             Split::Polyline => self.polyline = true,
             Split::Name(range) => {
                 if at > self.start || self.polyline {
-                    self.end(at);
+                    self.end(at, bytes);
                 }
-                let name = String::from_utf8_lossy(&bytes[range]);
-                let name = name.trim();
-                self.name = if name.is_empty() { UNNAMED.into() } else { name.into() };
+                self.name = Some(range);
             }
         }
     }
 
-    fn end(&mut self, at: usize) {
+    fn end(&mut self, at: usize, bytes: &[u8]) {
         if at > self.start {
-            self.done.push(ObjObject { name: self.name.clone(), triangles: self.start..at });
+            let name = self.name.clone().map(|r| String::from_utf8_lossy(&bytes[r]).trim().to_string());
+            let name = name.filter(|n| !n.is_empty()).unwrap_or_else(|| UNNAMED.into());
+            self.done.push(ObjObject { name, triangles: self.start..at });
         }
         self.start = at;
         self.polyline = false;
     }
 
-    fn finish(mut self, triangles: usize) -> Vec<ObjObject> {
-        self.end(triangles);
+    fn finish(mut self, triangles: usize, bytes: &[u8]) -> Vec<ObjObject> {
+        self.end(triangles, bytes);
         self.done
     }
 }
