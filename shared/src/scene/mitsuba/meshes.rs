@@ -42,7 +42,7 @@ pub(crate) fn read_obj(bytes: &[u8], flip_tex_coords: bool) -> Result<IndexedMes
         });
     }
     // Otherwise one vertex per distinct (position, texture coordinate, normal), numbered in the order the
-    // corners first name them, as tobj numbers a model's.
+    // corners first name them.
     let mut mesh =
         IndexedMesh { normals: with_normals.then(Vec::new), uvs: with_uvs.then(Vec::new), ..Default::default() };
     let mut vertices: HashMap<[u32; 3], u32> = HashMap::with_capacity(obj.positions.len());
