@@ -9,6 +9,7 @@ use super::description::{
     SceneDescription, ShapeDesc, Source, SourceFormat,
 };
 use super::mitsuba::meshes::{read_obj, read_ply, read_serialized, Placement};
+use super::obj::{self, Coverage, ObjMesh};
 use super::{Scene, SceneError, SceneObject};
 use crate::camera::{Camera, Lens, RearElement};
 use crate::color::Rgb;
@@ -19,10 +20,12 @@ use crate::light::infinite::{InfiniteLight, SceneSphere};
 use crate::light::{EmissionTexture, Light, Lights};
 use crate::material::Material;
 use crate::texture::{Bitmap, BitmapTexture, Encoding};
-use glam::{Vec2, Vec3};
+use glam::Vec2;
+use rayon::prelude::*;
 use sha2::{Digest, Sha256};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, OnceLock};
 
 impl Scene {
@@ -284,73 +287,62 @@ impl<'a> Builder<'a> {
         }
     }
 
-    /// An OBJ mesh in world coordinates and, when every triangle has them (`vt`), its texture coordinates.
+    /// An OBJ mesh in world coordinates and, when every triangle has them (`vt`), its texture coordinates. Each
+    /// of the file's objects (`o`, `g`) gives its triangles vertex normals when all its face corners name one,
+    /// and none when none do.
     fn obj_mesh(&mut self, file: &FileRef, source: &Source) -> Result<(Mesh, TriangleUvs), SceneError> {
         let bytes = self.bytes(file, source, "mesh")?;
         let path = self.shown(file);
-        let (models, _) = tobj::load_obj_buf(
-            &mut std::io::BufReader::new(bytes),
-            &tobj::LoadOptions { triangulate: true, single_index: true, ignore_points: true, ignore_lines: true },
-            |_| Err(tobj::LoadError::OpenFileFailed),
-        )
-        .map_err(|e| source.error(format!("cannot parse OBJ {path}: {e}")))?;
-        let mut mesh = Mesh::default();
-        let mut uvs = Some(Vec::new());
-        for model in &models {
-            let pos = &model.mesh.positions;
-            let nrm = &model.mesh.normals;
-            let tex = &model.mesh.texcoords;
-            let vertices = pos.len() / 3;
-            // With single_index tobj gives a vertex a normal or texture coordinate only where its face corner
-            // names one: when some corners do and others do not, the lists no longer line up with the vertices.
+        let obj = obj::read(bytes).map_err(|e| source.error(format!("cannot parse OBJ {path}: {e}")))?;
+        let mut mesh = Mesh { triangles: Vec::with_capacity(obj.triangles.len()) };
+        let mut uvs = Some(Vec::with_capacity(if obj.triangle_texcoords.is_empty() { 0 } else { obj.triangles.len() }));
+        for object in &obj.objects {
+            let range = object.triangles.clone();
             let partial = |what: &str, tag: &str| {
                 source.error(format!(
                     "{path}: '{}' gives {what} ({tag}) for some face corners but not for others; give them on every \
                      face of the object or on none",
-                    model.name
+                    object.name
                 ))
             };
-            if !nrm.is_empty() && nrm.len() != 3 * vertices {
+            let normals = obj::coverage(&obj.triangle_normals, range.clone());
+            if normals == Coverage::Partial {
                 return Err(partial("vertex normals", "f v/vt/vn"));
             }
-            if !tex.is_empty() && tex.len() != 2 * vertices {
+            let texcoords = obj::coverage(&obj.triangle_texcoords, range.clone());
+            if texcoords == Coverage::Partial {
                 return Err(partial("texture coordinates", "f v/vt"));
             }
-            let model_uvs = !tex.is_empty() && vertices > 0;
-            let vertex = |i: u32| Vec3::new(pos[3 * i as usize], pos[3 * i as usize + 1], pos[3 * i as usize + 2]);
-            let normal = |i: u32| Vec3::new(nrm[3 * i as usize], nrm[3 * i as usize + 1], nrm[3 * i as usize + 2]);
-            for (k, tri) in model.mesh.indices.chunks_exact(3).enumerate() {
-                let v = [vertex(tri[0]), vertex(tri[1]), vertex(tri[2])];
-                let bad = |what: &str| source.error(format!("{path}: triangle {k} of '{}' {what}", model.name));
-                if !v.iter().all(|p| p.is_finite()) {
-                    return Err(bad("has a coordinate that is not a finite number"));
+            let start = mesh.triangles.len();
+            if let Some(list) = &mut uvs {
+                if texcoords == Coverage::All {
+                    list.par_extend(
+                        range
+                            .clone()
+                            .into_par_iter()
+                            .map(|t| obj.triangle_texcoords[t].map(|i| obj.texcoords[i as usize])),
+                    );
+                } else {
+                    uvs = None;
                 }
-                let t = MeshTriangle {
-                    v,
-                    n: if nrm.is_empty() { None } else { Some([normal(tri[0]), normal(tri[1]), normal(tri[2])]) },
-                };
-                let scale = (v[1] - v[0]).length().max((v[2] - v[0]).length());
-                if t.area() <= 1e-7 * scale * scale || t.area() == 0.0 {
-                    return Err(bad("is degenerate (zero area)"));
+            }
+            // Each triangle is checked as it is made; the smallest index that fails is the error a serial pass
+            // would stop at.
+            let normals = normals == Coverage::All;
+            let uv = |k: usize| uvs.as_ref().map(|list| &list[start + k]);
+            let first_bad = AtomicUsize::new(usize::MAX);
+            mesh.triangles.par_extend(range.clone().into_par_iter().map(|t| {
+                let triangle = obj_triangle(&obj, t, normals);
+                let k = t - range.start;
+                if triangle_problem(&triangle, uv(k)).is_some() {
+                    first_bad.fetch_min(k, Ordering::Relaxed);
                 }
-                if let Some(n) = t.n {
-                    if !n.iter().all(|x| x.is_finite() && x.length_squared() > 0.0) {
-                        return Err(bad("has a vertex normal that is zero or not finite"));
-                    }
-                }
-                mesh.triangles.push(t);
-                if let Some(list) = &mut uvs {
-                    if model_uvs {
-                        let uv = |i: u32| Vec2::new(tex[2 * i as usize], tex[2 * i as usize + 1]);
-                        let uv = [uv(tri[0]), uv(tri[1]), uv(tri[2])];
-                        if !uv.iter().all(|c| c.is_finite()) {
-                            return Err(bad("has a texture coordinate that is not a finite number"));
-                        }
-                        list.push(uv);
-                    } else {
-                        uvs = None;
-                    }
-                }
+                triangle
+            }));
+            let k = first_bad.into_inner();
+            if k < range.len() {
+                let what = triangle_problem(&mesh.triangles[start + k], uv(k)).unwrap_or_default();
+                return Err(source.error(format!("{path}: triangle {k} of '{}' {what}", object.name)));
             }
         }
         if mesh.triangles.is_empty() {
@@ -434,6 +426,34 @@ impl<'a> Builder<'a> {
     }
 }
 
+/// Triangle `t` of an OBJ mesh, with its corners' vertex normals when `normals`.
+fn obj_triangle(obj: &ObjMesh, t: usize, normals: bool) -> MeshTriangle {
+    MeshTriangle {
+        v: obj.triangles[t].map(|i| obj.positions[i as usize]),
+        n: normals.then(|| obj.triangle_normals[t].map(|i| obj.normals[i as usize])),
+    }
+}
+
+/// What is wrong with a triangle of an OBJ mesh and its texture coordinates, if anything: the first of its
+/// checks that fails.
+fn triangle_problem(t: &MeshTriangle, uv: Option<&[Vec2; 3]>) -> Option<&'static str> {
+    let v = t.v;
+    if !v.iter().all(|p| p.is_finite()) {
+        return Some("has a coordinate that is not a finite number");
+    }
+    let scale = (v[1] - v[0]).length().max((v[2] - v[0]).length());
+    if t.area() <= 1e-7 * scale * scale || t.area() == 0.0 {
+        return Some("is degenerate (zero area)");
+    }
+    if t.n.is_some_and(|n| !n.iter().all(|x| x.is_finite() && x.length_squared() > 0.0)) {
+        return Some("has a vertex normal that is zero or not finite");
+    }
+    if uv.is_some_and(|uv| !uv.iter().all(|c| c.is_finite())) {
+        return Some("has a texture coordinate that is not a finite number");
+    }
+    None
+}
+
 /// The camera; a sensor camera's rear element is one of `lens_surfaces`, the named lens surfaces.
 fn camera(c: &CameraDesc, lens_surfaces: &BTreeMap<String, LensSurface>) -> Result<Camera, SceneError> {
     let (position, look_at, up) = (c.position, c.look_at, c.up);
@@ -484,9 +504,9 @@ pub(crate) fn decode_texture(
         format: SourceFormat::Toml,
         render: Default::default(),
         camera: CameraDesc {
-            position: Vec3::ZERO,
-            look_at: Vec3::Z,
-            up: Vec3::Y,
+            position: glam::Vec3::ZERO,
+            look_at: glam::Vec3::Z,
+            up: glam::Vec3::Y,
             width: 1,
             height: 1,
             lens: LensDesc::Pinhole { fov_y_deg: 45.0 },

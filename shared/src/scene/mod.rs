@@ -3,7 +3,7 @@
 //! format: `loader` reads TOML files (`file` holds the format) and `mitsuba` Mitsuba 3 files. One build step
 //! (`build`) turns a description and the files it references into a `Scene`, on the coordinator and on every
 //! worker alike. `error` holds the error that points at the file, line and field; `ghost` what a scene
-//! declares about the ghosts its lens makes.
+//! declares about the ghosts its lens makes; `obj` reads OBJ meshes.
 
 pub mod build;
 pub mod description;
@@ -14,6 +14,7 @@ mod loader;
 
 pub use loader::SceneFiles;
 pub mod mitsuba;
+pub mod obj;
 
 pub use error::SceneError;
 pub use mitsuba::MitsubaOptions;

@@ -128,6 +128,30 @@ fn obj_normals_or_texture_coordinates_on_only_some_faces_are_refused_with_a_clea
 }
 
 #[test]
+fn the_first_bad_triangle_or_object_of_a_large_obj_in_file_order_is_the_one_named() {
+    // A strip of quads split into triangles, read in parallel: the error is the one a serial read meets first.
+    let n = 40_000;
+    let mut strip = String::new();
+    for i in 0..=n {
+        strip.push_str(&format!("v {i} 0 0\nv {i} 1 0\n"));
+    }
+    let faces = |bad: &[usize]| {
+        let mut f = String::new();
+        for i in 0..n {
+            let (a, b, c) = (2 * i + 1, 2 * i + 3, 2 * i + 2);
+            let c = if bad.contains(&i) { a } else { c };
+            f.push_str(&format!("f {a} {b} {c}\n"));
+        }
+        f
+    };
+    let partial = "o partial\nvn 0 0 1\nf 1//1 3//1 2\n";
+    let e = obj_error("first-bad", &format!("{strip}{}{partial}", faces(&[31_000, 17_000, 39_000])));
+    assert!(e.contains("triangle 17000 of 'unnamed_object' is degenerate"), "{e}");
+    let e = obj_error("first-partial", &format!("{strip}{partial}o strip\n{}", faces(&[3])));
+    assert!(e.contains("'partial' gives vertex normals"), "{e}");
+}
+
+#[test]
 fn degenerate_triangle_in_an_obj_is_located() {
     let dir = std::env::temp_dir().join(format!("photonfarm-bad-scene-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
