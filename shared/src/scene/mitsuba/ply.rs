@@ -1,8 +1,7 @@
-//! PLY meshes (ASCII, binary little- or big-endian) for Mitsuba's `ply` shape, read with `ply-rs-bw` as the
-//! mesh-file reader of branch i39 reads them: the `vertex` element's `x`, `y`, `z` and, where given, `nx`, `ny`,
-//! `nz` and texture coordinates (`u`, `v`, or `s`, `t`, or `texture_u`, `texture_v`), and the `face` element's
-//! `vertex_indices` (or `vertex_index`), polygons as fans of triangles. Other elements and properties are
-//! skipped.
+//! PLY meshes (ASCII, binary little- or big-endian) for Mitsuba's `ply` shape, read with `ply-rs-bw`: the
+//! `vertex` element's `x`, `y`, `z` and, where given, `nx`, `ny`, `nz` and texture coordinates (`u`, `v`, or `s`,
+//! `t`, or `texture_u`, `texture_v`), and the `face` element's `vertex_indices` (or `vertex_index`), polygons as
+//! fans of triangles. Other elements and properties are skipped.
 
 use glam::{Vec2, Vec3};
 use ply_rs_bw::parser::{Parser, Reader};
