@@ -980,8 +980,8 @@ fn memory_plan(
             // most, which zstd bounds by the raw size) and a save (the preview's layer, a checkpoint piece, or a
             // row of each EXR layer, one after the other; merges wait while a save reads the sums). The workers
             // check their own engines when their job arrives.
-            // Called again once the geometry is let go: its peak may already be behind it (reading and building
-            // the scene for the lit mask).
+            // Planned once the geometry is let go, after the lit mask: the process's peak may already be behind
+            // it (reading and building the scene).
             let sums = photonfarm::accumulation::Accumulator::bytes_per_pixel(&aux) as u64 * pixels as u64;
             let merge = 2 * photonfarm::accumulation::delta::max_delta_bytes(pixels as u64, &aux);
             let save = (images::SAVE_BYTES_PER_PIXEL as u64 * pixels as u64).max(Checkpoint::max_save_bytes(&aux));
