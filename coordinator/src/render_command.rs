@@ -892,13 +892,14 @@ fn finish(engine: &mut dyn Progressive, outputs: &Outputs, history: &mut Vec<His
     if !outputs.args.method.is_distributed() {
         return;
     }
+    let ended_s = outputs.elapsed_s();
     let e = engine.sums().error(outputs.lit);
-    forecast.step(outputs.elapsed_s(), engine.sums().image_phases(), outputs.stop.delta_of(&e));
+    forecast.step(ended_s, engine.sums().image_phases(), outputs.stop.delta_of(&e));
     let s = engine.settings();
     let light = (!s.adaptive_light).then_some(s.light_paths_per_pixel);
     let depth = (!s.adaptive_depth).then_some(s.backward_diffuse_depth);
     let tiles = history.last().and_then(|h| h.active_tiles);
-    let mut entry = HistoryEntry::after_step(outputs.elapsed_s(), &e, &engine.totals(), light, depth, tiles);
+    let mut entry = HistoryEntry::after_step(ended_s, &e, &engine.totals(), light, depth, tiles);
     if let Some(truth) = outputs.reference.map(|r| r.compare(engine.sums(), outputs.lit)) {
         (entry.true_all, entry.true_unlit) = (Some(truth.rmse_all), Some(truth.rmse_unlit));
     }

@@ -116,6 +116,8 @@ pub struct Control<'a> {
     pub stop: &'a AtomicBool,
     /// The time between snapshots; the link lengthens it on slow links.
     pub interval_ms: &'a AtomicU64,
+    /// How long the latest snapshot took from its sending until the coordinator acknowledged it (merged).
+    pub send_ms: &'a AtomicU64,
     /// Tiles the coordinator restricted the job to since the last round (tile edge, one flag per tile).
     pub tiles: &'a PendingTiles,
     /// The processes rendering the image, announced since the last round.
@@ -214,13 +216,21 @@ pub fn run(
     let mut balance = LightBalance::for_run(&settings, engine.sums(), engine.totals());
     let mut seq = 0;
     let mut last = Instant::now();
-    let Control { stop, interval_ms, tiles, share, deadline, .. } = control;
+    let Control { stop, interval_ms, send_ms, tiles, share, deadline, .. } = control;
     let mut finish_by = None;
     let mut sent_phases = 0;
+    // How long the latest snapshot took to encode.
+    let mut encoding = Duration::ZERO;
     loop {
         if let Some(d) = deadline.lock().unwrap_or_else(|e| e.into_inner()).take() {
             finish_by = Some(d);
         }
+        // The run ends when the coordinator has merged every worker's last snapshot, so rendering stops
+        // early by as long as the latest snapshot took to encode, send and merge: on a large image that is
+        // seconds, which the last one would otherwise add past the deadline.
+        let collecting = encoding + Duration::from_millis(send_ms.load(Ordering::Relaxed));
+        let render_until =
+            finish_by.map(|d: Deadline| Deadline { at: d.at.checked_sub(collecting).unwrap_or(d.at), ..d });
         let announced = share.lock().unwrap_or_else(|e| e.into_inner()).take();
         if let Some(announced) = announced {
             // What this worker has sent, which the coordinator's merged phases include (or will): its phases but
@@ -254,8 +264,8 @@ pub fn run(
                 }
             }
         }
-        if finish_by.is_some_and(|d| Instant::now() >= d.at) {
-            // Past the run's deadline nothing more is rendered: the coordinator's stop follows.
+        if render_until.is_some_and(|d| Instant::now() >= d.at) {
+            // Past the time to stop rendering nothing more is rendered: the coordinator's stop follows.
             while !stop.load(Ordering::Acquire) {
                 std::thread::sleep(Duration::from_millis(5));
             }
@@ -270,9 +280,9 @@ pub fn run(
             // is sent after its first phase and then at every interval, not after K phases.
             let interval = Duration::from_millis(interval_ms.load(Ordering::Relaxed).max(1));
             let timing = RoundTiming {
-                cut_at: finish_by.map(|d: Deadline| d.at),
+                cut_at: render_until.map(|d| d.at),
                 wind_down_at: Some(last + interval),
-                finish_by,
+                finish_by: render_until,
             };
             engine.run_timed_round(stop, timing);
             if let Some(b) = &mut balance {
@@ -294,14 +304,18 @@ pub fn run(
         let stopping = stop.load(Ordering::Acquire);
         let interval = Duration::from_millis(interval_ms.load(Ordering::Relaxed).max(1));
         // A snapshot without a new phase would add nothing, also at the stop, unless it is the worker's first.
+        // Past the time to stop rendering, the last phases go at once rather than at the coordinator's stop.
         let news = engine.totals().phases > sent_phases;
-        if (stopping && (news || seq == 0)) || (news && last.elapsed() >= interval) {
+        let over = render_until.is_some_and(|d| Instant::now() >= d.at);
+        if (stopping && (news || seq == 0)) || (news && (over || last.elapsed() >= interval)) {
             sent_phases = engine.totals().phases;
             seq += 1;
             // Only the pixels the rounds since the previous snapshot rendered: with the phase cap a round
             // renders a part of a large image, and a pass over all of it would cost more than the round.
+            let encoding_since = Instant::now();
             let changes = engine.take_changed();
             let delta = encode_changes(engine.sums(), &changes, compression);
+            encoding = encoding_since.elapsed();
             let snapshot = Snapshot {
                 seq,
                 totals: engine.totals(),

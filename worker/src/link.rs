@@ -130,6 +130,7 @@ pub async fn serve_job(
     let adapts = !conn.peer.ip().is_loopback();
     let interval_ms = Arc::new(AtomicU64::new(floor_ms));
     let mut previous_send_ms = 0u64;
+    let send_ms = Arc::new(AtomicU64::new(0));
     let (events_tx, mut events) = mpsc::unbounded_channel();
     // The ray map's portions, from the recorder's writer thread: a bounded channel, so that a slow link makes
     // the recorder wait rather than the worker's memory grow.
@@ -141,7 +142,8 @@ pub async fn serve_job(
         None => (None, None),
     };
     let engine = {
-        let (job, stop, interval_ms, slowdown) = (job.clone(), stop.clone(), interval_ms.clone(), opts.slowdown);
+        let (job, stop, slowdown) = (job.clone(), stop.clone(), opts.slowdown);
+        let (interval_ms, send_ms) = (interval_ms.clone(), send_ms.clone());
         let (tiles, share, deadline) = (tiles.clone(), share.clone(), deadline.clone());
         // On this machine the link is free and the worker's time is not: compress fast.
         let compression = Compression::for_peer(conn.peer);
@@ -154,6 +156,7 @@ pub async fn serve_job(
                 let control = job::Control {
                     stop: &stop,
                     interval_ms: &interval_ms,
+                    send_ms: &send_ms,
                     tiles: &tiles,
                     share: &share,
                     deadline: &deadline,
@@ -230,6 +233,7 @@ pub async fn serve_job(
                         acked = acked.max(seq);
                         if let Some((_, t)) = in_flight.filter(|(s, _)| seq >= *s) {
                             previous_send_ms = t.elapsed().as_millis() as u64;
+                            send_ms.store(previous_send_ms, Ordering::Relaxed);
                             if adapts {
                                 interval_ms.store(floor_ms.max(20 * previous_send_ms), Ordering::Relaxed);
                             }

@@ -240,8 +240,9 @@ pub fn run<R: Progressive + ?Sized>(
         if let Some(b) = &mut balance {
             b.observe(engine.sums(), engine.totals());
         }
-        let e = engine.sums().error(lit);
+        // The step's time is when its sums were complete, not when their error was worked out.
         let time_s = (elapsed_before + start.elapsed()).as_secs_f64();
+        let e = engine.sums().error(lit);
         let entry = HistoryEntry::after_step(time_s, &e, &engine.totals(), light, depth, active_tiles);
         history.push(entry);
         forecast.step(entry.time_s, engine.sums().image_phases(), stop.delta_of(&e));
