@@ -279,23 +279,28 @@ impl SceneGeometry {
             };
             extent = extent.max(c.abs().max_element() + r);
         }
-        let edges = SurfaceEdges::find(&triangles);
         let (lo, hi) = triangles
             .iter()
             .flat_map(|(_, t)| *t)
             .fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(lo, hi), v| (lo.min(v), hi.max(v)));
         // The backend keeps the only copy of the triangles: obvhs its own in BVH order, so the list as added is
         // let go once that is made.
-        let accel = if triangles.is_empty() {
-            TriangleAccel::None
+        let find_edges = |triangles: &[(u32, [Vec3; 3])]| SurfaceEdges::find(triangles);
+        let (accel, edges) = if triangles.is_empty() {
+            (TriangleAccel::None, SurfaceEdges::default())
         } else {
             match backend {
-                Backend::Obvhs(preset) => TriangleAccel::Obvhs(build_obvhs(triangles, preset, extent)),
+                Backend::Obvhs(preset) => {
+                    let (accel, edges) = build_obvhs(triangles, preset, extent, find_edges);
+                    (TriangleAccel::Obvhs(accel), edges)
+                }
                 #[cfg(feature = "embree")]
-                Backend::Embree => TriangleAccel::Embree(
-                    super::embree::EmbreeTriangles::build(triangles)
-                        .map_err(|message| AccelError::Build { backend: "embree", message })?,
-                ),
+                Backend::Embree => {
+                    let edges = find_edges(&triangles);
+                    let accel = super::embree::EmbreeTriangles::build(triangles)
+                        .map_err(|message| AccelError::Build { backend: "embree", message })?;
+                    (TriangleAccel::Embree(accel), edges)
+                }
             }
         };
         let pad = Vec3::splat(TRIANGLE_BOX_MARGIN * (1.0 + extent));
@@ -571,8 +576,15 @@ fn bvh_ray(origin: Vec3A, direction: Vec3A, t_min: f32, t_max: f32) -> BvhRay {
 /// the triangle test, which is watertight. Far more than the slab test's rounding, far less than a triangle.
 const BVH_BOX_MARGIN: f32 = 1e-5;
 
-/// obvhs's `build_cwbvh_from_tris` over triangle boxes widened by `BVH_BOX_MARGIN` × (1 + `extent`).
-fn build_obvhs(triangles: Vec<(u32, [Vec3; 3])>, preset: ObvhsPreset, extent: f32) -> ObvhsTriangles {
+/// obvhs's `build_cwbvh_from_tris` over triangle boxes widened by `BVH_BOX_MARGIN` × (1 + `extent`), and
+/// `beside` of the triangles, run on the other cores while obvhs turns its binary BVH into the wide one, which
+/// it does on one thread.
+fn build_obvhs<R: Send>(
+    triangles: Vec<(u32, [Vec3; 3])>,
+    preset: ObvhsPreset,
+    extent: f32,
+    beside: impl FnOnce(&[(u32, [Vec3; 3])]) -> R + Send,
+) -> (ObvhsTriangles, R) {
     use obvhs::{bvh2::reinsertion::ReinsertionOptimizer, cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh, ploc::PlocBuilder};
     // Each intermediate (boxes, the binary BVH) is dropped as soon as the next is built, and the triangles are
     // converted straight into BVH order: a large mesh's build peaks at little more than what it keeps.
@@ -601,7 +613,8 @@ fn build_obvhs(triangles: Vec<(u32, [Vec3; 3])>, preset: ObvhsPreset, extent: f3
     drop(boxes);
     bvh2.uses_spatial_splits = params.pre_split;
     ReinsertionOptimizer::default().run(&mut bvh2, params.reinsertion_batch_ratio, None);
-    let bvh = bvh2_to_cwbvh(&bvh2, params.max_prims_per_leaf.clamp(1, 3), true, false);
+    let leaf_size = params.max_prims_per_leaf.clamp(1, 3);
+    let (bvh, beside) = rayon::join(|| bvh2_to_cwbvh(&bvh2, leaf_size, true, false), || beside(&triangles));
     drop(bvh2);
     let triangles_bvh = bvh.primitive_indices.iter().map(|&i| triangle(&triangles[i as usize].1)).collect();
     let data =
@@ -613,7 +626,7 @@ fn build_obvhs(triangles: Vec<(u32, [Vec3; 3])>, preset: ObvhsPreset, extent: f3
         slot[i as usize] = place as u32;
     }
     debug_assert!(slot.iter().all(|&s| s != u32::MAX), "every triangle is in a leaf");
-    ObvhsTriangles { bvh, triangles: triangles_bvh, data, slot }
+    (ObvhsTriangles { bvh, triangles: triangles_bvh, data, slot }, beside)
 }
 
 /// The hit on triangle `v` at distance `t`; `uv` gives the hit's barycentrics (computed only when the

@@ -31,22 +31,36 @@ impl SurfaceEdges {
                 (b, a)
             }
         };
-        let normals: Vec<_> =
-            triangles.par_iter().map(|(_, v)| (v[1] - v[0]).cross(v[2] - v[0]).normalize_or_zero()).collect();
-        // Every edge (3 × triangle + i) sorted by a hash of its end points: the edges that share their end points
-        // sit together (with the rare others of the same hash, told apart by their points), in one sort rather
-        // than a map of lists, which a mesh of millions of triangles filled slowly.
-        let mut edges: Vec<(u64, u32)> =
-            (0..3 * triangles.len()).into_par_iter().map(|e| (edge_hash(key(e)), e as u32)).collect();
+        // Worked out where needed rather than kept: the triangle's points are in the cache then (see below).
+        let normal = |index: usize| {
+            let v = &triangles[index].1;
+            (v[1] - v[0]).cross(v[2] - v[0]).normalize_or_zero()
+        };
+        // Every edge (3 × triangle + i) sorted by the Morton code of its midpoint: the edges that share their end
+        // points sit together (with the rare others of the same code, told apart by their points), in one sort
+        // rather than a map of lists, which a mesh of millions of triangles filled slowly. Runs next to each
+        // other in that order lie next to each other in space, so the triangles they read are
+        // mostly in the cache already where the mesh lists nearby triangles near each other, as meshes do; a
+        // hash of the end points scattered those reads over the whole mesh.
+        let cells = MortonCells::around(triangles);
+        let mut edges: Vec<(u64, u32)> = (0..3 * triangles.len())
+            .into_par_iter()
+            .map(|e| {
+                // From the ordered end points, so that both triangles of an edge compute the same midpoint.
+                let (a, b) = key(e);
+                let point = |bits: [u32; 3]| Vec3::from_array(bits.map(f32::from_bits));
+                (cells.code((point(a) + point(b)) * 0.5), e as u32)
+            })
+            .collect();
         edges.par_sort_unstable();
-        // Runs of one hash are independent, but two runs may clear bits of the same triangle (its other edges).
+        // Runs of one code are independent, but two runs may clear bits of the same triangle (its other edges).
         let bits: Vec<AtomicU8> = (0..triangles.len()).map(|_| AtomicU8::new(0b111)).collect();
-        edges.par_chunk_by(|a, b| a.0 == b.0).for_each(|same_hash| {
-            for &(_, e) in same_hash {
+        edges.par_chunk_by(|a, b| a.0 == b.0).for_each(|same_cell| {
+            for &(_, e) in same_cell {
                 let (e, index) = (e as usize, e as usize / 3);
-                let continued = same_hash.iter().any(|&(_, f)| {
+                let continued = same_cell.iter().any(|&(_, f)| {
                     let (f, other) = (f as usize, f as usize / 3);
-                    other != index && key(f) == key(e) && normals[index].dot(normals[other]).abs() >= SAME_SURFACE_COS
+                    other != index && key(f) == key(e) && normal(index).dot(normal(other)).abs() >= SAME_SURFACE_COS
                 });
                 if continued {
                     bits[index].fetch_and(!(1 << (e % 3)), Ordering::Relaxed);
@@ -64,11 +78,43 @@ impl SurfaceEdges {
     }
 }
 
-/// A hash of an edge's end points (their bits), the same for the same points.
-fn edge_hash((a, b): ([u32; 3], [u32; 3])) -> u64 {
-    a.into_iter()
-        .chain(b)
-        .fold(0xcbf2_9ce4_8422_2325u64, |h, w| (h.rotate_left(5) ^ w as u64).wrapping_mul(0x0100_0000_01b3))
+/// The cells of a 2²¹-per-axis grid over the triangles' box, numbered along a Morton (Z-order) curve: points
+/// in one cell share a code, and cells close in the numbering are mostly close in space.
+struct MortonCells {
+    lo: Vec3,
+    scale: Vec3,
+}
+
+impl MortonCells {
+    const CELLS: f32 = (1u32 << 21) as f32;
+
+    fn around(triangles: &[(u32, [Vec3; 3])]) -> Self {
+        let (lo, hi) = triangles
+            .par_iter()
+            .map(|(_, v)| (v[0].min(v[1]).min(v[2]), v[0].max(v[1]).max(v[2])))
+            .reduce(|| (Vec3::INFINITY, Vec3::NEG_INFINITY), |a, b| (a.0.min(b.0), a.1.max(b.1)));
+        // A flat or empty box gets cells of any size on its flat axes: every point there has cell 0.
+        let size = (hi - lo).max(Vec3::splat(f32::MIN_POSITIVE));
+        MortonCells { lo, scale: Vec3::splat(Self::CELLS) / size }
+    }
+
+    /// The code of the cell holding `p`; the same point always has the same code.
+    fn code(&self, p: Vec3) -> u64 {
+        // `as` saturates (and takes NaN to 0), so the far faces of the box fall into the last cell.
+        let cell = ((p - self.lo) * self.scale).to_array().map(|c| (c as u32).min((1 << 21) - 1));
+        spread(cell[0]) | spread(cell[1]) << 1 | spread(cell[2]) << 2
+    }
+}
+
+/// The 21 low bits of `x`, two zero bits after each: the bits of one axis in a 3D Morton code.
+fn spread(x: u32) -> u64 {
+    let mut x = x as u64 & 0x1f_ffff;
+    x = (x | x << 32) & 0x1f_0000_0000_ffff;
+    x = (x | x << 16) & 0x1f_0000_ff00_00ff;
+    x = (x | x << 8) & 0x100f_00f0_0f00_f00f;
+    x = (x | x << 4) & 0x10c3_0c30_c30c_30c3;
+    x = (x | x << 2) & 0x1249_2492_4924_9249;
+    x
 }
 
 #[cfg(test)]
@@ -108,10 +154,23 @@ mod tests {
 
     #[test]
     fn the_ends_found_are_those_of_a_comparison_of_every_pair_of_edges() {
-        // A bumpy 12 × 12 grid (neighbours at every angle, shared vertices), a few triangles reusing its points
-        // elsewhere, and a degenerate one.
+        the_ends_found_match_a_comparison_of_every_pair(None);
+    }
+
+    #[test]
+    fn edges_sharing_one_grid_cell_are_still_told_apart_by_their_points() {
+        // A triangle far away makes the grid's cells so large that the whole bumpy grid shares a few of them.
+        the_ends_found_match_a_comparison_of_every_pair(Some(Vec3::splat(1e7)));
+    }
+
+    /// A bumpy 12 × 12 grid (neighbours at every angle, shared vertices), a few triangles reusing its points
+    /// elsewhere, a degenerate one, and optionally a small triangle at `far`, against every pair of edges.
+    fn the_ends_found_match_a_comparison_of_every_pair(far: Option<Vec3>) {
         let point = |i: usize, j: usize| Vec3::new(i as f32, ((i * 7 + j * 3) % 5) as f32 * 0.3, j as f32);
         let mut triangles = Vec::new();
+        if let Some(f) = far {
+            triangles.push((3, MeshTriangle { v: [f, f + Vec3::X, f + Vec3::Z], n: None }));
+        }
         for i in 0..12 {
             for j in 0..12 {
                 let (a, b, c, d) = (point(i, j), point(i + 1, j), point(i + 1, j + 1), point(i, j + 1));
@@ -143,5 +202,18 @@ mod tests {
             assert_eq!(found.of(k as u32), ends, "triangle {k}");
         }
         assert_eq!(found.of(triangles.len() as u32 - 1), 0b111, "a degenerate triangle ends its surface everywhere");
+    }
+
+    #[test]
+    fn a_morton_code_interleaves_the_cells_bits_x_first() {
+        assert_eq!(spread(0b1), 0b1);
+        assert_eq!(spread(0b11), 0b1001);
+        assert_eq!(spread((1 << 21) - 1), 0x1249_2492_4924_9249);
+        let cells = MortonCells { lo: Vec3::ZERO, scale: Vec3::ONE };
+        assert_eq!(cells.code(Vec3::new(1.5, 0.0, 0.0)), 0b001);
+        assert_eq!(cells.code(Vec3::new(0.0, 1.0, 0.0)), 0b010);
+        assert_eq!(cells.code(Vec3::new(0.0, 0.0, 1.0)), 0b100);
+        // Beyond the last cell (and NaN, at cell 0) nothing wraps into another axis's bits.
+        assert_eq!(cells.code(Vec3::new(1e30, 0.0, f32::NAN)), spread((1 << 21) - 1));
     }
 }
