@@ -45,19 +45,20 @@ impl FileCache {
     }
 
     /// The job's files by their paths, moved out of the cache rather than copied (a path named twice with the
-    /// same content is the one copy made). Every file must be here.
-    pub fn take(&mut self, files: &[FileRef]) -> BTreeMap<String, Vec<u8>> {
+    /// same content is the one copy made); the path of the first one missing when one is. Each was checked
+    /// against its hash as it arrived, so the scene is built without hashing them again.
+    pub fn take(&mut self, files: &[FileRef]) -> Result<BTreeMap<String, Vec<u8>>, String> {
         let mut by_path = BTreeMap::new();
         let mut first_path: BTreeMap<&str, &str> = BTreeMap::new();
         for f in files {
             let bytes = match first_path.get(f.sha256.as_str()) {
                 Some(path) => by_path.get(*path).cloned().unwrap_or_default(),
-                None => self.files.remove(&f.sha256).unwrap_or_default(),
+                None => self.files.remove(&f.sha256).ok_or_else(|| f.path.clone())?,
             };
             first_path.entry(f.sha256.as_str()).or_insert(f.path.as_str());
             by_path.insert(f.path.clone(), bytes);
         }
-        by_path
+        Ok(by_path)
     }
 
     /// Hands back what `take` gave, once the scene is built: a daemon's cache keeps the files, a one-job
@@ -214,7 +215,7 @@ mod tests {
         for (mut cache, kept) in [(FileCache::for_one_job(), 0), (FileCache::kept_between_jobs(), 2)] {
             cache.insert("h1".into(), b"one".to_vec());
             cache.insert("h2".into(), b"two".to_vec());
-            let files = cache.take(&refs);
+            let files = cache.take(&refs).unwrap();
             assert_eq!(files["a.obj"], b"one");
             assert_eq!(files["copy-of-a.obj"], b"one");
             assert_eq!(files["b.obj"], b"two");
@@ -225,5 +226,16 @@ mod tests {
                 assert!(cache.contains("h1") && cache.contains("h2"));
             }
         }
+    }
+
+    #[test]
+    fn taking_a_file_that_never_arrived_names_it_rather_than_giving_it_empty() {
+        let mut cache = FileCache::for_one_job();
+        cache.insert("h1".into(), b"one".to_vec());
+        let refs = vec![
+            FileRef { path: "a.obj".into(), sha256: "h1".into() },
+            FileRef { path: "b.obj".into(), sha256: "h2".into() },
+        ];
+        assert_eq!(cache.take(&refs), Err("b.obj".to_string()));
     }
 }

@@ -40,7 +40,8 @@ pub fn load_scene(job: &Job, files: &BTreeMap<String, Vec<u8>>) -> Result<Scene,
             &job.scene_hash[..job.scene_hash.len().min(12)]
         ));
     }
-    let scene = Scene::from_description(&job.scene, files).map_err(|e| e.to_string())?;
+    // The file cache checked every file against its hash as it arrived.
+    let scene = Scene::from_hashed_files(&job.scene, files).map_err(|e| e.to_string())?;
     // The ghost pairs' pilot, part of building a sensor scene, runs here rather than in the job's first phase.
     photonfarm::pbpm::ghost_pairs(&scene);
     Ok(scene)

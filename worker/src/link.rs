@@ -88,7 +88,14 @@ pub async fn serve_job(
             snapshots_acked: 0,
         });
     }
-    let meshes = cache.take(&job.files);
+    let meshes = match cache.take(&job.files) {
+        Ok(m) => m,
+        Err(path) => {
+            let reason = format!("the scene's file {path} was not received");
+            conn.write(&Message::Failed { reason: reason.clone() }).await?;
+            return Err(LinkError::Job(reason));
+        }
+    };
     let job = Arc::new(*job);
     let loading_since = Instant::now();
     let scene = {

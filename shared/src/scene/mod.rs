@@ -162,7 +162,7 @@ impl Scene {
     /// Reads a scene file of either format and builds it; `options` as `SceneDescription::read` takes them.
     pub fn load_with_options(path: &std::path::Path, options: &MitsubaOptions) -> Result<Scene, SceneError> {
         let (desc, files) = description::SceneDescription::read(path, options)?;
-        Scene::from_description(&desc, &files)
+        Scene::from_hashed_files(&desc, &files)
     }
 
     /// Builds a scene from a scene file's text, its name (whose extension tells the format), the Mitsuba import

@@ -30,13 +30,13 @@ impl Scene {
     /// resolved relative to its folder.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
         let (desc, files) = SceneDescription::read(path, &crate::scene::MitsubaOptions::default())?;
-        Scene::from_description(&desc, &files)
+        Scene::from_hashed_files(&desc, &files)
     }
 
     /// Parses scene text; `file` names it in errors and `base_dir` resolves mesh paths.
     pub fn from_toml(text: &str, file: &Path, base_dir: &Path) -> Result<Scene, SceneError> {
         let (desc, files) = SceneDescription::from_toml(text, file, base_dir)?;
-        Scene::from_description(&desc, &files)
+        Scene::from_hashed_files(&desc, &files)
     }
 
     /// Parses scene text whose meshes and textures are given in memory, keyed by the path the scene writes.
@@ -46,7 +46,7 @@ impl Scene {
         meshes: &BTreeMap<String, Vec<u8>>,
     ) -> Result<Scene, SceneError> {
         let (desc, files) = Loader::new(text, file, MeshSource::Memory(meshes)).load()?;
-        Scene::from_description(&desc, &files)
+        Scene::from_hashed_files(&desc, &files)
     }
 }
 

@@ -29,7 +29,7 @@ impl Scene {
     /// Reads a Mitsuba 3 scene file and everything it references, as `options` say.
     pub fn load_mitsuba(path: &Path, options: &MitsubaOptions) -> Result<Scene, SceneError> {
         let (desc, files) = SceneDescription::from_mitsuba(path, options)?;
-        Scene::from_description(&desc, &files)
+        Scene::from_hashed_files(&desc, &files)
     }
 
     /// Builds a Mitsuba scene from its text and the files it references, keyed by their path relative to the
@@ -43,7 +43,7 @@ impl Scene {
         let source = FileSource::Memory(files);
         let document = super::read_str_from(text, name, &options.defines, source).map_err(scene_error)?;
         let (desc, files) = Importer::new(&document, options, source).import().map_err(scene_error)?;
-        Scene::from_description(&desc, &files)
+        Scene::from_hashed_files(&desc, &files)
     }
 }
 
