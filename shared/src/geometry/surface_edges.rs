@@ -39,9 +39,9 @@ impl SurfaceEdges {
         // Every edge (3 × triangle + i) sorted by the Morton code of its midpoint: the edges that share their end
         // points sit together (with the rare others of the same code, told apart by their points), in one sort
         // rather than a map of lists, which a mesh of millions of triangles filled slowly. Runs next to each
-        // other in that order lie next to each other in space, so the triangles they read are
-        // mostly in the cache already where the mesh lists nearby triangles near each other, as meshes do; a
-        // hash of the end points scattered those reads over the whole mesh.
+        // other in that order lie next to each other in space, so the triangles they read are mostly in the
+        // cache already where the mesh lists nearby triangles near each other, as meshes do; a hash of the end
+        // points scattered those reads over the whole mesh.
         let cells = MortonCells::around(triangles);
         let mut edges: Vec<(u64, u32)> = (0..3 * triangles.len())
             .into_par_iter()

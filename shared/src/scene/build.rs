@@ -529,34 +529,3 @@ pub(crate) fn decode_texture(
     let mut builder = Builder::new(&desc, files);
     t.try_map(&mut |b| builder.texture_image(b))
 }
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Cornell's description and files as its reader gave them.
-    fn cornell() -> (SceneDescription, BTreeMap<String, Vec<u8>>) {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/cornell.toml");
-        SceneDescription::read(&path, &Default::default()).unwrap()
-    }
-
-    #[test]
-    fn a_file_other_than_the_one_the_description_hashed_is_refused_by_name() {
-        let (desc, mut files) = cornell();
-        let (path, bytes) = files.iter_mut().next().unwrap();
-        let path = path.clone();
-        bytes.extend_from_slice(b"\n# changed\n");
-        let e = Scene::from_description(&desc, &files).err().expect("a changed file is refused");
-        assert!(e.to_string().contains(&path) && e.to_string().contains("SHA-256 differs"), "{e}");
-    }
-
-    #[test]
-    fn files_already_hashed_build_the_scene_the_checked_ones_do() {
-        let (desc, files) = cornell();
-        let checked = Scene::from_description(&desc, &files).unwrap();
-        let trusted = Scene::from_hashed_files(&desc, &files).unwrap();
-        assert_eq!(checked.hash, trusted.hash);
-        assert_eq!(checked.geometry.triangle_count(), trusted.geometry.triangle_count());
-        assert!(checked.geometry.triangle_count() > 0);
-    }
-}

@@ -139,6 +139,19 @@ fn a_file_that_is_not_the_one_described_is_refused_by_name() {
     files.remove(&name);
     let e = Scene::from_description(&desc, &files).err().expect("a missing file is refused");
     assert!(e.message.contains(&name) && e.message.contains("not sent"), "{e}");
+    // Files known to be the described ones are not hashed again, but one missing is refused all the same.
+    let e = Scene::from_hashed_files(&desc, &files).err().expect("a missing file is refused");
+    assert!(e.message.contains(&name) && e.message.contains("not sent"), "{e}");
+}
+
+#[test]
+fn files_already_hashed_build_the_scene_the_checked_ones_do() {
+    let (desc, files) = SceneDescription::read(&scenes_dir().join("cornell.toml"), &MitsubaOptions::default()).unwrap();
+    let checked = Scene::from_description(&desc, &files).unwrap();
+    let trusted = Scene::from_hashed_files(&desc, &files).unwrap();
+    assert_eq!(checked.hash, trusted.hash);
+    assert!(checked.geometry.triangle_count() > 0);
+    assert_eq!(checked.geometry.triangle_count(), trusted.geometry.triangle_count());
 }
 
 /// A triangle in an OBJ file without texture coordinates.
