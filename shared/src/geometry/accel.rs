@@ -19,6 +19,7 @@ use obvhs::{
     triangle::Triangle,
     BvhBuildParams,
 };
+use rayon::prelude::*;
 use std::ops::ControlFlow;
 
 /// obvhs's build presets, from the fastest build to the most thorough (a better BVH should trace faster).
@@ -616,9 +617,9 @@ fn build_obvhs<R: Send>(
     let leaf_size = params.max_prims_per_leaf.clamp(1, 3);
     let (bvh, beside) = rayon::join(|| bvh2_to_cwbvh(&bvh2, leaf_size, true, false), || beside(&triangles));
     drop(bvh2);
-    let triangles_bvh = bvh.primitive_indices.iter().map(|&i| triangle(&triangles[i as usize].1)).collect();
-    let data =
-        bvh.primitive_indices.iter().map(|&i| TriangleData { object: triangles[i as usize].0, index: i }).collect();
+    let order = &bvh.primitive_indices;
+    let triangles_bvh = order.par_iter().map(|&i| triangle(&triangles[i as usize].1)).collect();
+    let data = order.par_iter().map(|&i| TriangleData { object: triangles[i as usize].0, index: i }).collect();
     // With spatial splits a triangle may lie in several leaves; any of its places will do.
     let mut slot = vec![u32::MAX; triangles.len()];
     drop(triangles);
