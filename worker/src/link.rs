@@ -136,7 +136,8 @@ pub async fn serve_job(
     let floor_ms = job.snapshot_interval_ms.max(1);
     let adapts = !conn.peer.ip().is_loopback();
     let interval_ms = Arc::new(AtomicU64::new(floor_ms));
-    let mut previous_send_ms = 0u64;
+    // How long the latest snapshot took until it was acknowledged: sent with the next one, and read by the
+    // engine to stop rendering that much before a deadline.
     let send_ms = Arc::new(AtomicU64::new(0));
     let (events_tx, mut events) = mpsc::unbounded_channel();
     // The ray map's portions, from the recorder's writer thread: a bounded channel, so that a slow link makes
@@ -202,7 +203,7 @@ pub async fn serve_job(
                     Some(JobEvent::Snapshot(mut s)) => {
                         sent += 1;
                         last_seq = s.seq;
-                        s.previous_send_ms = previous_send_ms;
+                        s.previous_send_ms = send_ms.load(Ordering::Relaxed);
                         // A send is timed until its acknowledgement: the write alone returns as soon as the
                         // kernel's socket buffer holds the frame, which on a slow link can be megabytes early.
                         in_flight = Some((s.seq, Instant::now()));
@@ -239,10 +240,10 @@ pub async fn serve_job(
                     Some(Ok(Message::Ack { seq })) => {
                         acked = acked.max(seq);
                         if let Some((_, t)) = in_flight.filter(|(s, _)| seq >= *s) {
-                            previous_send_ms = t.elapsed().as_millis() as u64;
-                            send_ms.store(previous_send_ms, Ordering::Relaxed);
+                            let took_ms = t.elapsed().as_millis() as u64;
+                            send_ms.store(took_ms, Ordering::Relaxed);
                             if adapts {
-                                interval_ms.store(floor_ms.max(20 * previous_send_ms), Ordering::Relaxed);
+                                interval_ms.store(floor_ms.max(20 * took_ms), Ordering::Relaxed);
                             }
                             in_flight = None;
                         }
