@@ -36,7 +36,16 @@ const CHECKPOINT: &str = "checkpoint.bin";
 pub fn run(args: RenderArgs) -> Result<()> {
     let launched = Instant::now();
     let stop = stop_rule(&args)?;
-    let mut scene = Scene::load_with_options(&args.scene, &mitsuba_options(&args))?;
+    let distributed = args.method.layout().processes == Processes::PerNumaNode;
+    // A distributed run's workers trace the scene and decide its lit mask; this process merges and saves, and
+    // builds no BVH, the largest part of a large scene. One that only listens decides the mask itself: its
+    // clock runs before any worker has joined.
+    let workers_decide_lit = distributed && launch_options(&args).starts_with_workers();
+    let mut scene = if workers_decide_lit {
+        Scene::load_untraced(&args.scene, &mitsuba_options(&args))?
+    } else {
+        Scene::load_with_options(&args.scene, &mitsuba_options(&args))?
+    };
     let scene_load_s = launched.elapsed().as_secs_f64();
     check_method_options(&args)?;
     let mut settings = settings_of(&args, &scene)?;
@@ -52,20 +61,21 @@ pub fn run(args: RenderArgs) -> Result<()> {
     // cannot fit is refused now, and async gives up threads to fit. A distributed run's coordinator renders
     // nothing: what it will hold is known once it has let the scene's geometry go, after the lit mask.
     let mut notes = Vec::new();
-    let distributed = args.method.layout().processes == Processes::PerNumaNode;
     let plan = if distributed { None } else { Some(memory_plan(&args, &scene, &settings, &mut notes)?) };
     // Decided once, before the render, from the scene and the path depth alone: every figure over unlit pixels
     // (δ, the stop on the target error, the true error) measures the same pixels from the first phase on.
     // It takes as long as some renders through a lens, so the terminal says what is going on meanwhile.
-    let deciding = Instant::now();
-    let spinner = progress_bar(args.quiet);
-    spinner.set_message("finding the pixels that see a light (δ unlit leaves them out)");
-    let lit = Arc::new(LitMask::of_scene(&scene, settings.max_depth));
-    spinner.finish_and_clear();
-    let lit_seconds = deciding.elapsed().as_secs_f64();
-    if distributed {
-        // The workers trace; this process merges and saves. The mesh and its BVH, the largest part of a large
-        // scene, are let go before the workers load their own.
+    let own_lit = (!workers_decide_lit).then(|| {
+        let deciding = Instant::now();
+        let spinner = progress_bar(args.quiet);
+        spinner.set_message("finding the pixels that see a light (δ unlit leaves them out)");
+        let lit = Arc::new(LitMask::of_scene(&scene, settings.max_depth));
+        spinner.finish_and_clear();
+        (lit, deciding.elapsed().as_secs_f64())
+    });
+    if distributed && !scene.is_released() {
+        // The workers trace; this process merges and saves. The mesh and its BVH are let go before the workers
+        // load their own.
         scene.release_geometry();
     }
     let MemoryPlan { threads, estimate: memory_estimate } = match plan {
@@ -73,7 +83,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         None => memory_plan(&args, &scene, &settings, &mut notes)?,
     };
     if let (Some(c), Some(sums), Some(from)) = (&checkpoint, &resumed_sums, &args.resume) {
-        check_resume_has_work(c, sums, &stop, args.uniform, from, &lit)?;
+        check_resume_has_work(c, sums, &stop, args.uniform, from, own_lit.as_ref().map(|(l, _)| &**l))?;
     }
     let dir = output_dir(&args)?;
     let interrupted = catch_interrupts()?;
@@ -93,16 +103,26 @@ pub fn run(args: RenderArgs) -> Result<()> {
         recorder.clone(),
         threads,
     )?;
-    let mut live =
-        LiveSession::start(live_options(&args, &scene, &layout, &dir, engine.as_ref(), &interrupted, &lit)?)?;
-    if let Some(url) = live.as_ref().and_then(|l| l.url.as_ref()) {
-        say!("live page: {url}  (results in {})", dir.display());
-    }
     if distributed {
         // The run's clock, and `--time`, start when the first worker renders: a large scene takes its workers a
         // while to receive and load, which is not rendering time.
         bar.set_message("the workers are loading the scene");
         engine.wait_until_rendering(&interrupted);
+    }
+    // The first worker to render sent its mask before it began. Without one (every worker failed, or the run
+    // was interrupted first) nothing was rendered, and δ unlit is δ over every pixel.
+    let (lit, lit_seconds) = match own_lit.or_else(|| engine.take_lit_mask().map(|(m, s)| (Arc::new(m), s))) {
+        Some((lit, seconds)) => (lit, Some(seconds)),
+        None => (Arc::new(LitMask::none(scene.camera.width, scene.camera.height)), None),
+    };
+    if let (Some(c), Some(from), true) = (&checkpoint, &args.resume, workers_decide_lit) {
+        // What the resumed sums lack against a target error is known once a worker decided the mask.
+        check_resume_has_work(c, engine.sums(), &stop, args.uniform, from, Some(&lit))?;
+    }
+    let mut live =
+        LiveSession::start(live_options(&args, &scene, &layout, &dir, engine.as_ref(), &interrupted, &lit)?)?;
+    if let Some(url) = live.as_ref().and_then(|l| l.url.as_ref()) {
+        say!("live page: {url}  (results in {})", dir.display());
     }
     let outputs = Outputs {
         args: &args,
@@ -350,7 +370,7 @@ fn check_resume_has_work(
     stop: &StopRule,
     args_uniform: bool,
     from: &Path,
-    lit: &LitMask,
+    lit: Option<&LitMask>,
 ) -> Result<()> {
     let place = from.display();
     if let Some(t) = stop.time {
@@ -364,7 +384,6 @@ fn check_resume_has_work(
             );
         }
     }
-    let e = sums.error(lit);
     if let Some(n) = stop.phases {
         // The run's adaptive tiles (a target without --uniform) count the pixels' mean phases.
         let adaptive = stop.target_error.is_some() && !args_uniform;
@@ -377,7 +396,9 @@ fn check_resume_has_work(
             );
         }
     }
-    if let Some(target) = stop.target_error {
+    // A target error is checked once the mask is known.
+    if let (Some(target), Some(lit)) = (stop.target_error, lit) {
+        let e = sums.error(lit);
         let (d, over) = match stop.error_over {
             ErrorOver::Unlit => (e.delta_unlit, "unlit pixels"),
             ErrorOver::All => (e.delta_all, "all pixels"),
@@ -568,9 +589,10 @@ struct Outputs<'a> {
     /// The engine's layout in words.
     layout: String,
     reference: Option<&'a Reference>,
-    /// The pixels that see a light, decided before the render, and the seconds that took.
+    /// The pixels that see a light, decided before the render (here or by the first worker), and the seconds
+    /// that took; None when no worker got as far as deciding it.
     lit: &'a LitMask,
-    lit_seconds: f64,
+    lit_seconds: Option<f64>,
     /// Seconds this process took to read and build the scene.
     scene_load_s: f64,
     /// The stop rule, whose δ the forecast follows.
@@ -630,7 +652,7 @@ impl Outputs<'_> {
             memory_estimate_bytes: Some(self.memory_estimate),
             bytes_per_pixel: engine.bytes_per_pixel(),
             error: engine.sums().error(self.lit),
-            lit_mask: Some(self.lit.record(self.lit_seconds)),
+            lit_mask: self.lit_seconds.map(|s| self.lit.record(s)),
             adaptive_tile: adaptive_tile_edge(self.args, self.scene, self.stop),
             forecast: forecast.record(),
             pixel_phases: engine.sums().pixels.iter().map(|p| p.phases as u64).sum(),

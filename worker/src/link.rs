@@ -4,8 +4,11 @@
 use crate::files::{Arrivals, FileCache};
 use crate::job::{self, JobEvent};
 use photonfarm::accumulation::delta::Compression;
+use photonfarm::accumulation::LitMask;
 use photonfarm::protocol::auth::{handshake, Peer};
-use photonfarm::protocol::{Connection, Job, Message, ProtocolError, RayMapPortion, Role, Secret, WorkerInfo};
+use photonfarm::protocol::{
+    Connection, Job, LitPixels, Message, ProtocolError, RayMapPortion, Role, Secret, WorkerInfo,
+};
 use photonfarm::ray_map::{Portion, PortionSink};
 use photonfarm::render::session::Deadline;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -102,7 +105,17 @@ pub async fn serve_job(
         let loading = job.clone();
         let mut load = tokio::task::spawn_blocking(move || {
             let scene = job::load_scene(&loading, &meshes);
-            (scene, meshes)
+            let loaded_s = loading_since.elapsed().as_secs_f64();
+            // The coordinator builds no BVH: the worker decides which pixels see a light, as it would have.
+            let lit = match &scene {
+                Ok(scene) if loading.decide_lit_mask => {
+                    let deciding = Instant::now();
+                    let mask = LitMask::of_scene(scene, loading.settings.max_depth);
+                    Some(LitPixels::of(&mask, deciding.elapsed().as_secs_f64()))
+                }
+                _ => None,
+            };
+            (scene, meshes, loaded_s, lit)
         });
         // A large mesh takes longer to read and build than the coordinator waits for a silent worker: the
         // heartbeats go on meanwhile. What the coordinator sends waits in the link until the engine runs.
@@ -110,16 +123,19 @@ pub async fn serve_job(
         loop {
             tokio::select! {
                 loaded = &mut load => {
-                    let (scene, meshes) =
+                    let (scene, meshes, loaded_s, lit) =
                         loaded.map_err(|e| LinkError::Job(format!("the scene loader panicked: {e}")))?;
                     cache.give_back(&job.files, meshes);
-                    break scene;
+                    if let Some(lit) = lit {
+                        conn.write(&Message::LitPixels(lit)).await?;
+                    }
+                    break (scene, loaded_s);
                 }
                 _ = tick.tick() => conn.write(&Message::Heartbeat).await?,
             }
         }
     };
-    let scene_load_s = loading_since.elapsed().as_secs_f64();
+    let (scene, scene_load_s) = scene;
     let scene = match scene {
         Ok(s) => s,
         Err(reason) => {
@@ -446,6 +462,7 @@ mod tests {
             },
             snapshot_interval_ms: 1000,
             ray_map: None,
+            decide_lit_mask: false,
         };
         (job, store)
     }
@@ -477,19 +494,24 @@ mod tests {
     }
 
     #[test]
-    fn a_worker_renders_from_the_description_where_the_scene_file_is_absent() {
+    fn a_worker_renders_from_the_description_where_the_scene_file_is_absent_and_sends_its_lit_mask_first() {
         let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
         runtime.block_on(async {
             let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
             let addr = listener.local_addr().unwrap();
-            let (job, store) = cornell_job_without_its_file();
+            let (mut job, store) = cornell_job_without_its_file();
+            job.decide_lit_mask = true;
+            let files = job.files.iter().map(|f| (f.path.clone(), store[&f.sha256].clone())).collect();
+            let expected =
+                LitMask::of_scene(&Scene::from_description(&job.scene, &files).unwrap(), job.settings.max_depth);
+            assert!(expected.lit_count() > 0, "the light is in view");
             let sent = store.len();
             let coordinator = tokio::spawn(async move {
                 let (s, _) = listener.accept().await.unwrap();
                 let mut c = Connection::new(s).unwrap();
                 handshake(&mut c, Role::Coordinator, "c", &Secret::insecure()).await.unwrap();
                 c.write(&Message::Job(Box::new(job))).await.unwrap();
-                let (mut asked, mut snapshots) = (0, 0);
+                let (mut asked, mut snapshots, mut lit) = (0, 0, None);
                 loop {
                     match c.read().await.unwrap() {
                         Message::NeedFiles { hashes } => {
@@ -507,7 +529,9 @@ mod tests {
                                 c.write(&Message::Stop).await.unwrap();
                             }
                         }
-                        Message::Started(_) | Message::Heartbeat => {}
+                        Message::LitPixels(l) => lit = Some(l.mask(16, 16).unwrap()),
+                        Message::Started(_) => assert_eq!(lit.as_ref(), Some(&expected), "the mask, before Started"),
+                        Message::Heartbeat => {}
                         Message::Finished => return (asked, snapshots),
                         Message::Failed { reason } => panic!("the worker failed: {reason}"),
                         other => panic!("unexpected {}", other.kind()),

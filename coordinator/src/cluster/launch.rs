@@ -55,6 +55,15 @@ pub struct LaunchOptions {
     pub memory_limit: Option<u64>,
 }
 
+impl LaunchOptions {
+    /// True when workers render from the run's start (local ones, or `--worker` daemons it dials): they then
+    /// decide the lit mask (`Job::decide_lit_mask`) and the coordinator builds no BVH. A coordinator that only
+    /// listens decides the mask itself, since its clock runs before any worker joins.
+    pub fn starts_with_workers(&self) -> bool {
+        !self.remote_only || !self.remote_workers.is_empty()
+    }
+}
+
 /// What a resumed run continues from.
 pub struct Resume {
     pub session: u32,
@@ -189,6 +198,7 @@ struct JobTemplate {
     /// Remote workers start at the local interval and lengthen it on slow links (see worker::link).
     remote_interval: Duration,
     ray_map: Option<RayMapRequest>,
+    decide_lit_mask: bool,
 }
 
 impl JobTemplate {
@@ -235,6 +245,7 @@ impl JobTemplate {
             local_interval: interval,
             remote_interval: interval,
             ray_map,
+            decide_lit_mask: options.starts_with_workers(),
         })
     }
 
@@ -256,6 +267,7 @@ impl JobTemplate {
             },
             snapshot_interval_ms: interval.as_millis() as u64,
             ray_map: self.ray_map,
+            decide_lit_mask: self.decide_lit_mask,
         }
     }
 }

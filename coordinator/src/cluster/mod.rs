@@ -9,7 +9,7 @@ pub mod numa_nodes;
 use anyhow::{Context, Result};
 use network::{Blocklist, Control, Event, NetworkPlan, Planned};
 use photonfarm::accumulation::delta::apply_delta;
-use photonfarm::accumulation::{Accumulator, AuxLayout};
+use photonfarm::accumulation::{Accumulator, AuxLayout, LitMask};
 use photonfarm::protocol::{Share, Snapshot};
 use photonfarm::render::record::{WorkerRecord, WorkerState};
 use photonfarm::render::session::{Deadline, Progressive};
@@ -57,6 +57,10 @@ pub struct Cluster {
     collected: bool,
     /// The deadline the workers were told.
     announced_deadline: Option<Deadline>,
+    /// The lit mask the first worker to send one decided, and its seconds, until the run takes it.
+    lit: Option<(LitMask, f64)>,
+    /// A worker's mask was taken (or the run decided its own): later workers' masks are not read.
+    lit_known: bool,
     started: Instant,
 }
 
@@ -139,6 +143,8 @@ impl Cluster {
             accepts_joins,
             collected: false,
             announced_deadline: None,
+            lit: None,
+            lit_known: false,
             started: Instant::now(),
         })
     }
@@ -253,6 +259,21 @@ impl Cluster {
                 } else if let Ok(a) = address.parse::<std::net::SocketAddr>() {
                     // A `--worker` daemon this coordinator dialled.
                     v.ip = Some(a.ip());
+                }
+            }
+            Event::LitPixels { worker, lit } => {
+                if !self.lit_known {
+                    match lit.mask(self.sums.width, self.sums.height) {
+                        Ok(mask) => {
+                            self.lit = Some((mask, lit.seconds));
+                            self.lit_known = true;
+                        }
+                        Err(e) => {
+                            let reason = format!("sent a lit mask that does not fit the image: {e}");
+                            self.send(Control::Drop { worker, reason: reason.clone() });
+                            self.set_state(worker, WorkerState::Lost(reason));
+                        }
+                    }
                 }
             }
             Event::Started { worker, info } => {
@@ -474,6 +495,10 @@ impl Progressive for Cluster {
 
     fn set_active_tiles(&mut self, tiles: &ActiveTiles) {
         self.send(Control::ActiveTiles { tile: tiles.tile, flags: Arc::new(tiles.flags().to_vec()) });
+    }
+
+    fn take_lit_mask(&mut self) -> Option<(LitMask, f64)> {
+        self.lit.take()
     }
 
     fn wait_until_rendering(&mut self, interrupted: &AtomicBool) {

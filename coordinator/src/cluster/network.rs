@@ -5,8 +5,8 @@
 use photonfarm::protocol::auth::{handshake, Peer};
 use photonfarm::protocol::tls::Transport;
 use photonfarm::protocol::{
-    Connection, FilePiece, Job, Message, MessageWriter, ProtocolError, RayMapPortion, Role, Secret, Share, Snapshot,
-    WorkerInfo, FILE_PIECE_BYTES,
+    Connection, FilePiece, Job, LitPixels, Message, MessageWriter, ProtocolError, RayMapPortion, Role, Secret, Share,
+    Snapshot, WorkerInfo, FILE_PIECE_BYTES,
 };
 use photonfarm::ray_map::format::PortionHeader;
 use photonfarm::ray_map::{Portion, Recorder};
@@ -32,6 +32,11 @@ pub enum Event {
     Connected {
         worker: usize,
         address: String,
+    },
+    /// The pixels that see a light, as the worker decided them (before its `Started`).
+    LitPixels {
+        worker: usize,
+        lit: LitPixels,
     },
     Started {
         worker: usize,
@@ -455,6 +460,7 @@ async fn drive(
                             // behind it: its silence is counted from now.
                             last_heard = Instant::now();
                         }
+                        Ok(Message::LitPixels(lit)) => { let _ = events.send(Event::LitPixels { worker, lit }); }
                         Ok(Message::Started(info)) => { let _ = events.send(Event::Started { worker, info }); }
                         Ok(Message::Snapshot(snapshot)) => { let _ = events.send(Event::Snapshot { worker, snapshot, frame_bytes }); }
                         Ok(Message::RayMapPortion(p)) => {

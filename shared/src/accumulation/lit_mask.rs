@@ -105,6 +105,23 @@ impl LitMask {
         self.lit.is_empty()
     }
 
+    /// The flags eight to a byte, pixel i in bit i % 8 of byte i / 8: how a worker sends the mask it decided.
+    pub fn to_bits(&self) -> Vec<u8> {
+        self.lit.chunks(8).map(|c| c.iter().enumerate().fold(0u8, |b, (i, &l)| b | (u8::from(l) << i))).collect()
+    }
+
+    /// The mask `to_bits` gave, for a `width` × `height` image; None unless `bits` is one bit per pixel (with
+    /// the last byte's spare bits clear).
+    pub fn from_bits(width: u32, height: u32, bits: &[u8], samples_per_pixel: u32) -> Option<Self> {
+        let pixels = width as usize * height as usize;
+        let spare = (!pixels.is_multiple_of(8)).then(|| bits.last().map_or(0, |b| b >> (pixels % 8)));
+        if bits.len() != pixels.div_ceil(8) || spare.is_some_and(|s| s != 0) {
+            return None;
+        }
+        let lit = (0..pixels).map(|i| bits[i / 8] >> (i % 8) & 1 == 1).collect();
+        Some(LitMask { width, height, lit, samples_per_pixel })
+    }
+
     /// The summary kept in the run record; deciding the mask took `seconds`.
     pub fn record(&self, seconds: f64) -> LitMaskRecord {
         let lit = self.lit_count();
@@ -121,6 +138,21 @@ impl LitMask {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_mask_survives_its_bits_and_malformed_bits_are_refused() {
+        let flags: Vec<bool> = (0..7 * 3).map(|i| i % 3 == 0 || i == 20).collect();
+        let mask = LitMask::from_flags(7, 3, flags, 16);
+        let bits = mask.to_bits();
+        assert_eq!(bits.len(), 3);
+        assert_eq!(LitMask::from_bits(7, 3, &bits, 16), Some(mask.clone()));
+        assert_eq!(LitMask::from_bits(7, 4, &bits, 16), None, "too few bytes");
+        assert_eq!(LitMask::from_bits(3, 7, &bits[..2], 16), None, "too few bytes");
+        let mut spare = bits.clone();
+        *spare.last_mut().unwrap() |= 0x80;
+        assert_eq!(LitMask::from_bits(7, 3, &spare, 16), None, "a spare bit set");
+        assert_eq!(LitMask::from_bits(8, 3, &bits, 16).map(|m| m.lit_count()), Some(mask.lit_count()));
+    }
 
     #[test]
     fn a_lit_pixel_lights_its_eight_neighbours_and_no_pixel_further_away() {

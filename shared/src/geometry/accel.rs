@@ -244,6 +244,31 @@ const TRIANGLE_BOX_MARGIN: f32 = 1e-5;
 /// Minimum hit distance relative to the scene size: rays start on surfaces, offset by `offset_origin`.
 const RELATIVE_T_MIN: f32 = 1e-7;
 
+/// The scene's extent (its largest coordinate's magnitude, which scales the hit tolerances) and the
+/// triangles' box, widened by `TRIANGLE_BOX_MARGIN` of that extent.
+fn extent_and_box(vertices: impl Iterator<Item = Vec3> + Clone, analytic: &[(u32, Analytic)]) -> (f32, (Vec3, Vec3)) {
+    let mut extent = vertices.clone().fold(0.0f32, |e, v| e.max(v.abs().max_element()));
+    for (_, a) in analytic {
+        let (c, r) = match a {
+            Analytic::Sphere(s) => (s.center, s.radius),
+            Analytic::Lens(l) => (l.vertex, l.curvature_radius.abs().max(l.aperture_radius)),
+            Analytic::Annulus(a) => (a.center, a.outer_radius),
+        };
+        extent = extent.max(c.abs().max_element() + r);
+    }
+    let (lo, hi) = vertices
+        .fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    let pad = Vec3::splat(TRIANGLE_BOX_MARGIN * (1.0 + extent));
+    (extent, (lo - pad, hi + pad))
+}
+
+/// The box around the triangles' box and every analytic surface, when it is a finite one.
+fn bounds_with_analytic(triangle_box: (Vec3, Vec3), analytic: &[(u32, Analytic)]) -> Option<(Vec3, Vec3)> {
+    let (lo, hi) =
+        analytic.iter().map(|(_, a)| a.bounds()).fold(triangle_box, |(lo, hi), b| (lo.min(b.min), hi.max(b.max)));
+    (lo.cmple(hi).all() && lo.is_finite() && hi.is_finite()).then_some((lo, hi))
+}
+
 impl SceneGeometry {
     /// Builds the BVH with the default backend, or the one `PHOTONFARM_BVH` names. `triangles` pairs each
     /// triangle with the object it belongs to.
@@ -266,24 +291,7 @@ impl SceneGeometry {
             by_index.push((object, t.v));
         }
         let triangles = by_index;
-        let mut extent = 0.0f32;
-        for (_, t) in &triangles {
-            for &v in t {
-                extent = extent.max(v.abs().max_element());
-            }
-        }
-        for (_, a) in &analytic {
-            let (c, r) = match a {
-                Analytic::Sphere(s) => (s.center, s.radius),
-                Analytic::Lens(l) => (l.vertex, l.curvature_radius.abs().max(l.aperture_radius)),
-                Analytic::Annulus(a) => (a.center, a.outer_radius),
-            };
-            extent = extent.max(c.abs().max_element() + r);
-        }
-        let (lo, hi) = triangles
-            .iter()
-            .flat_map(|(_, t)| *t)
-            .fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(lo, hi), v| (lo.min(v), hi.max(v)));
+        let (extent, triangle_box) = extent_and_box(triangles.iter().flat_map(|(_, t)| *t), &analytic);
         // The backend keeps the only copy of the triangles: obvhs its own in BVH order, so the list as added is
         // let go once that is made.
         let find_edges = |triangles: &[(u32, [Vec3; 3])]| SurfaceEdges::find(triangles);
@@ -304,9 +312,8 @@ impl SceneGeometry {
                 }
             }
         };
-        let pad = Vec3::splat(TRIANGLE_BOX_MARGIN * (1.0 + extent));
         Ok(SceneGeometry {
-            triangle_box: (lo - pad, hi + pad),
+            triangle_box,
             backend,
             accel,
             normals,
@@ -352,12 +359,14 @@ impl SceneGeometry {
     /// The box around every surface, triangles and analytic ones (slightly widened for rounding); None for a
     /// scene without surfaces.
     pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
-        let (lo, hi) = self
-            .analytic
-            .iter()
-            .map(|(_, a)| a.bounds())
-            .fold(self.triangle_box, |(lo, hi), b| (lo.min(b.min), hi.max(b.max)));
-        (lo.cmple(hi).all() && lo.is_finite() && hi.is_finite()).then_some((lo, hi))
+        bounds_with_analytic(self.triangle_box, &self.analytic)
+    }
+
+    /// The `bounds` the geometry of these surfaces would have, without building it: for a scene that keeps
+    /// its lights and camera but is never traced (`Scene::load_untraced`).
+    pub fn bounds_of(triangles: &[(u32, MeshTriangle)], analytic: &[(u32, Analytic)]) -> Option<(Vec3, Vec3)> {
+        let (_, triangle_box) = extent_and_box(triangles.iter().flat_map(|(_, t)| t.v), analytic);
+        bounds_with_analytic(triangle_box, analytic)
     }
 
     /// Number of triangles.

@@ -2,6 +2,7 @@
 //! change of codec touches one file).
 
 use super::error::ProtocolError;
+use crate::accumulation::LitMask;
 use crate::render::method::ParallelMethod;
 use crate::render::settings::RenderSettings;
 use crate::render::totals::RayTotals;
@@ -22,7 +23,8 @@ use serde::{Deserialize, Serialize};
 /// 14: a snapshot's delta holds only the pixels rendered since the previous one (`delta::SPARSE_MAGIC`).
 /// 16: files travel in pieces (`FilePiece`), so that a mesh larger than a frame can be sent.
 /// 17: a worker says how long it took to build the scene (`WorkerInfo::scene_load_s`).
-pub const PROTOCOL_VERSION: u32 = 17;
+/// 18: a job may ask its worker to decide the lit mask (`Job::decide_lit_mask`), which it sends (`LitPixels`).
+pub const PROTOCOL_VERSION: u32 = 18;
 
 /// The most bytes of a file one `FilePiece` carries: far below the frame limit, and small enough that neither
 /// end holds a second copy of a large mesh while it is sent.
@@ -86,6 +88,45 @@ pub struct Job {
     pub snapshot_interval_ms: u64,
     /// Record a ray map (`render --ray-map`) and send its portions to the coordinator.
     pub ray_map: Option<RayMapRequest>,
+    /// Decide which pixels see a light once the scene is built, and send them (`Message::LitPixels`) before
+    /// `Started`: the coordinator, which builds no BVH, takes the first worker's.
+    pub decide_lit_mask: bool,
+}
+
+/// Worker → coordinator: the lit mask it decided (`accumulation::LitMask`), one bit per pixel
+/// (`LitMask::to_bits`), and the seconds deciding it took.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LitPixels {
+    pub width: u32,
+    pub height: u32,
+    pub samples_per_pixel: u32,
+    pub bits: Vec<u8>,
+    pub seconds: f64,
+}
+
+impl LitPixels {
+    /// The message carrying `mask`, which took `seconds` to decide.
+    pub fn of(mask: &LitMask, seconds: f64) -> Self {
+        LitPixels {
+            width: mask.width,
+            height: mask.height,
+            samples_per_pixel: mask.samples_per_pixel,
+            bits: mask.to_bits(),
+            seconds,
+        }
+    }
+
+    /// The mask, refused unless it is one bit per pixel of a `width` × `height` image.
+    pub fn mask(&self, width: u32, height: u32) -> Result<LitMask, ProtocolError> {
+        if (self.width, self.height) != (width, height) {
+            return Err(ProtocolError::Malformed(format!(
+                "a lit mask of {} × {} pixels for an image of {width} × {height}",
+                self.width, self.height
+            )));
+        }
+        LitMask::from_bits(width, height, &self.bits, self.samples_per_pixel)
+            .ok_or_else(|| ProtocolError::Malformed("the lit mask is not one bit per pixel".into()))
+    }
 }
 
 /// What a job's ray map records.
@@ -223,6 +264,8 @@ pub enum Message {
     NeedFiles { hashes: Vec<String> },
     /// Coordinator → worker: a piece of a file it asked for.
     FilePiece(FilePiece),
+    /// Worker → coordinator: which pixels see a light, when the job asks (`Job::decide_lit_mask`).
+    LitPixels(LitPixels),
     /// Worker → coordinator: the engine runs.
     Started(WorkerInfo),
     /// Worker → coordinator: completed phases.
@@ -269,6 +312,7 @@ impl Message {
             Message::Job(_) => "Job",
             Message::NeedFiles { .. } => "NeedFiles",
             Message::FilePiece(_) => "FilePiece",
+            Message::LitPixels(_) => "LitPixels",
             Message::Started(_) => "Started",
             Message::Snapshot(_) => "Snapshot",
             Message::Ack { .. } => "Ack",

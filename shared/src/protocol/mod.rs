@@ -14,6 +14,6 @@ pub use auth::Secret;
 pub use connection::{Connection, MessageReader, MessageWriter};
 pub use error::ProtocolError;
 pub use message::{
-    EngineSpec, FilePiece, FileRef, Job, Message, RayMapPortion, RayMapRequest, Role, Share, Snapshot, WorkerInfo,
-    FILE_PIECE_BYTES, PROTOCOL_VERSION,
+    EngineSpec, FilePiece, FileRef, Job, LitPixels, Message, RayMapPortion, RayMapRequest, Role, Share, Snapshot,
+    WorkerInfo, FILE_PIECE_BYTES, PROTOCOL_VERSION,
 };

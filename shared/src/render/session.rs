@@ -99,6 +99,11 @@ pub trait Progressive {
     /// when its first worker has loaded the scene and runs its engine (or every worker has ended, or on
     /// interruption), so that a run's clock and its `--time` count rendering, not the workers' loading.
     fn wait_until_rendering(&mut self, _interrupted: &AtomicBool) {}
+    /// The lit mask a worker decided and the seconds it took, once: for a distributed renderer whose workers
+    /// decide it (`protocol::Job::decide_lit_mask`), after `wait_until_rendering`; None for the others.
+    fn take_lit_mask(&mut self) -> Option<(LitMask, f64)> {
+        None
+    }
 }
 
 impl Progressive for Engine<'_> {

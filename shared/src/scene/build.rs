@@ -39,9 +39,17 @@ impl Scene {
     /// made `desc` hashed as it read them, or those a worker's file cache checked on arrival. Hashing a mesh
     /// of hundreds of megabytes again takes a noticeable part of its load.
     pub fn from_hashed_files(desc: &SceneDescription, files: &BTreeMap<String, Vec<u8>>) -> Result<Scene, SceneError> {
-        let mut builder = Builder::new(desc, files);
-        builder.checked = desc.files.iter().map(|f| f.path.clone()).filter(|p| files.contains_key(p)).collect();
-        builder.build()
+        Builder::hashed(desc, files).build()
+    }
+
+    /// `from_hashed_files` without the tracing structures: every file is read and checked, and the lights,
+    /// camera and objects are those of the traced scene, but no BVH is built and the scene comes released
+    /// (`Scene::is_released`). What a distributed run's coordinator, which merges and saves, keeps.
+    pub fn untraced_from_hashed_files(
+        desc: &SceneDescription,
+        files: &BTreeMap<String, Vec<u8>>,
+    ) -> Result<Scene, SceneError> {
+        Builder { traced: false, ..Builder::hashed(desc, files) }.build()
     }
 }
 
@@ -60,6 +68,8 @@ struct Builder<'a> {
     bitmaps: BTreeMap<(String, Encoding), Arc<Bitmap>>,
     notes: Vec<String>,
     parts: Parts,
+    /// Whether the scene is built to be traced (its BVH), or only described (`untraced_from_hashed_files`).
+    traced: bool,
 }
 
 /// What the objects add to the scene, gathered object by object.
@@ -88,7 +98,15 @@ impl<'a> Builder<'a> {
             bitmaps: BTreeMap::new(),
             notes: desc.notes.clone(),
             parts: Parts::default(),
+            traced: true,
         }
+    }
+
+    /// A builder for files already checked against the description's hashes.
+    fn hashed(desc: &'a SceneDescription, files: &'a BTreeMap<String, Vec<u8>>) -> Self {
+        let mut builder = Builder::new(desc, files);
+        builder.checked = desc.files.iter().map(|f| f.path.clone()).filter(|p| files.contains_key(p)).collect();
+        builder
     }
 
     /// The scene, built in the order the TOML reader has always reported errors in: the materials (with their
@@ -106,8 +124,10 @@ impl<'a> Builder<'a> {
         }
         let camera = camera(&desc.camera, &self.parts.lens_surfaces)?;
         let front = super::ghost::front_element(&camera, self.parts.lens_surfaces.values().copied());
+        let traced = self.traced;
         let mut scene = self.assemble(camera, materials)?;
-        if let Some(front) = front.filter(|_| super::ghost::sensor_ghosts(&scene)) {
+        // Aiming the lights at the lens traces the scene: an untraced one is never rendered from.
+        if let Some(front) = front.filter(|_| traced && super::ghost::sensor_ghosts(&scene)) {
             scene.lights.aim_at(front);
             let lens_images = super::ghost::lens_images_by_light_paths(&scene, &front);
             scene.lights.set_lens_images_by_light_paths(lens_images);
@@ -404,10 +424,17 @@ impl<'a> Builder<'a> {
         let desc = self.desc;
         let at_file = Source { file: desc.path.clone(), line: None, element: None };
         let parts = self.parts;
-        let geometry =
-            SceneGeometry::build(parts.triangles, parts.analytic).map_err(|e| at_file.error(e.to_string()))?;
-        let sphere = SceneSphere::around(geometry.bounds());
-        let lights = Lights::with_textures(parts.lights, parts.light_textures, geometry.triangle_count(), sphere);
+        let (geometry, bounds, triangle_count) = if self.traced {
+            let geometry =
+                SceneGeometry::build(parts.triangles, parts.analytic).map_err(|e| at_file.error(e.to_string()))?;
+            let (bounds, count) = (geometry.bounds(), geometry.triangle_count());
+            (geometry, bounds, count)
+        } else {
+            let bounds = SceneGeometry::bounds_of(&parts.triangles, &parts.analytic);
+            (SceneGeometry::empty(), bounds, parts.triangles.len())
+        };
+        let sphere = SceneSphere::around(bounds);
+        let lights = Lights::with_textures(parts.lights, parts.light_textures, triangle_count, sphere);
         if !lights.any() {
             return Err(at_file.error(
                 "the scene has no light that gives off light: give an object an emission (an area emitter) or add \
@@ -419,7 +446,7 @@ impl<'a> Builder<'a> {
             path: desc.path.clone(),
             camera,
             materials,
-            triangle_uvs: parts.triangle_uvs,
+            triangle_uvs: if self.traced { parts.triangle_uvs } else { PerTriangle::default() },
             objects: parts.objects,
             geometry,
             lights,
@@ -430,7 +457,7 @@ impl<'a> Builder<'a> {
             has_delta_surfaces,
             ghost_pairs: OnceLock::new(),
             notes: self.notes,
-            released: false,
+            released: !self.traced,
         })
     }
 }

@@ -165,6 +165,13 @@ impl Scene {
         Scene::from_hashed_files(&desc, &files)
     }
 
+    /// `load_with_options` for a process that never traces the scene (`Scene::untraced_from_hashed_files`):
+    /// the same checks, lights and camera, no BVH.
+    pub fn load_untraced(path: &std::path::Path, options: &MitsubaOptions) -> Result<Scene, SceneError> {
+        let (desc, files) = description::SceneDescription::read(path, options)?;
+        Scene::untraced_from_hashed_files(&desc, &files)
+    }
+
     /// Builds a scene from a scene file's text, its name (whose extension tells the format), the Mitsuba import
     /// options and the files it references by the path the scene writes, none of them read from disk.
     pub fn from_job_files(

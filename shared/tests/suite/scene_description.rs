@@ -171,8 +171,9 @@ fn build_error(name: &str, text: &str) -> (SceneError, PathBuf) {
     std::fs::write(&path, text).unwrap();
     let (desc, files) = SceneDescription::read(&path, &MitsubaOptions::default()).unwrap_or_else(|e| panic!("{e}"));
     let e = Scene::from_description(&desc, &files).err().expect("the build step refuses the scene");
-    // The scene loaded in one go fails the same way.
+    // The scene loaded in one go fails the same way, and so does a coordinator's, which builds no BVH.
     assert_eq!(Scene::load(&path).err(), Some(e.clone()));
+    assert_eq!(Scene::untraced_from_hashed_files(&desc, &files).err(), Some(e.clone()));
     (e, path)
 }
 
@@ -230,6 +231,31 @@ intensity = [1.0, 1.0, 1.0]
     assert_eq!(e.line, Some(line_of(xml, "<shape type=\"obj\"")), "{e}");
     assert_eq!(e.field.as_deref(), Some("<shape type=\"obj\">"), "{e}");
     assert!(e.message.contains("no texture coordinates"), "{e}");
+}
+
+#[test]
+fn an_untraced_scene_has_the_traced_ones_lights_objects_and_layers_and_no_bvh() {
+    for name in ["cornell.toml", "caustic.toml", "outdoor-sun.toml", "outdoor.toml", "hud.toml", "lens.toml"] {
+        let path = scenes_dir().join(name);
+        let traced = Scene::load(&path).unwrap();
+        let untraced = Scene::load_untraced(&path, &MitsubaOptions::default()).unwrap();
+        assert!(untraced.is_released() && !traced.is_released(), "{name}");
+        assert_eq!(untraced.geometry.triangle_count(), 0, "{name}");
+        assert_eq!((&untraced.hash, &untraced.mesh_files), (&traced.hash, &traced.mesh_files), "{name}");
+        let objects = |s: &Scene| s.objects.iter().map(|o| (o.name.clone(), o.material)).collect::<Vec<_>>();
+        assert_eq!(objects(&untraced), objects(&traced), "{name}");
+        // The sun's and the environment's light paths start on the scene's bounding sphere: the same one.
+        assert_eq!(untraced.lights.scene_sphere(), traced.lights.scene_sphere(), "{name}");
+        assert_eq!(untraced.lights.all().len(), traced.lights.all().len(), "{name}");
+        assert_eq!(
+            photonfarm::ray_map::emitter_names(&untraced),
+            photonfarm::ray_map::emitter_names(&traced),
+            "{name}"
+        );
+        let layers = |s: &Scene| photonfarm::accumulation::AuxLayout::for_scene(s, 2);
+        assert_eq!(layers(&untraced), layers(&traced), "{name}");
+        assert_eq!(untraced.has_delta_surfaces, traced.has_delta_surfaces, "{name}");
+    }
 }
 
 #[test]

@@ -9,12 +9,13 @@
 use anyhow::{bail, Context, Result};
 use clap::Parser;
 use photonfarm::accumulation::delta::{apply_delta, encode_delta, encode_delta_of, Compression, PixelRuns};
-use photonfarm::accumulation::{Accumulator, AuxLayer, AuxLayout};
+use photonfarm::accumulation::{Accumulator, AuxLayer, AuxLayout, LitMask};
 use photonfarm::color::Rgb;
 use photonfarm::protocol::frame::{read_frame, write_frame};
 use photonfarm::protocol::message::{decode, encode};
 use photonfarm::protocol::{
-    EngineSpec, FilePiece, FileRef, Job, Message, RayMapPortion, RayMapRequest, Role, Share, Snapshot, WorkerInfo,
+    EngineSpec, FilePiece, FileRef, Job, LitPixels, Message, RayMapPortion, RayMapRequest, Role, Share, Snapshot,
+    WorkerInfo,
 };
 use photonfarm::render::checkpoint::Checkpoint;
 use photonfarm::render::method::ParallelMethod;
@@ -299,6 +300,7 @@ fn main() -> Result<()> {
         },
         snapshot_interval_ms: 1000,
         ray_map: Some(RayMapRequest { fraction: 0.01 }),
+        decide_lit_mask: true,
     };
     let messages = [
         Message::Hello { version: 5, role: Role::Worker, nonce: [7; 32], name: "w".into() },
@@ -307,6 +309,10 @@ fn main() -> Result<()> {
         Message::Job(Box::new(job)),
         Message::NeedFiles { hashes: vec![scene.mesh_files[0].1.clone()] },
         Message::FilePiece(FilePiece::all_of(&scene.mesh_files[0].1, OBJ.as_bytes()).remove(0)),
+        Message::LitPixels(LitPixels::of(
+            &LitMask::from_flags(w, h, (0..w * h).map(|i| i % 5 == 0).collect(), 16),
+            0.25,
+        )),
         Message::Started(WorkerInfo {
             hostname: "h".into(),
             threads: 2,
@@ -384,6 +390,8 @@ fn main() -> Result<()> {
                             any_ok |= match decode(&body) {
                                 // A worker decodes an announced share's phases for its image.
                                 Ok(Message::Share(s)) => s.merged_phases(base.pixels.len()).is_ok(),
+                                // The coordinator reads a worker's lit mask for its image.
+                                Ok(Message::LitPixels(l)) => l.mask(w, h).is_ok(),
                                 decoded => decoded.is_ok(),
                             };
                         }
