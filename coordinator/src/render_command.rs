@@ -59,12 +59,13 @@ pub fn run(args: RenderArgs) -> Result<()> {
     }
     // Before anything the image's size scales (the lit mask, the engine's buffers, the workers): a render that
     // cannot fit is refused now, and async gives up threads to fit. A distributed run's coordinator renders
-    // nothing: what it will hold is known once it has let the scene's geometry go, after the lit mask.
+    // nothing: what it will hold is known once it holds the scene without its geometry.
     let mut notes = Vec::new();
     let plan = if distributed { None } else { Some(memory_plan(&args, &scene, &settings, &mut notes)?) };
     // Decided once, before the render, from the scene and the path depth alone: every figure over unlit pixels
     // (δ, the stop on the target error, the true error) measures the same pixels from the first phase on.
-    // It takes as long as some renders through a lens, so the terminal says what is going on meanwhile.
+    // It takes as long as some renders through a lens, so the terminal says what is going on meanwhile. Where
+    // the workers decide it, each does so once it has built the scene, and the first one's is taken below.
     let own_lit = (!workers_decide_lit).then(|| {
         let deciding = Instant::now();
         let spinner = progress_bar(args.quiet);
@@ -1003,8 +1004,8 @@ fn memory_plan(
             // most, which zstd bounds by the raw size) and a save (the preview's layer, a checkpoint piece, or a
             // row of each EXR layer, one after the other; merges wait while a save reads the sums). The workers
             // check their own engines when their job arrives.
-            // Planned once the geometry is let go, after the lit mask: the process's peak may already be behind
-            // it (reading and building the scene).
+            // Planned once the scene is held without its geometry: the process's peak may already be behind it
+            // (reading the scene, and building it where this process decides the lit mask).
             let sums = photonfarm::accumulation::Accumulator::bytes_per_pixel(&aux) as u64 * pixels as u64;
             let merge = 2 * photonfarm::accumulation::delta::max_delta_bytes(pixels as u64, &aux);
             let save = (images::SAVE_BYTES_PER_PIXEL as u64 * pixels as u64).max(Checkpoint::max_save_bytes(&aux));
