@@ -282,15 +282,41 @@ impl SceneGeometry {
         triangles: Vec<(u32, MeshTriangle)>,
         analytic: Vec<(u32, Analytic)>,
     ) -> Result<Self, AccelError> {
-        // Vertices and normals apart, so that a mesh without normals holds nothing for their absence; the
-        // triangles as given are let go before the BVH's build needs its own memory.
+        let (objects, triangles) = triangles.into_iter().unzip();
+        Self::build_objects_with(backend, triangles, objects, analytic)
+    }
+
+    /// `build` for triangles and the object of each, apart: how a scene's build gathers them, so that a mesh's
+    /// triangles move into the geometry rather than being copied.
+    pub fn build_objects(
+        triangles: Vec<MeshTriangle>,
+        objects: Vec<u32>,
+        analytic: Vec<(u32, Analytic)>,
+    ) -> Result<Self, AccelError> {
+        Self::build_objects_with(Backend::from_env()?, triangles, objects, analytic)
+    }
+
+    fn build_objects_with(
+        backend: Backend,
+        triangles: Vec<MeshTriangle>,
+        objects: Vec<u32>,
+        analytic: Vec<(u32, Analytic)>,
+    ) -> Result<Self, AccelError> {
+        assert_eq!(triangles.len(), objects.len(), "one object per triangle");
+        // Vertices and normals apart, so that a mesh without normals holds nothing for their absence. The list
+        // is remade in its own memory (an iterator over a vector, collected into one of smaller items), which
+        // saves a large mesh as many pages again to fault in; the memory its items no longer fill is let go.
         let mut normals = PerTriangle::default();
-        let mut by_index = Vec::with_capacity(triangles.len());
-        for (i, (object, t)) in triangles.into_iter().enumerate() {
-            normals.push(i as u32, t.n);
-            by_index.push((object, t.v));
-        }
-        let triangles = by_index;
+        let mut triangles: Vec<(u32, [Vec3; 3])> = triangles
+            .into_iter()
+            .enumerate()
+            .map(|(i, t)| {
+                normals.push(i as u32, t.n);
+                (objects[i], t.v)
+            })
+            .collect();
+        triangles.shrink_to_fit();
+        drop(objects);
         let (extent, triangle_box) = extent_and_box(triangles.iter().flat_map(|(_, t)| *t), &analytic);
         // The backend keeps the only copy of the triangles: obvhs its own in BVH order, so the list as added is
         // let go once that is made.
@@ -364,8 +390,8 @@ impl SceneGeometry {
 
     /// The `bounds` the geometry of these surfaces would have, without building it: for a scene that keeps
     /// its lights and camera but is never traced (`Scene::load_untraced`).
-    pub fn bounds_of(triangles: &[(u32, MeshTriangle)], analytic: &[(u32, Analytic)]) -> Option<(Vec3, Vec3)> {
-        let (_, triangle_box) = extent_and_box(triangles.iter().flat_map(|(_, t)| t.v), analytic);
+    pub fn bounds_of(triangles: &[MeshTriangle], analytic: &[(u32, Analytic)]) -> Option<(Vec3, Vec3)> {
+        let (_, triangle_box) = extent_and_box(triangles.iter().flat_map(|t| t.v), analytic);
         bounds_with_analytic(triangle_box, analytic)
     }
 

@@ -76,8 +76,9 @@ struct Builder<'a> {
 #[derive(Default)]
 struct Parts {
     objects: Vec<SceneObject>,
-    /// Every triangle with the object it belongs to.
-    triangles: Vec<(u32, MeshTriangle)>,
+    /// Every triangle, and the object each belongs to.
+    triangles: Vec<MeshTriangle>,
+    triangle_objects: Vec<u32>,
     /// Texture coordinates of the triangles, by their index in `triangles`.
     triangle_uvs: PerTriangle<[Vec2; 3]>,
     analytic: Vec<(u32, Analytic)>,
@@ -294,14 +295,17 @@ impl<'a> Builder<'a> {
         emission_texture: Option<Arc<Bitmap>>,
     ) {
         let parts = &mut self.parts;
-        // A mesh of millions of triangles would otherwise grow the list by doubling, each time into new pages.
-        parts.triangles.reserve(triangles.len());
-        for (k, t) in triangles.into_iter().enumerate() {
+        // A list collected in place from one of larger items (a placed mesh's) holds their memory.
+        let mut triangles = triangles;
+        triangles.shrink_to_fit();
+        let first = parts.triangles.len() as u32;
+        for (k, t) in triangles.iter().enumerate() {
+            let index = first + k as u32;
             let uv = uvs.as_ref().map(|u| u[k]);
             if let Some(le) = emission.filter(|&e| e != Rgb::ZERO) {
                 let c = t.cross();
                 parts.lights.push(Light::Area {
-                    triangle: parts.triangles.len() as u32,
+                    triangle: index,
                     emission: le,
                     area: 0.5 * c.length(),
                     normal: c.normalize(),
@@ -311,8 +315,17 @@ impl<'a> Builder<'a> {
                     _ => None,
                 });
             }
-            parts.triangle_uvs.push(parts.triangles.len() as u32, uv);
-            parts.triangles.push((id, t));
+            parts.triangle_uvs.push(index, uv);
+        }
+        parts.triangle_objects.resize(parts.triangle_objects.len() + triangles.len(), id);
+        // The longer list keeps its memory and the shorter one is put before or after it: a mesh of millions of
+        // triangles is not copied into new pages for the few quads read before it.
+        if parts.triangles.len() < triangles.len() {
+            let mut merged = triangles;
+            merged.splice(0..0, std::mem::take(&mut parts.triangles));
+            parts.triangles = merged;
+        } else {
+            parts.triangles.extend(triangles);
         }
     }
 
@@ -425,8 +438,8 @@ impl<'a> Builder<'a> {
         let at_file = Source { file: desc.path.clone(), line: None, element: None };
         let parts = self.parts;
         let (geometry, bounds, triangle_count) = if self.traced {
-            let geometry =
-                SceneGeometry::build(parts.triangles, parts.analytic).map_err(|e| at_file.error(e.to_string()))?;
+            let geometry = SceneGeometry::build_objects(parts.triangles, parts.triangle_objects, parts.analytic)
+                .map_err(|e| at_file.error(e.to_string()))?;
             let (bounds, count) = (geometry.bounds(), geometry.triangle_count());
             (geometry, bounds, count)
         } else {

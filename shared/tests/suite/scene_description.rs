@@ -275,3 +275,60 @@ fn a_released_scene_keeps_what_describes_it_and_refuses_to_be_traced() {
     }));
     assert!(traced.is_err(), "a released scene must not render an empty world");
 }
+
+#[test]
+fn triangles_keep_the_order_their_objects_were_added_in_when_a_mesh_follows_quads() {
+    // Four triangles in a row along x, at z = 1; a quad before them and an emitting one after.
+    let obj = "v 0 0 1\nv 1 0 1\nv 0 1 1\nv 1 1 1\nv 2 0 1\nv 2 1 1\nf 1 2 3\nf 2 4 3\nf 2 5 4\nf 5 6 4\n";
+    let toml = r#"
+[camera]
+position = [1.0, 0.5, -2.0]
+look_at = [1.0, 0.5, 1.0]
+fov_y_deg = 40
+width = 8
+height = 8
+
+[materials.white]
+type = "diffuse"
+albedo = [0.5, 0.5, 0.5]
+
+[[objects]]
+name = "floor"
+material = "white"
+quad = { corner = [-1.0, -1.0, 0.0], edge1 = [4.0, 0.0, 0.0], edge2 = [0.0, 0.0, 3.0] }
+
+[[objects]]
+name = "strip"
+material = "white"
+mesh = "strip.obj"
+
+[[objects]]
+name = "light"
+material = "white"
+emission = [1.0, 1.0, 1.0]
+quad = { corner = [0.0, 2.0, 0.0], edge1 = [1.0, 0.0, 0.0], edge2 = [0.0, 0.0, 1.0] }
+"#;
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("strip.obj"), obj).unwrap();
+    std::fs::write(dir.path().join("scene.toml"), toml).unwrap();
+    let scene = Scene::load(&dir.path().join("scene.toml")).unwrap();
+    let g = &scene.geometry;
+    let objects: Vec<u32> = (0..g.triangle_count() as u32).map(|t| g.object_of_triangle(t)).collect();
+    assert_eq!(objects, [0, 0, 1, 1, 1, 1, 2, 2]);
+    // The mesh's triangles, in the file's order, after the floor's.
+    let xs: Vec<f32> = (2..6).map(|t| g.triangle(t).v.iter().map(|v| v.x).sum::<f32>()).collect();
+    assert_eq!(xs, [1.0, 2.0, 4.0, 5.0]);
+    assert!((2..6).all(|t| g.triangle(t).v.iter().all(|v| v.z == 1.0)));
+    // The light's triangles are the last two, found by the index they were added with.
+    let lit: Vec<u32> = scene
+        .lights
+        .all()
+        .iter()
+        .filter_map(|l| match l {
+            Light::Area { triangle, .. } => Some(*triangle),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(lit, [6, 7]);
+    assert!(lit.iter().all(|&t| g.triangle(t).v.iter().all(|v| v.y == 2.0)));
+}
