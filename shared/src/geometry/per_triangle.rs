@@ -88,7 +88,8 @@ mod tests {
         let uv = |x: u32| Some([Vec2::splat(x as f32); 3]);
         let mut t = PerTriangle::default();
         // Two quads with values, a large mesh without, one with values again, then single gaps.
-        let has = |i: u32| i < 4 || (100_000..100_010).contains(&i) || (i > 100_010 && i % 2 == 0 && i < 100_020);
+        let has =
+            |i: u32| i < 4 || (100_000..100_010).contains(&i) || (i > 100_010 && i.is_multiple_of(2) && i < 100_020);
         for i in 0..100_030 {
             t.push(i, if has(i) { uv(i) } else { None });
         }
