@@ -43,8 +43,9 @@ impl Scene {
     }
 
     /// `from_hashed_files` without the tracing structures: every file is read and checked, and the lights,
-    /// camera and objects are those of the traced scene, but no BVH is built and the scene comes released
-    /// (`Scene::is_released`). What a distributed run's coordinator, which merges and saves, keeps.
+    /// camera and objects are those of the traced scene (less the lights' aim at a sensor camera's lens, which
+    /// is found by tracing), but no BVH is built and the scene comes released (`Scene::is_released`). What a
+    /// distributed run's coordinator, which merges and saves, keeps.
     pub fn untraced_from_hashed_files(
         desc: &SceneDescription,
         files: &BTreeMap<String, Vec<u8>>,
