@@ -110,11 +110,16 @@ pub fn run(args: RenderArgs) -> Result<()> {
         bar.set_message("the workers are loading the scene");
         engine.wait_until_rendering(&interrupted);
     }
-    // The first worker to render sent its mask before it began. Without one (every worker failed, or the run
-    // was interrupted first) nothing was rendered, and δ unlit is δ over every pixel.
+    // The worker deciding the mask sent it before it began, and the clock waited for it. Without one (that
+    // worker failed, or the run was interrupted first) δ unlit is δ over every pixel, and the record says so.
     let (lit, lit_seconds) = match own_lit.or_else(|| engine.take_lit_mask().map(|(m, s)| (Arc::new(m), s))) {
         Some((lit, seconds)) => (lit, Some(seconds)),
-        None => (Arc::new(LitMask::none(scene.camera.width, scene.camera.height)), None),
+        None => {
+            if workers_decide_lit && !interrupted.load(Ordering::Relaxed) {
+                notes.push(NO_LIT_MASK.to_string());
+            }
+            (Arc::new(LitMask::none(scene.camera.width, scene.camera.height)), None)
+        }
     };
     if let (Some(c), Some(from), true) = (&checkpoint, &args.resume, workers_decide_lit) {
         // What the resumed sums lack against a target error is known once a worker decided the mask.
@@ -539,6 +544,10 @@ fn adaptive_tile_edge(args: &RenderArgs, scene: &Scene, stop: &StopRule) -> Opti
 fn sensor_ghosts_keep_tiles(args: &RenderArgs, scene: &Scene) -> bool {
     args.adaptive_tile.is_none() && sensor_ghosts(scene)
 }
+
+/// What the record says when the worker deciding the lit mask ended before it did.
+const NO_LIT_MASK: &str = "the worker deciding the lit mask ended before it did: δ unlit and the error over \
+     unlit pixels are over every pixel";
 
 /// Why a run with a target error renders every tile of a scene whose light paths register ghosts on its sensor.
 const TILES_OFF_FOR_SENSOR_GHOSTS: &str = "adaptive tiles are off: this scene's light paths register its \

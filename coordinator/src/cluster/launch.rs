@@ -115,7 +115,7 @@ pub fn launch(
     let plan = NetworkPlan {
         planned: members.iter().map(|m| m.planned.clone()).collect(),
         jobs,
-        join_template: template.job(0, None, template.remote_interval),
+        join_template: template.join_job(),
         files: Arc::new(template.store.clone()),
         local: local.map(|l| (l, local_secret)),
         public: public.map(|l| (l, remote_secret.clone())),
@@ -127,8 +127,9 @@ pub fn launch(
     };
     let initial = resume.map(|r| (r.sums, r.totals));
     let aux = photonfarm::accumulation::AuxLayout::for_scene(scene, settings.spectral_bands);
-    let cluster =
-        Cluster::start(members, plan, children, scene.camera.width, scene.camera.height, aux, settings, initial)?;
+    let size = (scene.camera.width, scene.camera.height);
+    let lit_from = template.decide_lit_mask.then_some(0);
+    let cluster = Cluster::start(members, plan, children, size, aux, settings, initial, lit_from)?;
     Ok((cluster, layout))
 }
 
@@ -249,6 +250,12 @@ impl JobTemplate {
         })
     }
 
+    /// The job of a worker joining through `--listen`, its stream set as it joins. It never decides the lit
+    /// mask: the run's first planned worker does, or the coordinator.
+    fn join_job(&self) -> Job {
+        Job { decide_lit_mask: false, ..self.job(0, None, self.remote_interval) }
+    }
+
     /// The job of the worker with random stream `stream`, on `node`'s cores (a local worker) or on every core
     /// of its machine.
     fn job(&self, stream: usize, node: Option<&NumaNode>, interval: Duration) -> Job {
@@ -267,7 +274,8 @@ impl JobTemplate {
             },
             snapshot_interval_ms: interval.as_millis() as u64,
             ray_map: self.ray_map,
-            decide_lit_mask: self.decide_lit_mask,
+            // One worker decides the mask: the others, each on every core of the machine, would only slow it.
+            decide_lit_mask: self.decide_lit_mask && stream == 0,
         }
     }
 }
@@ -358,4 +366,55 @@ fn describe(options: &LaunchOptions, members: &[Member], nodes: &NumaNodes) -> S
         if remote == 0 { String::new() } else { format!(", {remote} remote") },
         if options.listen.is_some() { ", accepting joins" } else { "" },
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn options(remote_only: bool, remote_workers: Vec<String>) -> LaunchOptions {
+        LaunchOptions {
+            method: Method::ThreeLevel,
+            scene_path: Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/cornell.toml"),
+            topology: Some("pack:1 numa:2 core:1 pu:1".into()),
+            remote_workers,
+            listen: None,
+            remote_only,
+            secret_file: None,
+            insecure: false,
+            tls_dir: None,
+            worker_timeout_s: 10.0,
+            max_worker_failures: 3,
+            snapshot_interval_s: 1.0,
+            group_size: 1,
+            tile_size: None,
+            phases_per_deal: 4,
+            ray_map_fraction: None,
+            memory_limit: None,
+        }
+    }
+
+    /// Whether each planned worker's job, then a joining worker's, asks it to decide the lit mask.
+    fn deciders(options: &LaunchOptions) -> (Vec<bool>, bool) {
+        let scene = Scene::load(&options.scene_path).unwrap();
+        let nodes = numa_nodes::detect(options.topology.as_deref(), &[0, 1]).unwrap();
+        let settings = RenderSettings::for_scene(&scene, options.method, 1);
+        let template = JobTemplate::new(options, &scene, settings, &nodes, None, None).unwrap();
+        let (_, jobs) = plan_workers(options, &nodes, &template);
+        (jobs.iter().map(|j| j.decide_lit_mask).collect(), template.join_job().decide_lit_mask)
+    }
+
+    #[test]
+    fn only_the_first_planned_worker_decides_the_lit_mask_and_a_listening_coordinator_decides_its_own() {
+        // Two local workers and a remote one: the first local one decides, and no joining worker does.
+        assert_eq!(deciders(&options(false, vec!["10.0.0.9:7878".into()])), (vec![true, false, false], false));
+        // Only remote workers, dialled: the first of them.
+        let dialled = options(true, vec!["10.0.0.9:7878".into(), "10.0.0.10:7878".into()]);
+        assert!(dialled.starts_with_workers());
+        assert_eq!(deciders(&dialled), (vec![true, false], false));
+        // A coordinator that only listens has no worker when its clock starts, and decides the mask itself.
+        let listening = options(true, vec![]);
+        assert!(!listening.starts_with_workers());
+        assert_eq!(deciders(&listening), (vec![], false));
+    }
 }

@@ -57,9 +57,11 @@ pub struct Cluster {
     collected: bool,
     /// The deadline the workers were told.
     announced_deadline: Option<Deadline>,
-    /// The lit mask the first worker to send one decided, and its seconds, until the run takes it.
+    /// The worker whose job asks it to decide the lit mask, if any.
+    lit_from: Option<usize>,
+    /// The lit mask that worker decided, and its seconds, until the run takes it.
     lit: Option<(LitMask, f64)>,
-    /// A worker's mask was taken (or the run decided its own): later workers' masks are not read.
+    /// The mask arrived.
     lit_known: bool,
     started: Instant,
 }
@@ -74,17 +76,18 @@ pub struct Member {
 
 impl Cluster {
     /// Starts the network thread over `plan` and takes ownership of the local worker processes. `aux` is the
-    /// scene's auxiliary layers, which every worker's snapshots carry.
+    /// scene's auxiliary layers, which every worker's snapshots carry; `lit_from` the worker whose job asks it
+    /// to decide the lit mask, if any.
     #[allow(clippy::too_many_arguments)]
     pub fn start(
         members: Vec<Member>,
         plan: NetworkPlan,
         children: Vec<Child>,
-        width: u32,
-        height: u32,
+        (width, height): (u32, u32),
         aux: AuxLayout,
         settings: RenderSettings,
         initial: Option<(Accumulator, RayTotals)>,
+        lit_from: Option<usize>,
     ) -> Result<Self> {
         let (sums, base_totals) = match initial {
             Some((s, t)) => {
@@ -143,6 +146,7 @@ impl Cluster {
             accepts_joins,
             collected: false,
             announced_deadline: None,
+            lit_from,
             lit: None,
             lit_known: false,
             started: Instant::now(),
@@ -262,7 +266,7 @@ impl Cluster {
                 }
             }
             Event::LitPixels { worker, lit } => {
-                if !self.lit_known {
+                if !self.lit_known && self.lit_from == Some(worker) {
                     match lit.mask(self.sums.width, self.sums.height) {
                         Ok(mask) => {
                             self.lit = Some((mask, lit.seconds));
@@ -502,11 +506,17 @@ impl Progressive for Cluster {
     }
 
     fn wait_until_rendering(&mut self, interrupted: &AtomicBool) {
-        // A coordinator that only listens has no worker to wait for: its clock runs from the start.
+        // A coordinator that only listens has no worker to wait for: its clock runs from the start. Otherwise
+        // the clock waits for the lit mask too, which every figure over unlit pixels needs from the first step
+        // on: another worker may start rendering while the one deciding it is still at it.
         let rendering = |c: &Cluster| {
             c.workers.iter().any(|w| matches!(w.record.state, WorkerState::Running | WorkerState::Finished))
         };
-        while !self.workers.is_empty() && !rendering(self) && !self.all_ended() {
+        let lit_settled = |c: &Cluster| {
+            c.lit_known || c.lit_from.is_none_or(|w| c.workers.get(w).is_none_or(|v| v.record.state.ended()))
+        };
+        let ready = |c: &Cluster| c.workers.is_empty() || c.all_ended() || (rendering(c) && lit_settled(c));
+        while !ready(self) {
             if interrupted.load(Ordering::Relaxed) {
                 return;
             }
