@@ -89,7 +89,7 @@ pub struct Job {
     /// Record a ray map (`render --ray-map`) and send its portions to the coordinator.
     pub ray_map: Option<RayMapRequest>,
     /// Decide which pixels see a light once the scene is built, and send them (`Message::LitPixels`) before
-    /// `Started`: the coordinator, which builds no BVH, takes the first worker's.
+    /// `Started`: the coordinator, which builds no BVH, asks this of its first planned worker.
     pub decide_lit_mask: bool,
 }
 
