@@ -59,10 +59,8 @@ pub struct Cluster {
     announced_deadline: Option<Deadline>,
     /// The worker whose job asks it to decide the lit mask, if any.
     lit_from: Option<usize>,
-    /// The lit mask that worker decided, and its seconds, until the run takes it.
+    /// The lit mask that worker decided, and its seconds, until the run takes it (after the wait for it).
     lit: Option<(LitMask, f64)>,
-    /// The mask arrived.
-    lit_known: bool,
     started: Instant,
 }
 
@@ -148,7 +146,6 @@ impl Cluster {
             announced_deadline: None,
             lit_from,
             lit: None,
-            lit_known: false,
             started: Instant::now(),
         })
     }
@@ -266,12 +263,9 @@ impl Cluster {
                 }
             }
             Event::LitPixels { worker, lit } => {
-                if !self.lit_known && self.lit_from == Some(worker) {
+                if self.lit_from == Some(worker) {
                     match lit.mask(self.sums.width, self.sums.height) {
-                        Ok(mask) => {
-                            self.lit = Some((mask, lit.seconds));
-                            self.lit_known = true;
-                        }
+                        Ok(mask) => self.lit = Some((mask, lit.seconds)),
                         Err(e) => {
                             let reason = format!("sent a lit mask that does not fit the image: {e}");
                             self.send(Control::Drop { worker, reason: reason.clone() });
@@ -513,7 +507,7 @@ impl Progressive for Cluster {
             c.workers.iter().any(|w| matches!(w.record.state, WorkerState::Running | WorkerState::Finished))
         };
         let lit_settled = |c: &Cluster| {
-            c.lit_known || c.lit_from.is_none_or(|w| c.workers.get(w).is_none_or(|v| v.record.state.ended()))
+            c.lit.is_some() || c.lit_from.is_none_or(|w| c.workers.get(w).is_none_or(|v| v.record.state.ended()))
         };
         let ready = |c: &Cluster| c.workers.is_empty() || c.all_ended() || (rendering(c) && lit_settled(c));
         while !ready(self) {

@@ -246,8 +246,11 @@ const RELATIVE_T_MIN: f32 = 1e-7;
 
 /// The scene's extent (its largest coordinate's magnitude, which scales the hit tolerances) and the
 /// triangles' box, widened by `TRIANGLE_BOX_MARGIN` of that extent.
-fn extent_and_box(vertices: impl Iterator<Item = Vec3> + Clone, analytic: &[(u32, Analytic)]) -> (f32, (Vec3, Vec3)) {
-    let mut extent = vertices.clone().fold(0.0f32, |e, v| e.max(v.abs().max_element()));
+fn extent_and_box(vertices: impl Iterator<Item = Vec3>, analytic: &[(u32, Analytic)]) -> (f32, (Vec3, Vec3)) {
+    let (lo, hi) = vertices
+        .fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    // The largest coordinate's magnitude is at a face of the box (none without triangles).
+    let mut extent = if lo.cmple(hi).all() { lo.abs().max(hi.abs()).max_element() } else { 0.0 };
     for (_, a) in analytic {
         let (c, r) = match a {
             Analytic::Sphere(s) => (s.center, s.radius),
@@ -256,8 +259,6 @@ fn extent_and_box(vertices: impl Iterator<Item = Vec3> + Clone, analytic: &[(u32
         };
         extent = extent.max(c.abs().max_element() + r);
     }
-    let (lo, hi) = vertices
-        .fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(lo, hi), v| (lo.min(v), hi.max(v)));
     let pad = Vec3::splat(TRIANGLE_BOX_MARGIN * (1.0 + extent));
     (extent, (lo - pad, hi + pad))
 }
