@@ -10,6 +10,7 @@ use crate::output_folder::{self, Reference};
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use photonfarm::accumulation::{Accumulator, LitMask};
+use photonfarm::geometry::BvhCacheUse;
 use photonfarm::protocol::Secret;
 use photonfarm::ray_map::{self, Recorder};
 use photonfarm::render::active_tiles::DEFAULT_TILE;
@@ -47,6 +48,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
         Scene::load_with_options(&args.scene, &mitsuba_options(&args))?
     };
     let scene_load_s = launched.elapsed().as_secs_f64();
+    // A scene loaded untraced built no BVH, so had no use for the cache.
+    let bvh_cache = (!workers_decide_lit).then(|| scene.geometry.bvh_cache().clone());
     check_method_options(&args)?;
     let mut settings = settings_of(&args, &scene)?;
     let reference = match &args.reference {
@@ -139,6 +142,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         lit: &lit,
         lit_seconds,
         scene_load_s,
+        bvh_cache,
         stop: &stop,
         notes,
         memory_estimate,
@@ -605,6 +609,8 @@ struct Outputs<'a> {
     lit_seconds: Option<f64>,
     /// Seconds this process took to read and build the scene.
     scene_load_s: f64,
+    /// What the BVH cache did for this process's scene, when it built a BVH.
+    bvh_cache: Option<BvhCacheUse>,
     /// The stop rule, whose δ the forecast follows.
     stop: &'a StopRule,
     /// What the run changed from what it was asked (flags of the record).
@@ -658,6 +664,7 @@ impl Outputs<'_> {
             wall_time_s: self.elapsed_s(),
             started_s: Some(self.start.duration_since(self.launched).as_secs_f64()),
             scene_load_s: Some(self.scene_load_s),
+            bvh_cache: self.bvh_cache.clone(),
             peak_memory_bytes: memory::peak_rss_bytes(),
             memory_estimate_bytes: Some(self.memory_estimate),
             bytes_per_pixel: engine.bytes_per_pixel(),

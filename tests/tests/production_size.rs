@@ -1,9 +1,10 @@
 //! A production-size render in small: a generated room at 1,920 × 1,080 pixels holding a mesh of 200,000
 //! triangles (`end_to_end::room`, written into a scratch folder, never committed), rendered three-level for a
 //! few seconds as a user would. It stops on time, shows its first image before the deadline, and no process
-//! grows past the memory it estimated before it allocated. `scripts/production-sizes` measures the full sizes.
+//! grows past the memory it estimated before it allocated. A room with a mesh of a million triangles has its
+//! BVH cached by the first run and read by the next. `scripts/production-sizes` measures the full sizes.
 
-use end_to_end::room::{write_room, RoomSpec};
+use end_to_end::room::{write_room, write_room_as, MeshFormat, RoomSpec};
 use end_to_end::{binary, repo_root, scratch_dir};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -93,4 +94,36 @@ fn a_1080p_room_with_a_large_mesh_stops_on_time_saves_before_its_deadline_and_st
     for w in workers {
         within(w["name"].as_str().unwrap(), w);
     }
+}
+
+#[test]
+fn a_million_triangle_meshs_bvh_is_cached_by_the_first_run_and_read_by_the_next_worker_or_process() {
+    let dir = scratch_dir("bvh-cache");
+    let spec = RoomSpec { triangles: 1_010_000, width: 64, height: 36 };
+    let room = write_room_as(&dir, spec, MeshFormat::Ply).unwrap();
+    assert!(room.triangles >= 1_000_000, "{} triangles are below the cache's threshold", room.triangles);
+    let cache = dir.join("cache");
+    let render = |method: &str, out: &str| -> serde_json::Value {
+        let out = dir.join(out);
+        let run = Command::new(binary("coordinator"))
+            .arg("render")
+            .arg(&room.scene)
+            .args(["--method", method, "--time", "1", "--quiet", "--out"])
+            .arg(&out)
+            .env("PHOTONFARM_BVH_CACHE", &cache)
+            .current_dir(repo_root())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .output()
+            .unwrap();
+        assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+        serde_json::from_str(&std::fs::read_to_string(out.join("run.json")).unwrap()).unwrap()
+    };
+    let worker_cache = |record: &serde_json::Value| record["workers"][0]["bvh_cache"].clone();
+    assert_eq!(worker_cache(&render("three-level", "first")), "written");
+    assert_eq!(worker_cache(&render("three-level", "second")), "read");
+    // A process that renders in itself builds the same BVH, so reads the same file.
+    assert_eq!(render("pbpm", "in-process")["bvh_cache"], "read");
+    let files: Vec<_> = std::fs::read_dir(&cache).unwrap().flatten().map(|e| e.file_name()).collect();
+    assert_eq!(files.len(), 1, "{files:?}");
 }

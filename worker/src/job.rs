@@ -7,6 +7,7 @@ use crate::memory_binding::{self, MemoryBinding};
 use crate::parallel::engine::RoundTiming;
 use crate::parallel::{EngineConfig, ParallelEngine};
 use photonfarm::accumulation::delta::{encode_changes, Compression};
+use photonfarm::geometry::BvhCacheUse;
 use photonfarm::pbpm::ProcessShare;
 use photonfarm::protocol::{Job, Share, Snapshot, WorkerInfo};
 use photonfarm::ray_map::{self, PortionSink, Recorder};
@@ -208,6 +209,7 @@ pub fn run(
         layout,
         // The link, which loaded the scene, fills this in.
         scene_load_s: 0.0,
+        bvh_cache: BvhCacheUse::Off,
     };
     if !emit(JobEvent::Started(info)) {
         return;

@@ -143,6 +143,7 @@ pub async fn serve_job(
             return Err(LinkError::Job(reason));
         }
     };
+    let bvh_cache = scene.geometry.bvh_cache().clone();
 
     let stop = Arc::new(AtomicBool::new(false));
     // Snapshot interval: the job's, lengthened so that sending a snapshot (until it is acknowledged) takes at
@@ -215,7 +216,9 @@ pub async fn serve_job(
         tokio::select! {
             event = events.recv(), if !finished => {
                 let message = match event {
-                    Some(JobEvent::Started(info)) => Message::Started(WorkerInfo { scene_load_s, ..info }),
+                    Some(JobEvent::Started(info)) => {
+                        Message::Started(WorkerInfo { scene_load_s, bvh_cache: bvh_cache.clone(), ..info })
+                    }
                     Some(JobEvent::Snapshot(mut s)) => {
                         sent += 1;
                         last_seq = s.seq;

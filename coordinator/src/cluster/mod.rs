@@ -284,6 +284,7 @@ impl Cluster {
                 }
                 r.started_after_s = self.started.elapsed().as_secs_f64();
                 r.scene_load_s = info.scene_load_s;
+                r.bvh_cache = Some(info.bvh_cache);
                 self.set_state(worker, WorkerState::Running);
             }
             Event::Snapshot { worker, snapshot, frame_bytes } => {

@@ -5,6 +5,7 @@
 use super::{
     analytic::Analytic,
     analytic_culling::{AnalyticCulling, Probe},
+    bvh_cache::{BuildSettings, BvhCache, BvhCacheUse, CachedBvh},
     hit::SurfaceHit,
     mesh::MeshTriangle,
     per_triangle::PerTriangle,
@@ -54,7 +55,7 @@ impl ObvhsPreset {
     /// traced no faster (docs/measurements.md, "BVH build presets").
     pub const DEFAULT: ObvhsPreset = ObvhsPreset::Fastest;
 
-    fn params(self) -> BvhBuildParams {
+    pub(crate) fn params(self) -> BvhBuildParams {
         match self {
             ObvhsPreset::Fastest => BvhBuildParams::fastest_build(),
             ObvhsPreset::VeryFast => BvhBuildParams::very_fast_build(),
@@ -226,6 +227,8 @@ pub struct SceneGeometry {
     normals: PerTriangle<[Vec3; 3]>,
     /// Which triangle edges end their surface, for the photons' gather discs.
     edges: SurfaceEdges,
+    /// What the BVH cache did for this build.
+    bvh_cache: BvhCacheUse,
     analytic: Vec<(u32, Analytic)>,
     culling: AnalyticCulling,
     /// The box around all triangles, widened for rounding: a ray segment that misses it skips the BVH, as rays
@@ -284,24 +287,27 @@ impl SceneGeometry {
         analytic: Vec<(u32, Analytic)>,
     ) -> Result<Self, AccelError> {
         let (objects, triangles) = triangles.into_iter().unzip();
-        Self::build_objects_with(backend, triangles, objects, analytic)
+        Self::build_objects_with(backend, triangles, objects, analytic, None)
     }
 
     /// `build` for triangles and the object of each, apart: how a scene's build gathers them, so that a mesh's
-    /// triangles move into the geometry rather than being copied.
+    /// triangles move into the geometry rather than being copied. A large mesh's BVH is read from the cache
+    /// `PHOTONFARM_BVH_CACHE` names, or built and stored there (`BvhCache`).
     pub fn build_objects(
         triangles: Vec<MeshTriangle>,
         objects: Vec<u32>,
         analytic: Vec<(u32, Analytic)>,
     ) -> Result<Self, AccelError> {
-        Self::build_objects_with(Backend::from_env()?, triangles, objects, analytic)
+        Self::build_objects_with(Backend::from_env()?, triangles, objects, analytic, BvhCache::from_env().as_ref())
     }
 
-    fn build_objects_with(
+    /// `build_objects` with the given backend and BVH cache (None for none).
+    pub fn build_objects_with(
         backend: Backend,
         triangles: Vec<MeshTriangle>,
         objects: Vec<u32>,
         analytic: Vec<(u32, Analytic)>,
+        cache: Option<&BvhCache>,
     ) -> Result<Self, AccelError> {
         assert_eq!(triangles.len(), objects.len(), "one object per triangle");
         // Vertices and normals apart, so that a mesh without normals holds nothing for their absence. The list
@@ -321,21 +327,20 @@ impl SceneGeometry {
         let (extent, triangle_box) = extent_and_box(triangles.iter().flat_map(|(_, t)| *t), &analytic);
         // The backend keeps the only copy of the triangles: obvhs its own in BVH order, so the list as added is
         // let go once that is made.
-        let find_edges = |triangles: &[(u32, [Vec3; 3])]| SurfaceEdges::find(triangles);
-        let (accel, edges) = if triangles.is_empty() {
-            (TriangleAccel::None, SurfaceEdges::default())
+        let (accel, edges, bvh_cache) = if triangles.is_empty() {
+            (TriangleAccel::None, SurfaceEdges::default(), BvhCacheUse::Off)
         } else {
             match backend {
                 Backend::Obvhs(preset) => {
-                    let (accel, edges) = build_obvhs(triangles, preset, extent, find_edges);
-                    (TriangleAccel::Obvhs(accel), edges)
+                    let (accel, edges, cached) = build_obvhs(triangles, preset, extent, cache);
+                    (TriangleAccel::Obvhs(accel), edges, cached)
                 }
                 #[cfg(feature = "embree")]
                 Backend::Embree => {
-                    let edges = find_edges(&triangles);
+                    let edges = SurfaceEdges::find(&triangles);
                     let accel = super::embree::EmbreeTriangles::build(triangles)
                         .map_err(|message| AccelError::Build { backend: "embree", message })?;
-                    (TriangleAccel::Embree(accel), edges)
+                    (TriangleAccel::Embree(accel), edges, BvhCacheUse::Off)
                 }
             }
         };
@@ -345,6 +350,7 @@ impl SceneGeometry {
             accel,
             normals,
             edges,
+            bvh_cache,
             culling: AnalyticCulling::new(&analytic),
             analytic,
             t_min: RELATIVE_T_MIN * (1.0 + extent),
@@ -376,6 +382,11 @@ impl SceneGeometry {
     /// The backend that traces this geometry's triangles.
     pub fn backend(&self) -> Backend {
         self.backend
+    }
+
+    /// What the BVH cache did when this geometry was built.
+    pub fn bvh_cache(&self) -> &BvhCacheUse {
+        &self.bvh_cache
     }
 
     /// The analytic surfaces and their objects, in the order they were added.
@@ -613,20 +624,70 @@ fn bvh_ray(origin: Vec3A, direction: Vec3A, t_min: f32, t_max: f32) -> BvhRay {
 /// the triangle test, which is watertight. Far more than the slab test's rounding, far less than a triangle.
 const BVH_BOX_MARGIN: f32 = 1e-5;
 
-/// obvhs's `build_cwbvh_from_tris` over triangle boxes widened by `BVH_BOX_MARGIN` × (1 + `extent`), and
-/// `beside` of the triangles, run on the other cores while obvhs turns its binary BVH into the wide one, which
-/// it does on one thread.
-fn build_obvhs<R: Send>(
+/// The BVH over `triangles` and their surface edges, read from `cache` when it holds them, else built (see
+/// `build_cwbvh`) and stored there when the mesh is large enough; with the triangles in the BVH's order.
+fn build_obvhs(
     triangles: Vec<(u32, [Vec3; 3])>,
     preset: ObvhsPreset,
     extent: f32,
-    beside: impl FnOnce(&[(u32, [Vec3; 3])]) -> R + Send,
-) -> (ObvhsTriangles, R) {
-    use obvhs::{bvh2::reinsertion::ReinsertionOptimizer, cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh, ploc::PlocBuilder};
-    // Each intermediate (boxes, the binary BVH) is dropped as soon as the next is built, and the triangles are
-    // converted straight into BVH order: a large mesh's build peaks at little more than what it keeps.
-    let triangle = |v: &[Vec3; 3]| Triangle { v0: Vec3A::from(v[0]), v1: Vec3A::from(v[1]), v2: Vec3A::from(v[2]) };
+    cache: Option<&BvhCache>,
+) -> (ObvhsTriangles, SurfaceEdges, BvhCacheUse) {
     let params = preset.params();
+    let leaf_size = params.max_prims_per_leaf.clamp(1, 3);
+    let box_margin = BVH_BOX_MARGIN * (1.0 + extent);
+    let settings = BuildSettings { preset: Backend::Obvhs(preset).name(), leaf_size, box_margin };
+    let build = |triangles: &[(u32, [Vec3; 3])]| {
+        let (bvh, edges) = build_cwbvh(triangles, &params, leaf_size, box_margin);
+        CachedBvh { bvh, edges }
+    };
+    let (built, cache_use) = match cache {
+        None => (build(&triangles), BvhCacheUse::Off),
+        Some(cache) if !cache.keeps(triangles.len()) => (build(&triangles), BvhCacheUse::Small),
+        Some(cache) => {
+            let key = BvhCache::key(&triangles, &settings);
+            match cache.read(&key, triangles.len()) {
+                Ok(Some(found)) => (found, BvhCacheUse::Read),
+                found => {
+                    let built = build(&triangles);
+                    let stored = cache.write(&key, &built);
+                    let cache_use = match (found, stored) {
+                        (_, Err(why)) => BvhCacheUse::Unwritten(why),
+                        (Err(damaged), Ok(())) => BvhCacheUse::Replaced(damaged),
+                        (Ok(_), Ok(())) => BvhCacheUse::Written,
+                    };
+                    (built, cache_use)
+                }
+            }
+        }
+    };
+    let CachedBvh { bvh, edges } = built;
+    let triangle = |v: &[Vec3; 3]| Triangle { v0: Vec3A::from(v[0]), v1: Vec3A::from(v[1]), v2: Vec3A::from(v[2]) };
+    let order = &bvh.primitive_indices;
+    let triangles_bvh = order.par_iter().map(|&i| triangle(&triangles[i as usize].1)).collect();
+    let data = order.par_iter().map(|&i| TriangleData { object: triangles[i as usize].0, index: i }).collect();
+    // With spatial splits a triangle may lie in several leaves; any of its places will do.
+    let mut slot = vec![u32::MAX; triangles.len()];
+    drop(triangles);
+    for (place, &i) in bvh.primitive_indices.iter().enumerate() {
+        slot[i as usize] = place as u32;
+    }
+    debug_assert!(slot.iter().all(|&s| s != u32::MAX), "every triangle is in a leaf");
+    (ObvhsTriangles { bvh, triangles: triangles_bvh, data, slot }, edges, cache_use)
+}
+
+/// obvhs's `build_cwbvh_from_tris` over triangle boxes widened by `box_margin`, and the triangles' surface
+/// edges, found on the other cores while obvhs turns its binary BVH into the wide one, which it does on one
+/// thread.
+fn build_cwbvh(
+    triangles: &[(u32, [Vec3; 3])],
+    params: &BvhBuildParams,
+    leaf_size: u32,
+    box_margin: f32,
+) -> (CwBvh, SurfaceEdges) {
+    use obvhs::{bvh2::reinsertion::ReinsertionOptimizer, cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh, ploc::PlocBuilder};
+    // Each intermediate (boxes, the binary BVH) is dropped as soon as the next is built: a large mesh's build
+    // peaks at little more than what it keeps.
+    let triangle = |v: &[Vec3; 3]| Triangle { v0: Vec3A::from(v[0]), v1: Vec3A::from(v[1]), v2: Vec3A::from(v[2]) };
     let mut boxes: Vec<obvhs::aabb::Aabb> = triangles.iter().map(|(_, t)| triangle(t).aabb()).collect();
     let mut indices: Vec<u32> = (0..triangles.len() as u32).collect();
     if params.pre_split {
@@ -636,7 +697,7 @@ fn build_obvhs<R: Send>(
         let average = total / tris.len() as f32;
         obvhs::splits::split_aabbs_preset(&mut boxes, &mut indices, &tris, average, largest);
     }
-    let margin = Vec3A::splat(BVH_BOX_MARGIN * (1.0 + extent));
+    let margin = Vec3A::splat(box_margin);
     for b in &mut boxes {
         (b.min, b.max) = (b.min - margin, b.max + margin);
     }
@@ -650,20 +711,7 @@ fn build_obvhs<R: Send>(
     drop(boxes);
     bvh2.uses_spatial_splits = params.pre_split;
     ReinsertionOptimizer::default().run(&mut bvh2, params.reinsertion_batch_ratio, None);
-    let leaf_size = params.max_prims_per_leaf.clamp(1, 3);
-    let (bvh, beside) = rayon::join(|| bvh2_to_cwbvh(&bvh2, leaf_size, true, false), || beside(&triangles));
-    drop(bvh2);
-    let order = &bvh.primitive_indices;
-    let triangles_bvh = order.par_iter().map(|&i| triangle(&triangles[i as usize].1)).collect();
-    let data = order.par_iter().map(|&i| TriangleData { object: triangles[i as usize].0, index: i }).collect();
-    // With spatial splits a triangle may lie in several leaves; any of its places will do.
-    let mut slot = vec![u32::MAX; triangles.len()];
-    drop(triangles);
-    for (place, &i) in bvh.primitive_indices.iter().enumerate() {
-        slot[i as usize] = place as u32;
-    }
-    debug_assert!(slot.iter().all(|&s| s != u32::MAX), "every triangle is in a leaf");
-    (ObvhsTriangles { bvh, triangles: triangles_bvh, data, slot }, beside)
+    rayon::join(|| bvh2_to_cwbvh(&bvh2, leaf_size, true, false), || SurfaceEdges::find(triangles))
 }
 
 /// The hit on triangle `v` at distance `t`; `uv` gives the hit's barycentrics (computed only when the

@@ -71,6 +71,16 @@ impl SurfaceEdges {
         SurfaceEdges { bits }
     }
 
+    /// Edges as `bits` gives them: one byte per triangle, as a cache stored them.
+    pub(crate) fn from_bits(bits: Vec<u8>) -> Self {
+        SurfaceEdges { bits }
+    }
+
+    /// One byte per triangle, bit i set when the edge from vertex i to vertex i + 1 ends the surface.
+    pub(crate) fn bits(&self) -> &[u8] {
+        &self.bits
+    }
+
     /// The edges of triangle `index` that end the surface (bit i: vertex i to vertex i + 1).
     #[inline]
     pub fn of(&self, index: u32) -> u8 {

@@ -3,6 +3,7 @@
 
 use super::error::ProtocolError;
 use crate::accumulation::LitMask;
+use crate::geometry::BvhCacheUse;
 use crate::render::method::ParallelMethod;
 use crate::render::settings::RenderSettings;
 use crate::render::totals::RayTotals;
@@ -24,7 +25,8 @@ use serde::{Deserialize, Serialize};
 /// 16: files travel in pieces (`FilePiece`), so that a mesh larger than a frame can be sent.
 /// 17: a worker says how long it took to build the scene (`WorkerInfo::scene_load_s`).
 /// 18: a job may ask its worker to decide the lit mask (`Job::decide_lit_mask`), which it sends (`LitPixels`).
-pub const PROTOCOL_VERSION: u32 = 18;
+/// 19: a worker says what the BVH cache did for its scene (`WorkerInfo::bvh_cache`).
+pub const PROTOCOL_VERSION: u32 = 19;
 
 /// The most bytes of a file one `FilePiece` carries: far below the frame limit, and small enough that neither
 /// end holds a second copy of a large mesh while it is sent.
@@ -189,6 +191,8 @@ pub struct WorkerInfo {
     pub layout: String,
     /// Seconds the worker took to build the scene from the files received (meshes read, their BVH built).
     pub scene_load_s: f64,
+    /// What the BVH cache did for the worker's scene.
+    pub bvh_cache: BvhCacheUse,
 }
 
 /// Phases a worker completed since its previous snapshot.

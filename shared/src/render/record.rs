@@ -6,6 +6,7 @@ use super::method::Method;
 use super::settings::RenderSettings;
 use super::totals::RayTotals;
 use crate::accumulation::{ErrorEstimate, LitMaskRecord};
+use crate::geometry::BvhCacheUse;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use std::fmt;
 use std::str::FromStr;
@@ -146,6 +147,9 @@ pub struct WorkerRecord {
     /// BVH built).
     #[serde(default)]
     pub scene_load_s: f64,
+    /// What the BVH cache did for the worker's scene; None until the worker has started.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bvh_cache: Option<BvhCacheUse>,
     /// The worker process's peak resident memory at its last snapshot.
     #[serde(default)]
     pub peak_memory_bytes: Option<u64>,
@@ -301,6 +305,9 @@ pub struct RunRecord {
     /// Of those, the seconds this process took to read the scene and build it (meshes read, their BVH built).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scene_load_s: Option<f64>,
+    /// What the BVH cache did for this process's scene, when it built one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bvh_cache: Option<BvhCacheUse>,
     pub peak_memory_bytes: Option<u64>,
     /// This process's peak memory as estimated before it allocated what the image's size scales (the scene
     /// loaded, plus the engine's buffers or, in a distributed run's coordinator, the merged sums, the copy a save

@@ -11,6 +11,7 @@ use clap::Parser;
 use photonfarm::accumulation::delta::{apply_delta, encode_delta, encode_delta_of, Compression, PixelRuns};
 use photonfarm::accumulation::{Accumulator, AuxLayer, AuxLayout, LitMask};
 use photonfarm::color::Rgb;
+use photonfarm::geometry::BvhCacheUse;
 use photonfarm::protocol::frame::{read_frame, write_frame};
 use photonfarm::protocol::message::{decode, encode};
 use photonfarm::protocol::{
@@ -321,6 +322,7 @@ fn main() -> Result<()> {
             binding: "b".into(),
             layout: "l".into(),
             scene_load_s: 1.5,
+            bvh_cache: BvhCacheUse::Unwritten("disk full".into()),
         }),
         Message::Snapshot(Snapshot {
             seq: 1,
