@@ -9,7 +9,7 @@
 //! folder (`$XDG_CACHE_HOME`, else `~/.cache`). Meshes below a million triangles build faster than a file is
 //! checked, and are not cached; the folder is kept below 4 GiB by removing the files used least recently.
 
-use super::surface_edges::SurfaceEdges;
+use super::surface_edges::{SurfaceEdges, SAME_SURFACE_COS};
 use glam::Vec3;
 use obvhs::{aabb::Aabb, cwbvh::node::CwBvhNode, cwbvh::CwBvh};
 use rayon::prelude::*;
@@ -37,7 +37,9 @@ const CAPACITY_BYTES: u64 = 4 << 30;
 /// Temporary files older than this were left by a process that died while writing, and are removed.
 const STALE_TEMPORARY: Duration = Duration::from_secs(24 * 3600);
 
-/// The first bytes of a cache file, which name its layout.
+/// The first bytes of a cache file, which name its layout and, being part of every key, the rules its contents
+/// were made by: change it with the file's layout, with how `build_obvhs` builds a BVH from its settings, or with
+/// how `SurfaceEdges::find` decides where a surface ends, and every older file finds no use.
 const MAGIC: &[u8; 8] = b"PFBVHC01";
 
 /// Triangles hashed together: the chunks' digests are computed in parallel and hashed in order.
@@ -169,6 +171,7 @@ impl BvhCache {
         hasher.update([0]);
         hasher.update(settings.leaf_size.to_le_bytes());
         hasher.update(settings.box_margin.to_bits().to_le_bytes());
+        hasher.update(SAME_SURFACE_COS.to_bits().to_le_bytes());
         hasher.update((triangles.len() as u64).to_le_bytes());
         for c in &chunks {
             hasher.update(c);
