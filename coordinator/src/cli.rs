@@ -340,8 +340,7 @@ pub struct RenderArgs {
     #[arg(long, value_name = "EXR")]
     pub reference: Option<PathBuf>,
     /// Seconds from the end of one refresh of the output files during the run to the start of the next, and
-    /// at least as long as the last refresh took (merges wait while one reads the sums). A refresh rewrites
-    /// image.exr only once four times as long as its last write has passed (on large images it is most of one).
+    /// at least as long as the last refresh took (merges wait while one reads the sums).
     #[arg(long, default_value_t = 10.0, value_name = "SECONDS")]
     pub save_interval: f64,
     /// No progress bar (for logs and scripts).

@@ -13,7 +13,6 @@ use photonfarm::render::images::{
 use photonfarm::render::record::{RunRecord, TrueError};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
-use std::time::{Duration, Instant};
 
 /// A reference image loaded once and compared against after every save.
 pub struct Reference {
@@ -74,28 +73,22 @@ impl Reference {
 }
 
 /// Writes preview.png, then runs `between` (the preview is the cheapest file, and the one a user waits for; a
-/// large image's EXR takes seconds), then, `with_image`, image.exr (with the lit mask as its `lit` layer and
-/// the phases per pixel as its `phases` layer), and run.json; each file is replaced atomically. Besides the sums
-/// it holds the preview's total layer, then what `between` holds, then a row of each of the EXR's layers, never
-/// two of them at once. Nothing renders meanwhile (it is called between an in-process engine's steps, and at
-/// the end), so the EXR is compressed on every core. Returns how long the EXR took, when it was written.
+/// large image's EXR takes seconds), then image.exr (with the lit mask as its `lit` layer and the phases per
+/// pixel as its `phases` layer) and run.json; each file is replaced atomically. Besides the sums it holds the
+/// preview's total layer, then what `between` holds, then a row of each of the EXR's layers, never two of them
+/// at once. Nothing renders meanwhile (it is called between an in-process engine's steps, and at the end), so
+/// the EXR is compressed on every core.
 pub fn save(
     dir: &Path,
     sums: &Accumulator,
     lit: &LitMask,
     record: &RunRecord,
-    with_image: bool,
     between: impl FnOnce() -> Result<()>,
-) -> Result<Option<Duration>> {
+) -> Result<()> {
     write_preview(dir, sums)?;
     between()?;
-    if !with_image {
-        write_record(dir, record)?;
-        return Ok(None);
-    }
-    let started = Instant::now();
     write_image_and_record(dir, sums, lit, record, Compressing::OnEveryCore, None)?;
-    Ok(Some(started.elapsed()))
+    Ok(())
 }
 
 /// Writes preview.png from the total layer alone.
@@ -137,17 +130,12 @@ pub fn write_image_and_record(
         Err(OutputError::Abandoned { .. }) => return Ok(Written::Abandoned),
         written => written?,
     }
-    write_record(dir, record)?;
-    Ok(Written::Done)
-}
-
-/// Writes run.json, replacing it atomically.
-pub fn write_record(dir: &Path, record: &RunRecord) -> Result<()> {
     let json = serde_json::to_vec_pretty(record)?;
     let tmp = dir.join(".run.json.tmp");
     std::fs::write(&tmp, json).with_context(|| format!("cannot write {}", tmp.display()))?;
     std::fs::rename(&tmp, dir.join("run.json"))
-        .with_context(|| format!("cannot write {}", dir.join("run.json").display()))
+        .with_context(|| format!("cannot write {}", dir.join("run.json").display()))?;
+    Ok(Written::Done)
 }
 
 /// A fresh folder under out/ named after the scene and the UTC time.

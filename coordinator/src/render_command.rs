@@ -188,7 +188,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
             engine.workers().unwrap_or_default().iter().map(|w| format!("{}: {}", w.name, w.state)).collect();
         bail!("no worker rendered anything ({})", why.join("; "));
     }
-    let record = outputs.save(engine.as_ref(), &history, reason, &forecast, true)?.0;
+    let record = outputs.save(engine.as_ref(), &history, reason, &forecast)?;
     if let Some(f) = feed {
         f.finished(engine.as_ref(), &record);
     }
@@ -687,21 +687,19 @@ impl Outputs<'_> {
         }
     }
 
-    /// Writes the checkpoint (distributed methods), the preview, the image (`with_image`) and the record, and
-    /// returns the record and how long the image took: the run's final save, whose record's wall time includes
-    /// the checkpoint, or an in-process method's periodic one.
+    /// Writes the checkpoint (distributed methods), the image and the record: the run's final save, whose
+    /// record's wall time includes the checkpoint.
     fn save(
         &self,
         engine: &dyn Progressive,
         history: &[HistoryEntry],
         reason: StopReason,
         forecast: &Forecast,
-        with_image: bool,
-    ) -> Result<(RunRecord, Option<Duration>)> {
+    ) -> Result<RunRecord> {
         write_checkpoint(self.dir, engine.sums(), self.checkpoint_inputs(engine, history), None)?;
         let record = self.record(engine, history, reason, forecast);
-        let image_took = output_folder::save(self.dir, engine.sums(), self.lit, &record, with_image, || Ok(()))?;
-        Ok((record, image_took))
+        output_folder::save(self.dir, engine.sums(), self.lit, &record, || Ok(()))?;
+        Ok(record)
     }
 
     /// `save` on a thread of its own, reading the sums the engine shares (`Progressive::shared_sums`, which
@@ -713,15 +711,14 @@ impl Outputs<'_> {
         engine: &dyn Progressive,
         history: &[HistoryEntry],
         forecast: &Forecast,
-        with_image: bool,
-    ) -> std::io::Result<std::thread::JoinHandle<Result<Option<Duration>>>> {
+    ) -> std::io::Result<std::thread::JoinHandle<Result<()>>> {
         let record = self.record(engine, history, StopReason::Running, forecast);
         let checkpoint = self.checkpoint_inputs(engine, history);
         let sums = engine.shared_sums().unwrap_or_else(|| Arc::new(engine.sums().clone()));
         let (dir, lit, stopping) = (self.dir.to_path_buf(), self.lit.clone(), self.stopping.clone());
         std::thread::Builder::new()
             .name("save".into())
-            .spawn(move || save_periodically(&dir, sums, &lit, &record, checkpoint, with_image, &stopping))
+            .spawn(move || save_periodically(&dir, sums, &lit, &record, checkpoint, &stopping))
     }
 
     /// What a checkpoint of this moment holds besides the sums (distributed methods only).
@@ -750,41 +747,34 @@ struct CheckpointInputs {
 }
 
 /// A periodic save on a thread of its own: the preview first (what a user waits for), then the checkpoint (what
-/// a resumed run needs), then, `with_image`, the image, its layers made from the shared sums as it is
-/// compressed, and the record. Merges wait for all of it (on a 4K image, seconds): making the EXR's f32 layers
-/// first, to let the sums go before the compression, would hold about 130 bytes a pixel more at the run's peak.
-/// Once the run stops, what is left of the save is abandoned, as the final save writes everything again.
-/// Returns how long the image took, when it was written.
+/// a resumed run needs), then the image, its layers made from the shared sums as it is compressed, and the
+/// record. Merges wait for all of it (on a 4K image, seconds): making the EXR's f32 layers first, to let the
+/// sums go before the compression, would hold about 130 bytes a pixel more at the run's peak. Once the run
+/// stops, what is left of the save is abandoned, as the final save writes everything again.
 fn save_periodically(
     dir: &Path,
     sums: Arc<Accumulator>,
     lit: &LitMask,
     record: &RunRecord,
     checkpoint: Option<CheckpointInputs>,
-    with_image: bool,
     stopping: &AtomicBool,
-) -> Result<Option<Duration>> {
+) -> Result<()> {
     let stopped = || stopping.load(Ordering::Relaxed);
     output_folder::write_preview(dir, &sums)?;
     if stopped() {
-        return Ok(None);
+        return Ok(());
     }
     match write_checkpoint(dir, &sums, checkpoint, Some(stopping)) {
-        Err(CheckpointError::Abandoned { .. }) => return Ok(None),
+        Err(CheckpointError::Abandoned { .. }) => return Ok(()),
         written => written?,
     }
     if stopped() {
-        return Ok(None);
-    }
-    if !with_image {
-        output_folder::write_record(dir, record)?;
-        return Ok(None);
+        return Ok(());
     }
     // The workers render meanwhile: one thread.
     let compressing = photonfarm::image_io::exr_file::Compressing::OnThisThread;
-    let started = Instant::now();
-    let written = output_folder::write_image_and_record(dir, &sums, lit, record, compressing, Some(stopping))?;
-    Ok((written == output_folder::Written::Done).then(|| started.elapsed()))
+    output_folder::write_image_and_record(dir, &sums, lit, record, compressing, Some(stopping))?;
+    Ok(())
 }
 
 fn write_checkpoint(
@@ -805,33 +795,18 @@ fn write_checkpoint(
     Ok(())
 }
 
-/// Waits for the save under way, if any, and keeps its error unless one came before; returns how long its image
-/// took, when it wrote one.
-fn join_save(saving: &mut Saving, save_error: &mut Option<anyhow::Error>) -> Option<Duration> {
-    let h = saving.take()?;
-    match h.join().unwrap_or_else(|_| Err(anyhow::anyhow!("the thread saving the outputs panicked"))) {
-        Ok(image_took) => image_took,
-        Err(e) => {
+/// Waits for the save under way, if any, and keeps its error unless one came before.
+fn join_save(saving: &mut Saving, save_error: &mut Option<anyhow::Error>) {
+    if let Some(h) = saving.take() {
+        let done = h.join().unwrap_or_else(|_| Err(anyhow::anyhow!("the thread saving the outputs panicked")));
+        if let Err(e) = done {
             save_error.get_or_insert(e);
-            None
         }
     }
 }
 
-/// A periodic save writing on a thread of its own (distributed methods), which returns how long its image took.
-type Saving = Option<std::thread::JoinHandle<Result<Option<Duration>>>>;
-
-/// A periodic save rewrites image.exr only once this many times as long as its last write took has passed since
-/// (and a save interval): on a large image the EXR is most of a save (seconds at 3,840 × 2,160), during which
-/// merges or the in-process engine wait, while the preview, δ and the checkpoint are what a user follows and a
-/// resumed run needs. On small images the EXR takes milliseconds and every save writes it.
-const IMAGE_REST: u32 = 4;
-
-/// Whether a periodic save also rewrites the image: the first does, and later ones once `since_image` (since
-/// the last image was written) is at least the save interval and `IMAGE_REST` times `image_took`.
-fn image_due(since_image: Option<Duration>, image_took: Duration, interval: Duration) -> bool {
-    since_image.is_none_or(|since| since >= interval.max(image_took * IMAGE_REST))
-}
+/// A periodic save writing on a thread of its own (distributed methods).
+type Saving = Option<std::thread::JoinHandle<Result<()>>>;
 
 /// Runs the engine until the stop rule or Ctrl-C, showing progress and refreshing the outputs every
 /// `--save-interval`. A refresh that fails stops the run, and is the error returned; a refresh still under way at
@@ -856,8 +831,6 @@ fn run_until_stop(
     // least half the time. How long the latest save took also keeps a timed run from starting one that would
     // still be writing at its end, where the final save waits for it.
     let (mut save_started, mut save_took) = (Instant::now(), Duration::ZERO);
-    // When the latest image was written, and how long that took.
-    let (mut last_image, mut image_took): (Option<Instant>, Duration) = (None, Duration::ZERO);
     let stop = outputs.stop;
     let tracking = Tracking { lit: outputs.lit, forecast, elapsed_before: outputs.elapsed_before, tiles };
     let reason = session::run(engine, stop, interrupted, history, tracking, |engine, history, forecast| {
@@ -873,21 +846,16 @@ fn run_until_stop(
         // A step that ends at the deadline is saved by the run's final save, which follows at once.
         let over = stop.time.is_some_and(|t| outputs.elapsed_s() >= t.as_secs_f64());
         if saving.as_ref().is_some_and(|h| h.is_finished()) {
-            if let Some(took) = join_save(saving, &mut save_error) {
-                (last_image, image_took) = (Some(Instant::now()), took);
-            }
+            join_save(saving, &mut save_error);
             save_took = save_started.elapsed();
             last_save = Some(Instant::now());
         }
         let due = last_save.is_none_or(|t| t.elapsed() >= save_interval.max(save_took));
-        let with_image = image_due(last_image.map(|t| t.elapsed()), image_took, save_interval);
-        // A save that writes the image may take as long as the last one and the last image together.
-        let might_take = save_took + if with_image { image_took } else { Duration::ZERO };
-        let ends_in_time = stop.time.is_none_or(|t| outputs.elapsed_s() + might_take.as_secs_f64() < t.as_secs_f64());
+        let ends_in_time = stop.time.is_none_or(|t| outputs.elapsed_s() + save_took.as_secs_f64() < t.as_secs_f64());
         if !over && due && ends_in_time && saving.is_none() && save_error.is_none() {
             save_started = Instant::now();
             if outputs.args.method.is_distributed() {
-                match outputs.save_in_background(engine, history, forecast, with_image) {
+                match outputs.save_in_background(engine, history, forecast) {
                     Ok(h) => *saving = Some(h),
                     Err(e) => {
                         save_error = Some(anyhow::Error::new(e).context("cannot start the thread saving the outputs"))
@@ -896,11 +864,7 @@ fn run_until_stop(
             } else {
                 // An engine in this process renders only between steps, so a save here holds back no merging,
                 // and a copy of its sums would be memory that --memory-limit's estimate does not count.
-                match outputs.save(engine, history, StopReason::Running, forecast, with_image) {
-                    Ok((_, Some(took))) => (last_image, image_took) = (Some(Instant::now()), took),
-                    Ok((_, None)) => {}
-                    Err(e) => save_error = Some(e),
-                }
+                save_error = outputs.save(engine, history, StopReason::Running, forecast).err();
                 save_took = save_started.elapsed();
                 last_save = Some(Instant::now());
             }
@@ -1171,19 +1135,6 @@ mod tests {
     use super::*;
     use crate::cli::{Cli, Command};
     use clap::Parser;
-
-    #[test]
-    fn a_save_rewrites_an_image_that_is_quick_to_write_every_time_and_a_slow_one_at_a_fraction_of_the_time() {
-        let (interval, s) = (Duration::from_secs(10), Duration::from_secs);
-        assert!(image_due(None, s(8), interval), "the first save writes the image");
-        // A small image's EXR: every save, a save interval apart.
-        assert!(image_due(Some(s(10)), Duration::from_millis(20), interval));
-        assert!(!image_due(Some(s(9)), Duration::from_millis(20), interval));
-        // A 4K image's EXR of 8 s: not at the next save 10 s on, but once four times its write has passed.
-        assert!(!image_due(Some(s(12)), s(8), interval));
-        assert!(!image_due(Some(s(31)), s(8), interval));
-        assert!(image_due(Some(s(32)), s(8), interval));
-    }
 
     fn render_args(extra: &[&str]) -> RenderArgs {
         let argv = [&["coordinator", "render", "scene.toml"][..], extra].concat();
