@@ -6,8 +6,8 @@
 //! renamed into place, so processes building the same mesh at once do not read each other's half-written file.
 //!
 //! `PHOTONFARM_BVH_CACHE` names the folder, or `off`; by default it is `photonfarm/bvh` in the user's cache
-//! folder (`$XDG_CACHE_HOME`, else `~/.cache`). Meshes below a million triangles build faster than a file is
-//! checked, and are not cached; the folder is kept below 4 GiB by removing the files used least recently.
+//! folder (`$XDG_CACHE_HOME`, else `~/.cache`). Meshes below a million triangles build in well under a second
+//! and are not cached; the folder is kept below 4 GiB by removing the files used least recently.
 
 use super::surface_edges::{SurfaceEdges, SAME_SURFACE_COS};
 use glam::Vec3;
@@ -84,6 +84,7 @@ pub(crate) struct CachedBvh {
 pub(crate) struct BuildSettings<'a> {
     /// The obvhs preset's name.
     pub preset: &'a str,
+    /// The most triangles in a leaf.
     pub leaf_size: u32,
     /// How far each triangle's box is widened, in scene units.
     pub box_margin: f32,
