@@ -661,9 +661,8 @@ fn build_obvhs(
         }
     };
     let CachedBvh { bvh, edges } = built;
-    let triangle = |v: &[Vec3; 3]| Triangle { v0: Vec3A::from(v[0]), v1: Vec3A::from(v[1]), v2: Vec3A::from(v[2]) };
     let order = &bvh.primitive_indices;
-    let triangles_bvh = order.par_iter().map(|&i| triangle(&triangles[i as usize].1)).collect();
+    let triangles_bvh = order.par_iter().map(|&i| obvhs_triangle(&triangles[i as usize].1)).collect();
     let data = order.par_iter().map(|&i| TriangleData { object: triangles[i as usize].0, index: i }).collect();
     // With spatial splits a triangle may lie in several leaves; any of its places will do.
     let mut slot = vec![u32::MAX; triangles.len()];
@@ -673,6 +672,11 @@ fn build_obvhs(
     }
     debug_assert!(slot.iter().all(|&s| s != u32::MAX), "every triangle is in a leaf");
     (ObvhsTriangles { bvh, triangles: triangles_bvh, data, slot }, edges, cache_use)
+}
+
+/// A triangle as obvhs takes it.
+pub(crate) fn obvhs_triangle(v: &[Vec3; 3]) -> Triangle {
+    Triangle { v0: Vec3A::from(v[0]), v1: Vec3A::from(v[1]), v2: Vec3A::from(v[2]) }
 }
 
 /// obvhs's `build_cwbvh_from_tris` over triangle boxes widened by `box_margin`, and the triangles' surface
@@ -687,11 +691,10 @@ fn build_cwbvh(
     use obvhs::{bvh2::reinsertion::ReinsertionOptimizer, cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh, ploc::PlocBuilder};
     // Each intermediate (boxes, the binary BVH) is dropped as soon as the next is built: a large mesh's build
     // peaks at little more than what it keeps.
-    let triangle = |v: &[Vec3; 3]| Triangle { v0: Vec3A::from(v[0]), v1: Vec3A::from(v[1]), v2: Vec3A::from(v[2]) };
-    let mut boxes: Vec<obvhs::aabb::Aabb> = triangles.iter().map(|(_, t)| triangle(t).aabb()).collect();
+    let mut boxes: Vec<obvhs::aabb::Aabb> = triangles.iter().map(|(_, t)| obvhs_triangle(t).aabb()).collect();
     let mut indices: Vec<u32> = (0..triangles.len() as u32).collect();
     if params.pre_split {
-        let tris: Vec<Triangle> = triangles.iter().map(|(_, t)| triangle(t)).collect();
+        let tris: Vec<Triangle> = triangles.iter().map(|(_, t)| obvhs_triangle(t)).collect();
         let areas = boxes.iter().map(|b| b.half_area());
         let (largest, total) = areas.fold((0.0f32, 0.0f32), |(l, t), a| (l.max(a), t + a));
         let average = total / tris.len() as f32;

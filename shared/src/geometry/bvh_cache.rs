@@ -434,11 +434,9 @@ mod tests {
     /// Boxes scattered over a unit cube, each two triangles per face: a mesh with edges that end the surface
     /// (the boxes' edges) and edges that continue it (the faces' diagonals).
     fn boxes(count: usize) -> Vec<MeshTriangle> {
-        let mut seed = 7u32;
-        let mut random = move || {
-            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-            (seed >> 8) as f32 / (1 << 24) as f32
-        };
+        use rand_core::{RngCore, SeedableRng};
+        let mut rng = rand_pcg::Pcg32::seed_from_u64(7);
+        let mut random = move || (rng.next_u32() >> 8) as f32 / (1 << 24) as f32;
         (0..count)
             .flat_map(|_| {
                 let min = Vec3::new(random(), random(), random());
@@ -590,10 +588,8 @@ mod tests {
     fn every_presets_bvh_passes_the_structure_check_and_broken_ones_do_not() {
         let mesh: Vec<(u32, [Vec3; 3])> = boxes(300).into_iter().map(|t| (0, t.v)).collect();
         for preset in [ObvhsPreset::Fastest, ObvhsPreset::Medium, ObvhsPreset::Slow] {
-            let tris: Vec<obvhs::triangle::Triangle> = mesh
-                .iter()
-                .map(|(_, v)| obvhs::triangle::Triangle { v0: v[0].into(), v1: v[1].into(), v2: v[2].into() })
-                .collect();
+            let tris: Vec<obvhs::triangle::Triangle> =
+                mesh.iter().map(|(_, v)| crate::geometry::accel::obvhs_triangle(v)).collect();
             let bvh = obvhs::cwbvh::builder::build_cwbvh_from_tris(&tris, preset.params(), &mut Duration::default());
             assert_eq!(check_structure(&bvh, mesh.len()), Ok(()), "{preset:?}");
             let inner = bvh.nodes.iter().position(|n| n.imask != 0).unwrap();
